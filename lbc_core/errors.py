@@ -1,0 +1,9 @@
+"""Exceptions raised by lbc_core."""
+
+
+class CageError(ValueError):
+    """The cage (or the points bound to it) cannot be used; the message says why and what to do."""
+
+
+class Cancelled(RuntimeError):
+    """A long computation was cancelled through its ``cancel`` callback; nothing was returned."""
