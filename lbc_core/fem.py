@@ -1,0 +1,108 @@
+"""Piecewise-linear (P1) finite elements on triangle and tetrahedron meshes.
+
+Shared by the geodesic, solver and baseline stages. A mesh is ``vertices`` (N, d) and ``cells`` (F, d+1) with
+d = 2 (triangles) or d = 3 (tetrahedra). Gradient rows are stored cell-major: row ``c * d + k`` is the k-th
+component of the gradient on cell c, so a (d F, n) array reshapes to (F, d, n).
+"""
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def cell_gradients(vertices, cells):
+    """Gradients of the d+1 barycentric basis functions on every cell, and the cells' measures.
+
+    Parameters
+    ----------
+    vertices : (N, d) float array
+    cells : (F, d+1) int array
+
+    Returns
+    -------
+    gradients : (F, d+1, d) float array, in 1 / length units
+    measures : (F,) float array, unsigned area (d = 2) or volume (d = 3)
+    """
+    vertices = np.asarray(vertices, dtype=float)
+    cells = np.asarray(cells)
+    d = vertices.shape[1]
+    corners = vertices[cells]  # (F, d+1, d)
+    edges = corners[:, 1:, :] - corners[:, :1, :]  # (F, d, d): rows are edge vectors from corner 0
+    det = np.linalg.det(edges)
+    measures = np.abs(det) / (2.0 if d == 2 else 6.0)
+    # The gradients of basis functions 1..d are the columns of inv(edges); basis 0 takes minus their sum.
+    safe = np.where(np.abs(det)[:, None, None] > 0, edges, np.eye(d))
+    inverse = np.linalg.inv(safe)  # (F, d, d)
+    grads_rest = np.transpose(inverse, (0, 2, 1))  # (F, d, d): row j = gradient of basis j+1
+    gradients = np.concatenate([-grads_rest.sum(axis=1, keepdims=True), grads_rest], axis=1)
+    gradients[np.abs(det) == 0] = 0.0
+    return gradients, measures
+
+
+def gradient_operator(vertices, cells):
+    """Sparse map from vertex values to per-cell gradients.
+
+    Returns
+    -------
+    G : (d F, N) scipy.sparse.csr_matrix, cell-major rows (see the module docstring)
+    measures : (F,) float array
+    """
+    vertices = np.asarray(vertices, dtype=float)
+    cells = np.asarray(cells)
+    n_cells, corners = cells.shape
+    d = corners - 1
+    gradients, measures = cell_gradients(vertices, cells)
+    rows = (np.arange(n_cells)[:, None, None] * d + np.arange(d)[None, None, :]).repeat(corners, axis=1)
+    cols = np.broadcast_to(cells[:, :, None], rows.shape)
+    G = sp.csr_matrix(
+        (gradients.ravel(), (rows.ravel(), cols.ravel())), shape=(n_cells * d, len(vertices))
+    )
+    return G, measures
+
+
+def stiffness_matrix(vertices, cells):
+    """The P1 stiffness (cotangent Laplacian) matrix L with L_ij = ∫ ∇φ_i · ∇φ_j, positive semi-definite.
+
+    Returns
+    -------
+    (N, N) scipy.sparse.csr_matrix, in length^(d-2) units
+    """
+    G, measures = gradient_operator(vertices, cells)
+    d = np.asarray(vertices).shape[1]
+    return (G.T @ sp.diags(np.repeat(measures, d)) @ G).tocsr()
+
+
+def mass_matrix(vertices, cells, lumped=False):
+    """The P1 mass matrix M_ij = ∫ φ_i φ_j, consistent or lumped (diagonal, each cell's measure shared equally).
+
+    Returns
+    -------
+    (N, N) scipy.sparse.csr_matrix, in length^d units
+    """
+    cells = np.asarray(cells)
+    n_vertices = len(vertices)
+    corners = cells.shape[1]
+    _, measures = cell_gradients(vertices, cells)
+    if lumped:
+        diagonal = np.bincount(cells.ravel(), np.repeat(measures / corners, corners), minlength=n_vertices)
+        return sp.diags(diagonal).tocsr()
+    # ∫ φ_i φ_j = |c| (1 + δ_ij) / ((d+1)(d+2)) on a simplex.
+    local = (np.ones((corners, corners)) + np.eye(corners)) / (corners * (corners + 1))
+    values = measures[:, None, None] * local[None]
+    rows = np.broadcast_to(cells[:, :, None], values.shape)
+    cols = np.broadcast_to(cells[:, None, :], values.shape)
+    return sp.csr_matrix((values.ravel(), (rows.ravel(), cols.ravel())), shape=(n_vertices, n_vertices))
+
+
+def boundary_facets(cells):
+    """Facets (edges of triangles, triangles of tetrahedra) that belong to exactly one cell.
+
+    Returns
+    -------
+    (E, d) int array of vertex indices, each facet's indices sorted
+    """
+    cells = np.asarray(cells)
+    corners = cells.shape[1]
+    facets = np.concatenate([np.delete(cells, k, axis=1) for k in range(corners)])
+    facets = np.sort(facets, axis=1)
+    unique, counts = np.unique(facets, axis=0, return_counts=True)
+    return unique[counts == 1]
