@@ -2,19 +2,49 @@
 
 A :class:`Cage` always has its control points (``vertices``, welded) and its boundary ``facets``: the polygon's edges
 in 2D, an outward-oriented triangulation of the faces in 3D. Boundary values are linear on each facet, so a quad or
-n-gon face is linear on each triangle of its triangulation (quads are split along the shorter diagonal, n-gons by
-ear clipping in the face's best-fit plane): a documented, consistent choice that keeps the Lagrange and linearity
-properties on every edge of the input.
+n-gon face is linear on each triangle of its triangulation. The triangulation is a documented, consistent choice that
+keeps the Lagrange and linearity properties on every edge of the input:
+
+* a quad is split along its shorter diagonal, unless that diagonal leaves the quad (a non-convex quad) or makes a
+  zero-area triangle; then along the other one;
+* an n-gon is ear-clipped in the plane of its Newell normal, always cutting the first ear in the face's vertex order.
+
+Checks, in this order (each failure raises :class:`~lbc_core.errors.CageError`, a ValueError, whose message names the
+problem and what to do; repairs are reported in ``Cage.warnings``):
+
+* shape, NaN/inf, too few vertices, too many faces or vertices (:data:`MAX_CONTROL_POINTS`), invalid face indices;
+* duplicates closer than ``weld_tolerance`` × bounding-box diagonal are welded (warning);
+* 2D: the polygon must not revisit a vertex, be collinear, double back on itself, or cross or touch itself;
+* 3D: the cage must not be flat; faces must have no repeated vertex or zero area, and not be twisted;
+  no loose vertices; no duplicated faces; closed; manifold at edges and vertices; one connected, orientable surface
+  (inconsistent orientation is fixed, with a warning); no two faces may cross or touch except along their shared
+  edge or vertex.
+
+Lengths below :data:`ZERO_LENGTH` × bounding-box diagonal count as zero in every geometric test.
 """
 
 import hashlib
+import operator
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, connected_components
+from scipy.spatial import cKDTree
 
 from .errors import CageError
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
+ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
+# The solver keeps several dense (cells × control points) arrays and its per-iteration cost grows as
+# (mesh vertices) × (control points)², with a mesh that needs several vertices per control point: beyond ~2000 control
+# points even the coarsest useful domain mesh needs several GB in 2D and tens of GB in 3D.
+MAX_CONTROL_POINTS = 2000
+# Closed triangle meshes have about 2 triangles per vertex; 4 leaves room for handles and unwelded input.
+_FACES_PER_CONTROL_POINT = 4
+# Unwelded triangle soups repeat each vertex about 6 times.
+_INPUT_VERTICES_PER_CONTROL_POINT = 8
+_LISTED = 5  # how many offending items a message names
 
 
 @dataclass
@@ -24,9 +54,10 @@ class Cage:
     Attributes
     ----------
     vertices : (n, d) float array
-        Control points after welding, d = 2 or 3.
+        Control points after welding, d = 2 or 3, in the input's units.
     facets : (E, d) int array
-        2D: polygon edges (i, i+1), counter-clockwise. 3D: triangles, outward-oriented.
+        2D: polygon edges (i, i+1) or (i+1, i), oriented counter-clockwise; every control point starts exactly one
+        edge. 3D: triangles, outward-oriented.
     facet_face : (E,) int array
         Index of the input face each facet comes from (2D: the edge index).
     vertex_map : (n_input,) int array
@@ -93,7 +124,7 @@ class Cage:
         return points
 
 
-def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE):
+def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE, max_control_points=MAX_CONTROL_POINTS):
     """Check and normalise a cage.
 
     Parameters
@@ -101,10 +132,12 @@ def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE):
     vertices : (n, 2) or (n, 3) float array
         2D polygon vertices in boundary order (either orientation), or 3D mesh vertices. A 2D polygon may also be
         given as (n, 3) with a constant z when ``faces`` is None.
-    faces : None or sequence of index sequences
-        None for a 2D polygon; else the 3D faces (triangles, quads, n-gons).
+    faces : None, (F, k) int array or sequence of index sequences
+        None for a 2D polygon; else the 3D faces (triangles, quads, n-gons), any orientation.
     weld_tolerance : float
         Vertices closer than this fraction of the bounding-box diagonal are merged (and reported).
+    max_control_points : int
+        Larger cages are refused before any work (see :data:`MAX_CONTROL_POINTS`).
 
     Returns
     -------
@@ -118,245 +151,774 @@ def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE):
     vertices = np.asarray(vertices, dtype=float)
     if vertices.ndim != 2 or vertices.shape[1] not in (2, 3):
         raise CageError(f"cage vertices must be an (n, 2) or (n, 3) array, got shape {vertices.shape}")
+    _check_size(len(vertices), None if faces is None else len(faces), max_control_points)
     if not np.all(np.isfinite(vertices)):
-        bad = int(np.count_nonzero(~np.all(np.isfinite(vertices), axis=1)))
-        raise CageError(f"{bad} cage vertices have NaN or infinite coordinates: fix or delete them")
+        bad = np.flatnonzero(~np.all(np.isfinite(vertices), axis=1))
+        raise CageError(
+            f"{len(bad)} cage vertices have NaN or infinite coordinates ({_some(bad)}): fix or delete them"
+        )
     if faces is None:
-        return _make_polygon_cage(vertices, weld_tolerance)
-    return _make_mesh_cage(vertices, faces, weld_tolerance)
+        return _make_polygon_cage(vertices, weld_tolerance, max_control_points)
+    return _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points)
+
+
+def _check_size(n_vertices, n_faces, max_control_points):
+    """Refuse, before any work, inputs that cannot give a cage of at most ``max_control_points``."""
+    if n_faces is not None and n_faces > _FACES_PER_CONTROL_POINT * max_control_points:
+        _refuse_size(f"{n_faces} faces", max_control_points)
+    if n_vertices > _INPUT_VERTICES_PER_CONTROL_POINT * max_control_points:
+        _refuse_size(f"{n_vertices} vertices", max_control_points)
+
+
+def _check_control_points(n, max_control_points):
+    if n > max_control_points:
+        _refuse_size(f"{n} distinct vertices (control points)", max_control_points)
+
+
+def _refuse_size(what, max_control_points):
+    raise CageError(
+        f"the cage has {what}; lbc binds cages of at most {max_control_points} control points (the solve's memory "
+        "grows with control points × cells and its time with mesh vertices × control points²): use a coarser cage, "
+        "e.g. with a Decimate modifier or a low-poly retopology"
+    )
+
+
+def _some(indices):
+    """'3, 7, 9' or '3, 7, 9, 12, 15, ...': a few of the offending indices for a message."""
+    indices = [str(int(i)) for i in np.ravel(indices)]
+    return ", ".join(indices[:_LISTED]) + (", ..." if len(indices) > _LISTED else "")
 
 
 def _weld(vertices, weld_tolerance):
-    """Merge vertices closer than ``weld_tolerance`` × diagonal; returns (welded, vertex_map, n_merged)."""
-    from scipy.spatial import cKDTree
+    """Merge vertices closer than ``weld_tolerance`` × diagonal.
 
-    diagonal = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
+    Returns
+    -------
+    welded : (n, d) float array
+        The first input vertex of each group, in input order.
+    vertex_map : (n_input,) int array
+        Index in ``welded`` of each input vertex.
+    """
+    diagonal = np.linalg.norm(np.ptp(vertices, axis=0))
     pairs = cKDTree(vertices).query_pairs(weld_tolerance * diagonal, output_type="ndarray")
-    vertex_map = np.arange(len(vertices))
-    if len(pairs):
-        import scipy.sparse as sp
-        from scipy.sparse.csgraph import connected_components
-
-        graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(vertices),) * 2)
-        _, labels = connected_components(graph, directed=False)
-        _, first, vertex_map = np.unique(labels, return_index=True, return_inverse=True)
-        # Keep the input order of the first vertex of each group.
-        order = np.argsort(first)
-        rank = np.empty_like(order)
-        rank[order] = np.arange(len(order))
-        vertex_map = rank[vertex_map]
-        welded = vertices[np.sort(first)]
-        return welded, vertex_map, len(vertices) - len(welded)
-    return vertices.copy(), vertex_map, 0
+    if not len(pairs):
+        return vertices.copy(), np.arange(len(vertices))
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(vertices),) * 2)
+    _, labels = connected_components(graph, directed=False)
+    _, first, vertex_map = np.unique(labels, return_index=True, return_inverse=True)
+    # Number the groups in the input order of their first vertex.
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))
+    return vertices[np.sort(first)], rank[vertex_map]
 
 
-def _make_polygon_cage(vertices, weld_tolerance):
+def _first_inputs(vertex_map):
+    """(n,) int array: the first input vertex of each welded vertex, to name vertices as the user numbers them."""
+    return np.unique(vertex_map, return_index=True)[1]
+
+
+def _spread_direction(points):
+    """Unit direction of least spread of the points (the normal of their best-fit line or plane) and that spread.
+
+    Returns
+    -------
+    normal : (d,) float array
+    spread : float
+        Largest distance of a point from the best-fit line (2D) or plane (3D), in the points' units.
+    """
+    centred = points - points.mean(axis=0)
+    normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
+    return normal, float(np.max(np.abs(centred @ normal)))
+
+
+# ---------------------------------------------------------------------------------------------------------- 2D polygon
+
+
+def _make_polygon_cage(vertices, weld_tolerance, max_control_points):
     if vertices.shape[1] == 3:
-        if np.ptp(vertices[:, 2]) > 1e-9 * max(np.ptp(vertices[:, :2]), 1e-300):
+        if np.ptp(vertices[:, 2]) > ZERO_LENGTH * max(np.ptp(vertices[:, :2]), 1e-300):
             raise CageError("a 2D polygon cage must lie in a plane z = constant; pass faces for a 3D cage")
         vertices = vertices[:, :2]
     if len(vertices) < 3:
-        raise CageError(f"a polygon cage needs at least 3 vertices, got {len(vertices)}")
+        raise CageError(
+            f"a polygon cage needs at least 3 vertices, got {len(vertices)}: give the outline's corners in order"
+        )
     warnings = []
-    welded, vertex_map, merged = _weld(vertices, weld_tolerance)
-    if merged:
-        warnings.append(f"welded {merged} duplicate cage vertices")
+    welded, vertex_map = _weld(vertices, weld_tolerance)
+    if len(welded) < len(vertices):
+        warnings.append(f"welded {len(vertices) - len(welded)} duplicate cage vertices")
         # Consecutive duplicates collapse; the polygon order follows the first occurrences.
         order = vertex_map[np.r_[True, vertex_map[1:] != vertex_map[:-1]]]
         if len(order) > 1 and order[0] == order[-1]:
             order = order[:-1]
         if len(np.unique(order)) != len(order):
-            raise CageError("the polygon visits a vertex twice: it touches itself; separate the touching parts")
+            twice = np.flatnonzero(np.bincount(order) > 1)
+            raise CageError(
+                f"the polygon cage passes twice through vertex {_some(_first_inputs(vertex_map)[twice])}: it touches "
+                "itself; separate the touching parts"
+            )
         welded, vertex_map = welded[order], np.argsort(order)[vertex_map]
     if len(welded) < 3:
-        raise CageError(f"a polygon cage needs at least 3 distinct vertices, got {len(welded)}")
+        raise CageError(f"a polygon cage needs at least 3 distinct vertices, got {len(welded)} after welding")
+    _check_control_points(len(welded), max_control_points)
+    zero = ZERO_LENGTH * np.linalg.norm(np.ptp(welded, axis=0))
+    if _spread_direction(welded)[1] <= zero:
+        raise CageError("the polygon cage encloses zero area: its vertices are collinear; spread them out")
+    names = _first_inputs(vertex_map)
+    _check_polygon_simple(welded, zero, names)
     n = len(welded)
     edges = np.stack([np.arange(n), (np.arange(n) + 1) % n], axis=1)
-    area = _enclosed_measure(welded, edges)
-    if abs(area) <= 1e-12 * np.linalg.norm(np.ptp(welded, axis=0)) ** 2:
-        raise CageError("the polygon cage encloses zero area: its vertices are collinear")
-    _check_polygon_simple(welded)
-    if area < 0:
+    if _enclosed_measure(welded, edges) < 0:
         edges = edges[:, ::-1]
     return Cage(welded, edges, np.arange(n), vertex_map, warnings)
 
 
-def _check_polygon_simple(vertices):
-    """Raise CageError if two non-adjacent edges of the closed polygon intersect."""
+def _check_polygon_simple(vertices, zero, names):
+    """Raise CageError if the closed polygon doubles back at a vertex or two non-adjacent edges cross or touch.
+
+    Parameters
+    ----------
+    vertices : (n, 2) float array
+        Welded, in boundary order.
+    zero : float
+        Length that counts as zero.
+    names : (n,) int array
+        Input index of each vertex, for messages.
+    """
     n = len(vertices)
-    a = vertices
-    b = np.roll(vertices, -1, axis=0)
-    i, j = np.triu_indices(n, k=2)
-    keep = ~((i == 0) & (j == n - 1))
-    i, j = i[keep], j[keep]
-
-    def orient(p, q, r):
-        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
-
-    d1 = orient(a[i], b[i], a[j])
-    d2 = orient(a[i], b[i], b[j])
-    d3 = orient(a[j], b[j], a[i])
-    d4 = orient(a[j], b[j], b[i])
-    crossing = (d1 * d2 <= 0) & (d3 * d4 <= 0)
-    if np.any(crossing):
-        k = int(np.argmax(crossing))
+    start, end = vertices, np.roll(vertices, -1, axis=0)
+    # A spike: the next vertex lies on the line of the incoming edge, behind the corner.
+    incoming, outgoing = end - start, np.roll(end - start, -1, axis=0)
+    spike = (np.abs(_cross2(incoming, outgoing)) <= zero * np.linalg.norm(incoming, axis=1)) & (
+        np.einsum("ij,ij->i", incoming, outgoing) < 0
+    )
+    if np.any(spike):
+        corner = names[(np.flatnonzero(spike) + 1) % n]
         raise CageError(
-            f"the polygon cage intersects itself (edge {i[k]}-{(i[k] + 1) % n} crosses edge {j[k]}-{(j[k] + 1) % n}): "
-            "move its vertices so that the outline does not cross itself"
+            f"the polygon cage doubles back on itself at vertex {_some(corner)} (a zero-width spike): delete that "
+            "vertex or move it off the line of its neighbours"
+        )
+    low, high = np.minimum(start, end) - zero, np.maximum(start, end) + zero
+    i, j = _overlapping_boxes(low, high).T
+    distance = (j - i) % n
+    i, j = i[(distance != 1) & (distance != n - 1)], j[(distance != 1) & (distance != n - 1)]
+    crossing = _segments_touch(start[i], end[i], start[j], end[j], zero)
+    if np.any(crossing):
+        i, j = i[crossing], j[crossing]
+        pairs = ", ".join(
+            f"{names[a]}-{names[(a + 1) % n]} with {names[b]}-{names[(b + 1) % n]}" for a, b in zip(i[:_LISTED], j)
+        )
+        raise CageError(
+            f"the polygon cage intersects itself: {len(i)} pairs of edges cross or touch (edges between input "
+            f"vertices {pairs}{', ...' if len(i) > _LISTED else ''}); move its vertices so that the outline does not "
+            "cross itself"
         )
 
 
-def _make_mesh_cage(vertices, faces, weld_tolerance):
+# ------------------------------------------------------------------------------------------------------------ 3D mesh
+
+
+def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     if vertices.shape[1] != 3:
-        raise CageError("a cage with faces must have 3D vertices")
-    faces = [np.asarray(f, dtype=np.int64) for f in faces]
+        raise CageError("a cage with faces must have 3D vertices; for a 2D polygon pass faces=None")
     if len(vertices) < 4:
         raise CageError(f"a 3D cage needs at least 4 vertices, got {len(vertices)}")
-    if not faces:
-        raise CageError("the 3D cage has no faces")
-    for f in faces:
-        if len(f) < 3 or f.min() < 0 or f.max() >= len(vertices):
-            raise CageError(f"cage face {f.tolist()} is invalid: faces need 3 or more valid vertex indices")
+    faces = _face_list(faces, len(vertices))
     warnings = []
-    welded, vertex_map, merged = _weld(vertices, weld_tolerance)
-    if merged:
-        warnings.append(f"welded {merged} duplicate cage vertices")
-    triangles, triangle_face = [], []
-    for index, face in enumerate(faces):
-        face = vertex_map[face]
-        face = face[np.r_[True, face[1:] != face[:-1]]]
-        if len(face) > 1 and face[0] == face[-1]:
-            face = face[:-1]
-        if len(face) < 3:
-            continue
-        for tri in _triangulate_face(welded, face):
-            triangles.append(tri)
-            triangle_face.append(index)
-    triangles = np.array(triangles, dtype=np.int64).reshape(-1, 3)
-    triangle_face = np.array(triangle_face, dtype=np.int64)
-    used = np.unique(triangles)
-    if len(used) < len(welded):
+    welded, vertex_map = _weld(vertices, weld_tolerance)
+    if len(welded) < len(vertices):
+        warnings.append(f"welded {len(vertices) - len(welded)} duplicate cage vertices")
+    if len(welded) < 4:
+        raise CageError(f"a 3D cage needs at least 4 distinct vertices, got {len(welded)} after welding")
+    _check_control_points(len(welded), max_control_points)
+    diagonal = np.linalg.norm(np.ptp(welded, axis=0))
+    zero = ZERO_LENGTH * diagonal
+    if _spread_direction(welded)[1] <= zero:
         raise CageError(
-            f"{len(welded) - len(used)} cage vertices belong to no face: delete loose vertices from the cage"
+            "the cage is flat (all its vertices lie in one plane) and encloses zero volume: give it thickness, "
+            "or bind in 2D with a polygon cage"
         )
-    _check_closed_manifold(triangles)
-    triangles, flipped = _orient_outward(welded, triangles)
-    if flipped:
-        warnings.append(f"flipped {flipped} cage faces to make the orientation consistent and outward")
-    volume = _enclosed_measure(welded, triangles)
-    if volume <= 1e-12 * np.linalg.norm(np.ptp(welded, axis=0)) ** 3:
-        raise CageError("the cage encloses zero volume: it is flat; give it thickness or bind in 2D")
+    names = _first_inputs(vertex_map)
+    faces, collapsed = _collapse_welded(faces, vertex_map, names)
+    if collapsed:
+        warnings.append(f"dropped {collapsed} cage faces that welding collapsed to an edge or a point")
+    triangles, triangle_face = _triangulate(welded, faces, zero)
+    _check_degenerate(welded, triangles, triangle_face, zero)
+    unused = np.setdiff1d(np.arange(len(welded)), triangles)
+    if len(unused):
+        raise CageError(
+            f"{len(unused)} cage vertices belong to no face (vertex {_some(names[unused])}): delete loose vertices "
+            "from the cage (in Blender: Mesh > Clean Up > Delete Loose)"
+        )
+    pairing = _check_closed_manifold(triangles, names)
+    triangles, flipped = _orient_outward(welded, triangles, pairing)
+    if np.all(flipped):
+        warnings.append("reversed all cage faces: they pointed inward")
+    elif np.any(flipped):
+        warnings.append(
+            f"flipped {len(np.unique(triangle_face[flipped]))} cage faces to make the orientation consistent and "
+            "outward"
+        )
+    _check_self_intersection(welded, triangles, triangle_face, zero)
+    if _enclosed_measure(welded, triangles) <= ZERO_LENGTH * diagonal**3:
+        raise CageError("the cage encloses zero volume: give it thickness, or bind in 2D with a polygon cage")
     return Cage(welded, triangles, triangle_face, vertex_map, warnings)
 
 
-def _triangulate_face(vertices, face):
-    """Triangles of one planar-ish face: as is, a quad on its shorter diagonal, or ear clipping."""
-    if len(face) == 3:
-        return [face]
-    if len(face) == 4:
-        p = vertices[face]
-        if np.linalg.norm(p[0] - p[2]) <= np.linalg.norm(p[1] - p[3]):
-            return [face[[0, 1, 2]], face[[0, 2, 3]]]
-        return [face[[0, 1, 3]], face[[1, 2, 3]]]
-    return _ear_clip(vertices, face)
+def _face_list(faces, n_vertices):
+    """The faces as lists of Python ints, checked against the vertex count."""
+    if isinstance(faces, np.ndarray):
+        faces = faces.tolist()
+    try:
+        faces = [[operator.index(corner) for corner in face] for face in faces]
+    except TypeError:
+        raise CageError("cage faces must be sequences of integer vertex indices") from None
+    if not faces:
+        raise CageError("the 3D cage has no faces")
+    for index, face in enumerate(faces):
+        if len(face) < 3 or min(face) < 0 or max(face) >= n_vertices:
+            raise CageError(
+                f"cage face {index} ({face}) is invalid: a face needs 3 or more indices of the cage's {n_vertices} "
+                "vertices"
+            )
+    return faces
 
 
-def _ear_clip(vertices, face):
+def _collapse_welded(faces, vertex_map, names):
+    """Faces in welded indices without the corners welding merged; faces reduced below 3 corners are dropped,
+    duplicated faces (the same corners, in any order) refused.
+
+    Returns
+    -------
+    faces : list of (index, list of int)
+        Input face index and corners of each kept face.
+    dropped : int
+    """
+    vertex_map = vertex_map.tolist()
+    kept, dropped, seen = [], 0, {}
+    for index, face in enumerate(faces):
+        face = [vertex_map[corner] for corner in face]
+        face = [corner for k, corner in enumerate(face) if corner != face[k - 1]]
+        if len(face) < 3:
+            dropped += 1
+            continue
+        if len(set(face)) != len(face):
+            twice = sorted({corner for corner in face if face.count(corner) > 1})
+            raise CageError(
+                f"cage face {index} passes twice through vertex {_some(names[twice])}: split it into faces that each "
+                "visit a vertex once"
+            )
+        copy = seen.setdefault(tuple(sorted(face)), index)
+        if copy != index:
+            raise CageError(
+                f"cage faces {copy} and {index} use the same vertices (a duplicated face): delete one of them "
+                "(in Blender: Select > Select All by Trait > Interior Faces, or Mesh > Clean Up)"
+            )
+        kept.append((index, face))
+    return kept, dropped
+
+
+def _triangulate(vertices, faces, zero):
+    """Triangles of all faces (see the module docstring for the choice).
+
+    Returns
+    -------
+    triangles : (T, 3) int array
+        In the faces' own orientation, in input face order.
+    triangle_face : (T,) int array
+        Input face index of each triangle.
+    """
+    if not faces:
+        raise CageError("every face of the cage collapsed when welding its vertices: the cage has no faces left")
+    triangles = [(index, [face]) for index, face in faces if len(face) == 3]
+    for index, face in faces:
+        if len(face) == 4:
+            triangles.append((index, _split_quad(vertices, np.array(face), zero)))
+        elif len(face) > 4:
+            triangles.append((index, _ear_clip(vertices, np.array(face), index, zero)))
+    triangles.sort(key=lambda item: item[0])
+    triangle_face = np.array([index for index, pieces in triangles for _ in pieces], dtype=np.int64)
+    return np.array([list(t) for _, pieces in triangles for t in pieces], dtype=np.int64).reshape(-1, 3), triangle_face
+
+
+def _split_quad(vertices, quad, zero):
+    """(2, 3) int array: the quad's two triangles along the shorter diagonal that stays inside it."""
+    points = vertices[quad]
+    options = (quad[[[0, 1, 2], [0, 2, 3]]], quad[[[0, 1, 3], [1, 2, 3]]])
+    lengths = (np.linalg.norm(points[0] - points[2]), np.linalg.norm(points[1] - points[3]))
+    preference = np.argsort(lengths, kind="stable")
+    for choice in preference:
+        normals = _triangle_normals(vertices[options[choice]])
+        if normals[0] @ normals[1] > 0 and not np.any(_degenerate(vertices[options[choice]], zero)):
+            return options[choice]
+    # A zero-area or bow-tie quad: the degenerate-face or self-intersection check names it.
+    return options[preference[0]]
+
+
+def _ear_clip(vertices, face, index, zero):
+    """(k - 2, 3) int array: ear clipping of an n-gon in the plane of its Newell normal, first ear in face order."""
     points = vertices[face]
-    normal = np.zeros(3)
-    for k in range(len(points)):  # Newell's normal
-        p, q = points[k], points[(k + 1) % len(points)]
-        normal += np.cross(p, q)
-    axis_u = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 * np.linalg.norm(normal) else [0, 1.0, 0])
-    axis_u /= np.linalg.norm(axis_u)
-    axis_v = np.cross(normal / np.linalg.norm(normal), axis_u)
-    flat = np.stack([points @ axis_u, points @ axis_v], axis=1)
-    remaining = list(range(len(face)))
+    normal = np.sum(np.cross(points, np.roll(points, -1, axis=0)), axis=0)  # Newell: twice the vector area
+    if np.linalg.norm(normal) <= zero * np.max(np.linalg.norm(points - points[0], axis=1)):
+        raise CageError(f"cage face {index} has zero area: delete it or dissolve it into its neighbours")
+    normal /= np.linalg.norm(normal)
+    # (u, v, normal) is right-handed, so the face is counter-clockwise in (u, v).
+    u = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
+    u /= np.linalg.norm(u)
+    flat = np.stack([points @ u, points @ np.cross(normal, u)], axis=1)
+    remaining = np.arange(len(face))
     triangles = []
     while len(remaining) > 3:
-        for k in range(len(remaining)):
-            a, b, c = remaining[k - 1], remaining[k], remaining[(k + 1) % len(remaining)]
-            pa, pb, pc = flat[a], flat[b], flat[c]
-            cross = (pb[0] - pa[0]) * (pc[1] - pa[1]) - (pb[1] - pa[1]) * (pc[0] - pa[0])
-            if cross <= 0:
-                continue
-            others = [flat[m] for m in remaining if m not in (a, b, c)]
-            if any(_in_triangle(p, pa, pb, pc) for p in others):
-                continue
-            triangles.append(face[[a, b, c]])
-            remaining.pop(k)
-            break
-        else:  # no ear found (degenerate face): fall back to a fan
-            triangles.extend(face[[remaining[0], remaining[m], remaining[m + 1]]] for m in range(1, len(remaining) - 1))
-            return triangles
+        corner = flat[remaining]
+        before, after = np.roll(corner, 1, axis=0), np.roll(corner, -1, axis=0)
+        # Convex corners standing clear of the line through their neighbours (collinear ones make no ear).
+        convex = _cross2(corner - before, after - corner) > zero * np.linalg.norm(after - before, axis=1)
+        ears = np.flatnonzero(convex)
+        others = np.flatnonzero(~convex)  # only non-convex corners can lie inside a convex ear
+        if len(others):
+            count = len(remaining)
+            blocked = _in_triangle_2d(corner[others][None], before[ears][:, None], corner[ears][:, None],
+                                      after[ears][:, None], zero)
+            own = (others[None] == (ears[:, None] - 1) % count) | (others[None] == (ears[:, None] + 1) % count)
+            ears = ears[~np.any(blocked & ~own, axis=1)]
+        if not len(ears):
+            raise CageError(
+                f"cage face {index} cannot be triangulated: its outline crosses itself or is badly non-planar; "
+                "split it into simpler faces (in Blender: Face > Triangulate Faces, then fix the result)"
+            )
+        ear = ears[0]
+        triangles.append(face[remaining[[ear - 1, ear, (ear + 1) % len(remaining)]]])
+        remaining = np.delete(remaining, ear)
     triangles.append(face[remaining])
-    return triangles
+    return np.array(triangles)
 
 
-def _in_triangle(p, a, b, c):
-    def side(p, q, r):
-        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
-
-    return side(a, b, p) >= 0 and side(b, c, p) >= 0 and side(c, a, p) >= 0
-
-
-def _check_closed_manifold(triangles):
-    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    open_edges = int(np.count_nonzero(counts == 1))
-    if open_edges:
+def _check_degenerate(vertices, triangles, triangle_face, zero):
+    bad = _degenerate(vertices[triangles], zero)
+    if np.any(bad):
+        faces = np.unique(triangle_face[bad])
         raise CageError(
-            f"the cage is not closed: {open_edges} edges belong to only one face; fill the holes "
-            "(in Blender: select the boundary edges and press F)"
-        )
-    nonmanifold = int(np.count_nonzero(counts > 2))
-    if nonmanifold:
-        raise CageError(
-            f"the cage has {nonmanifold} non-manifold edges (shared by more than two faces): "
-            "make every edge belong to exactly two faces"
+            f"{len(faces)} cage faces have zero area (face {_some(faces)}): delete them or dissolve them "
+            "(in Blender: Mesh > Clean Up > Degenerate Dissolve)"
         )
 
 
-def _orient_outward(vertices, triangles):
-    """Make neighbouring triangles agree in orientation, then point the whole surface outward."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import breadth_first_order
+def _degenerate(corners, zero):
+    """(T,) bool: triangles whose height over their longest edge is at most ``zero``.
 
-    n_tri = len(triangles)
+    Parameters
+    ----------
+    corners : (T, 3, d) float array
+    zero : float
+        Length that counts as zero.
+    """
+    edges = np.roll(corners, -1, axis=1) - corners
+    longest = np.max(np.linalg.norm(edges, axis=2), axis=1)
+    if corners.shape[2] == 2:
+        twice_area = np.abs(_cross2(edges[:, 0], edges[:, 1]))
+    else:
+        twice_area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+    return twice_area <= zero * longest
+
+
+def _edge_pairing(triangles):
+    """Directed edges and how they pair up across the mesh.
+
+    Returns
+    -------
+    directed : (3T, 2) int array
+        Edge k of triangle t is row k·T + t.
+    order : (3T,) int array
+        Directed edges sorted so that the copies of one undirected edge are consecutive.
+    counts : (U,) int array
+        Number of copies of each undirected edge, in ``order``.
+    """
     directed = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    owner = np.tile(np.arange(n_tri), 3)
     key = np.sort(directed, axis=1)
     order = np.lexsort((key[:, 1], key[:, 0]))
-    first, second = order[0::2], order[1::2]  # closed manifold: every edge appears exactly twice
-    same_direction = np.all(directed[first] == directed[second], axis=1)
-    a, b = owner[first], owner[second]
+    _, counts = np.unique(key[order], axis=0, return_counts=True)
+    return directed, order, counts
+
+
+def _check_closed_manifold(triangles, names):
+    """Raise CageError for open or non-manifold edges and vertices, and several parts.
+
+    Returns
+    -------
+    (first, second) : two (3T / 2,) int arrays
+        The two directed edges (rows of the ``directed`` array of :func:`_edge_pairing`) of each undirected edge.
+    """
+    directed, order, counts = _edge_pairing(triangles)
+    edge_of = directed[order[np.cumsum(counts) - counts]]
+    if np.any(counts == 1):
+        where = ", ".join(f"{names[a]}-{names[b]}" for a, b in edge_of[counts == 1][:_LISTED])
+        raise CageError(
+            f"the cage is not closed: {np.count_nonzero(counts == 1)} boundary edges belong to only one face (between "
+            f"vertices {where}{', ...' if np.count_nonzero(counts == 1) > _LISTED else ''}); fill the holes "
+            "(in Blender: select the boundary edges with Select > Select All by Trait > Non Manifold, and press F)"
+        )
+    if np.any(counts > 2):
+        where = ", ".join(f"{names[a]}-{names[b]}" for a, b in edge_of[counts > 2][:_LISTED])
+        raise CageError(
+            f"the cage has {np.count_nonzero(counts > 2)} non-manifold edges shared by more than two faces (between "
+            f"vertices {where}{', ...' if np.count_nonzero(counts > 2) > _LISTED else ''}): make every edge belong to "
+            "exactly two faces (in Blender: Select > Select All by Trait > Non Manifold)"
+        )
+    first, second = order[0::2], order[1::2]
+    n_tri = len(triangles)
+    _check_manifold_vertices(triangles, directed, first, second, names)
+    adjacency = sp.coo_matrix((np.ones(len(first)), (first % n_tri, second % n_tri)), shape=(n_tri, n_tri))
+    parts, label = connected_components(adjacency, directed=False)
+    if parts > 1:
+        sizes = np.bincount(label)
+        raise CageError(
+            f"the cage has {parts} separate parts ({', '.join(str(s) for s in sizes[:_LISTED])} triangles): LBC needs "
+            "one closed surface around one region; join the parts or bind to each part with its own cage"
+        )
+    return first, second
+
+
+def _check_manifold_vertices(triangles, directed, first, second, names):
+    """Raise CageError where the faces around a vertex form more than one fan (surfaces touching at a point)."""
+    n_tri = len(triangles)
+    # Corners are (triangle, vertex) pairs; two corners at one vertex are linked when their triangles share an edge
+    # there. A manifold vertex has all its corners in one linked fan.
+    corner = np.arange(3 * n_tri)
+    corner_start, corner_end = corner, (corner + n_tri) % (3 * n_tri)  # the corners at directed edge's two ends
+    same = directed[first, 0] == directed[second, 0]
+    links_a = np.r_[corner_start[first], corner_end[first]]
+    links_b = np.r_[np.where(same, corner_start[second], corner_end[second]),
+                    np.where(same, corner_end[second], corner_start[second])]
+    graph = sp.coo_matrix((np.ones(len(links_a)), (links_a, links_b)), shape=(3 * n_tri,) * 2)
+    _, fan = connected_components(graph, directed=False)
+    corner_vertex = directed[:, 0]
+    fans_per_vertex = np.bincount(np.unique(np.c_[corner_vertex, fan], axis=0)[:, 0])
+    pinched = np.flatnonzero(fans_per_vertex > 1)
+    if len(pinched):
+        raise CageError(
+            f"the cage has {len(pinched)} non-manifold vertices where separate sheets of the surface touch at a point "
+            f"(vertex {_some(names[pinched])}): pull the sheets apart or merge them along an edge"
+        )
+
+
+def _orient_outward(vertices, triangles, pairing):
+    """Make neighbouring triangles agree in orientation, then point the surface outward.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+    triangles : (T, 3) int array
+        One connected, closed, edge-manifold surface.
+    pairing : (first, second)
+        From :func:`_check_closed_manifold`.
+
+    Returns
+    -------
+    triangles : (T, 3) int array
+    flipped : (T,) bool array
+        The triangles whose orientation changed.
+    """
+    first, second = pairing
+    n_tri = len(triangles)
+    directed = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    a, b = first % n_tri, second % n_tri
+    # Neighbours agree when they run their shared edge in opposite directions.
+    disagree = np.all(directed[first] == directed[second], axis=1)
+    relation = dict(zip(zip(a.tolist(), b.tolist()), disagree.tolist()))
+    relation.update(zip(zip(b.tolist(), a.tolist()), disagree.tolist()))
     adjacency = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n_tri, n_tri)).tocsr()
-    adjacency = adjacency + adjacency.T
+    nodes, predecessors = breadth_first_order(adjacency, 0, directed=False)
     flip = np.zeros(n_tri, dtype=bool)
-    visited = np.zeros(n_tri, dtype=bool)
-    relation = {}
-    for x, y, s in zip(a, b, same_direction):
-        relation[(x, y)] = relation[(y, x)] = s
-    for start in range(n_tri):
-        if visited[start]:
-            continue
-        nodes, predecessors = breadth_first_order(adjacency, start, directed=False)
-        visited[nodes] = True
-        for node in nodes[1:]:
-            parent = predecessors[node]
-            flip[node] = flip[parent] ^ relation[(parent, node)]
-    for (x, y), s in relation.items():
-        if (flip[x] ^ flip[y]) != s:
-            raise CageError("the cage surface is not orientable (like a Möbius strip): it cannot enclose a volume")
+    for node in nodes[1:].tolist():  # breadth-first order: a parent's flip is known before its children's
+        parent = predecessors[node]
+        flip[node] = flip[parent] ^ relation[(parent, node)]
+    if np.any((flip[a] ^ flip[b]) != disagree):
+        raise CageError("the cage surface is not orientable (like a Möbius strip): it cannot enclose a volume")
     oriented = np.where(flip[:, None], triangles[:, ::-1], triangles)
-    # Each connected shell points outward on its own.
-    _, shell = sp.csgraph.connected_components(adjacency, directed=False)
-    for label in np.unique(shell):
-        members = shell == label
-        if _enclosed_measure(vertices, oriented[members]) < 0:
-            oriented[members] = oriented[members][:, ::-1]
-            flip[members] = ~flip[members]
-    return oriented, int(min(np.count_nonzero(flip), np.count_nonzero(~flip)))
+    if _enclosed_measure(vertices, oriented) < 0:
+        oriented, flip = oriented[:, ::-1], ~flip
+    return oriented, flip
+
+
+def _check_self_intersection(vertices, triangles, triangle_face, zero):
+    pairs = _intersecting_triangles(vertices, triangles, zero)
+    if len(pairs):
+        faces = np.unique(np.sort(triangle_face[pairs], axis=1), axis=0)
+        listed = ", ".join(f"{a} and {b}" if a != b else f"{a} with itself" for a, b in faces[:_LISTED])
+        raise CageError(
+            f"the cage intersects itself: {len(faces)} pairs of faces cross or touch (faces {listed}"
+            f"{', ...' if len(faces) > _LISTED else ''}); move them apart so that the surface does not pass through "
+            "itself (in Blender the 3D-Print Toolbox's Intersections check selects them)"
+        )
+
+
+# -------------------------------------------------------------------------------------------- triangle intersections
+
+
+def _intersecting_triangles(vertices, triangles, zero):
+    """Pairs of triangles that meet anywhere besides the edge or vertex they share.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+    triangles : (T, 3) int array
+        Welded, no zero-area or duplicated triangles.
+    zero : float
+        Length that counts as zero: touching within it counts as intersecting.
+
+    Returns
+    -------
+    (P, 2) int array of triangle indices, i < j
+    """
+    corners = vertices[triangles]
+    pairs = _overlapping_boxes(corners.min(axis=1) - zero, corners.max(axis=1) + zero)
+    first, second = triangles[pairs[:, 0]], triangles[pairs[:, 1]]
+    equal = first[:, :, None] == second[:, None, :]  # (P, 3, 3): corner k of the first is corner l of the second
+    shared = np.count_nonzero(equal, axis=(1, 2))
+    hit = np.zeros(len(pairs), dtype=bool)
+    for count, test in ((0, _disjoint_meet), (1, _vertex_neighbours_meet), (2, _edge_neighbours_fold)):
+        chosen = shared == count
+        hit[chosen] = test(vertices, first[chosen], second[chosen], equal[chosen], zero)
+    return pairs[hit]
+
+
+def _overlapping_boxes(low, high, chunk=2_000_000):
+    """Index pairs (i < j) of axis-aligned boxes that overlap, touching included: sort and sweep on the longest axis.
+
+    Parameters
+    ----------
+    low, high : (B, d) float arrays
+        Box corners.
+    chunk : int
+        Candidate pairs generated at a time, to bound memory.
+
+    Returns
+    -------
+    (P, 2) int array
+    """
+    axis = int(np.argmax(high.max(axis=0) - low.min(axis=0)))
+    across = np.delete(np.arange(low.shape[1]), axis)
+    order = np.argsort(low[:, axis], kind="stable")
+    low, high = low[order], high[order]
+    # Boxes after s in sweep order start before s ends, so they overlap s along the sweep axis.
+    counts = np.searchsorted(low[:, axis], high[:, axis], side="right") - np.arange(len(low)) - 1
+    cumulative = np.cumsum(counts)
+    found = []
+    start = 0
+    while start < len(low):
+        done = cumulative[start - 1] if start else 0
+        stop = max(int(np.searchsorted(cumulative, done + chunk, side="right")), start + 1)
+        own = counts[start:stop]
+        i = np.repeat(np.arange(start, stop), own)
+        j = i + 1 + np.arange(len(i)) - np.repeat(np.cumsum(own) - own, own)
+        keep = np.all((low[j][:, across] <= high[i][:, across]) & (low[i][:, across] <= high[j][:, across]), axis=1)
+        found.append(np.stack([order[i[keep]], order[j[keep]]], axis=1))
+        start = stop
+    pairs = np.concatenate(found) if found else np.empty((0, 2), dtype=np.int64)
+    return np.sort(pairs, axis=1)
+
+
+def _disjoint_meet(vertices, first, second, equal, zero):
+    """(P,) bool: triangles with no shared vertex that cross or touch."""
+    a, b = vertices[first], vertices[second]  # (P, 3, 3)
+    normal_a, normal_b = _unit(_triangle_normals(a)), _unit(_triangle_normals(b))
+    height_a = _zeroed(np.einsum("pkj,pj->pk", a - b[:, :1], normal_b), zero)  # a's corners over b's plane
+    height_b = _zeroed(np.einsum("pkj,pj->pk", b - a[:, :1], normal_a), zero)
+    apart = np.zeros(len(a), dtype=bool)
+    for height in (height_a, height_b):
+        apart |= np.all(height > 0, axis=1) | np.all(height < 0, axis=1)
+    coplanar = ~apart & (np.all(height_a == 0, axis=1) | np.all(height_b == 0, axis=1))
+    crossing = ~apart & ~coplanar
+    hit = np.zeros(len(a), dtype=bool)
+    hit[coplanar] = _coplanar_overlap(a[coplanar], b[coplanar], normal_b[coplanar], zero)
+    # Not coplanar: the two meet in a segment whose ends lie on an edge of one of them, inside the other.
+    hit[crossing] = _edges_meet_triangle(
+        a[crossing], height_a[crossing], b[crossing], normal_b[crossing], zero
+    ) | _edges_meet_triangle(b[crossing], height_b[crossing], a[crossing], normal_a[crossing], zero)
+    return hit
+
+
+def _edges_meet_triangle(a, height, b, normal, zero):
+    """(P,) bool: an edge of triangle ``a`` meets triangle ``b`` (boundary included).
+
+    Parameters
+    ----------
+    a, b : (P, 3, 3) float arrays
+    height : (P, 3) float array
+        Signed distances of a's corners from b's plane, zeroed within ``zero``; not all zero.
+    normal : (P, 3) float array
+        b's unit normal.
+    """
+    hit = np.zeros(len(a), dtype=bool)
+    for k in range(3):
+        p, q = a[:, k], a[:, (k + 1) % 3]
+        hp, hq = height[:, k], height[:, (k + 1) % 3]
+        # An edge lying in the plane has its ends tested by the edges joining them to the corner off the plane.
+        meets_plane = (hp * hq <= 0) & ~((hp == 0) & (hq == 0))
+        t = np.divide(hp, hp - hq, out=np.zeros_like(hp), where=meets_plane)
+        hit |= meets_plane & _in_triangle_3d(p + t[:, None] * (q - p), b, normal, zero)
+    return hit
+
+
+def _in_triangle_3d(x, b, normal, zero):
+    """(P,) bool: points x (P, 3), on the plane of triangles b (P, 3, 3), lie in them or within ``zero`` of them."""
+    inside = np.ones(len(x), dtype=bool)
+    for k in range(3):
+        edge = b[:, (k + 1) % 3] - b[:, k]
+        side = np.einsum("pj,pj->p", np.cross(edge, x - b[:, k]), normal) / np.linalg.norm(edge, axis=1)
+        inside &= side >= -zero
+    return inside
+
+
+def _coplanar_overlap(a, b, normal, zero):
+    """(P,) bool: coplanar triangles a, b (P, 3, 3) without a shared vertex that overlap or touch."""
+    axis_u = _unit(b[:, 1] - b[:, 0])
+    axis_v = np.cross(normal, axis_u)
+
+    def flatten(points):
+        relative = points - b[:, :1]
+        return np.stack([np.einsum("pkj,pj->pk", relative, axis_u), np.einsum("pkj,pj->pk", relative, axis_v)], axis=2)
+
+    a, b = flatten(a), flatten(b)
+    hit = np.zeros(len(a), dtype=bool)
+    for k in range(3):
+        for m in range(3):
+            hit |= _segments_touch(a[:, k], a[:, (k + 1) % 3], b[:, m], b[:, (m + 1) % 3], zero)
+    # Boundaries apart: they overlap only if one contains the other.
+    hit |= _in_triangle_2d(a[:, 0], *_ccw(b).transpose(1, 0, 2), zero)
+    hit |= _in_triangle_2d(b[:, 0], *_ccw(a).transpose(1, 0, 2), zero)
+    return hit
+
+
+def _vertex_neighbours_meet(vertices, first, second, equal, zero):
+    """(P,) bool: triangles sharing exactly one vertex that meet anywhere else."""
+    # Rotate both so that the shared vertex is corner 0: (v, a, b) and (v, c, d).
+    first = _rotate_rows(first, np.argmax(np.any(equal, axis=2), axis=1))
+    second = _rotate_rows(second, np.argmax(np.any(equal, axis=1), axis=1))
+    v = vertices[first[:, 0]]
+    a, b = vertices[first[:, 1]] - v, vertices[first[:, 2]] - v
+    c, d = vertices[second[:, 1]] - v, vertices[second[:, 2]] - v
+    normal_1, normal_2 = _unit(np.cross(a, b)), _unit(np.cross(c, d))
+    ha, hb = (_zeroed(np.einsum("pj,pj->p", x, normal_2), zero) for x in (a, b))
+    hc, hd = (_zeroed(np.einsum("pj,pj->p", x, normal_1), zero) for x in (c, d))
+    coplanar = ((ha == 0) & (hb == 0)) | ((hc == 0) & (hd == 0))
+    # Not coplanar: each triangle meets the other's plane in a segment from v (or only in v); both segments lie on the
+    # planes' common line, and the triangles meet beyond v when the segments leave v in the same direction.
+    reach_1 = _segment_on_plane(a, b, ha, hb)
+    reach_2 = _segment_on_plane(c, d, hc, hd)
+    length_1, length_2 = np.linalg.norm(reach_1, axis=1), np.linalg.norm(reach_2, axis=1)
+    same_way = np.einsum("pj,pj->p", reach_1, reach_2) > 0
+    hit = ~coplanar & (ha * hb <= 0) & (hc * hd <= 0) & same_way & (np.minimum(length_1, length_2) > zero)
+    # Coplanar: they overlap exactly when their angular wedges at v do.
+    wedges = np.flatnonzero(coplanar)
+    if len(wedges):
+        hit[wedges] = _wedges_overlap(a[wedges], b[wedges], c[wedges], d[wedges], normal_1[wedges])
+    return hit
+
+
+def _segment_on_plane(a, b, ha, hb):
+    """(P, 3): the point of segment a-b on the plane where the heights ha, hb change sign (a where both are 0)."""
+    t = np.divide(ha, ha - hb, out=np.zeros_like(ha), where=ha != hb)
+    return a + t[:, None] * (b - a)
+
+
+def _wedges_overlap(a, b, c, d, normal, tolerance=1e-9):
+    """(P,) bool: the wedges a-v-b and c-v-d (directions from v, in the plane of ``normal``) overlap."""
+    axis_u = _unit(a)
+    axis_v = np.cross(normal, axis_u)
+    flat = [np.stack([np.einsum("pj,pj->p", x, axis_u), np.einsum("pj,pj->p", x, axis_v)], axis=1) for x in (a, b, c, d)]
+    a, b, c, d = (x / np.linalg.norm(x, axis=1, keepdims=True) for x in flat)
+    # Order each wedge counter-clockwise; wedges of triangles are narrower than a half-turn.
+    swap = _cross2(a, b) < 0
+    a, b = np.where(swap[:, None], b, a), np.where(swap[:, None], a, b)
+    swap = _cross2(c, d) < 0
+    c, d = np.where(swap[:, None], d, c), np.where(swap[:, None], c, d)
+
+    def strictly_inside(x, start, end):
+        return (_cross2(start, x) > tolerance) & (_cross2(x, end) > tolerance)
+
+    def same(x, y):
+        return (np.abs(_cross2(x, y)) <= tolerance) & (np.einsum("pj,pj->p", x, y) > 0)
+
+    return (
+        strictly_inside(c, a, b) | strictly_inside(d, a, b) | strictly_inside(a, c, d) | strictly_inside(b, c, d)
+        | (same(a, c) & same(b, d))
+    )
+
+
+def _edge_neighbours_fold(vertices, first, second, equal, zero):
+    """(P,) bool: triangles sharing an edge that fold flat onto each other (same plane, same side of the edge)."""
+    # Rotate both so that the corner off the shared edge is corner 0: (a, u, v) and (b, ., .).
+    first = _rotate_rows(first, np.argmin(np.any(equal, axis=2), axis=1))
+    second = _rotate_rows(second, np.argmin(np.any(equal, axis=1), axis=1))
+    u, v = vertices[first[:, 1]], vertices[first[:, 2]]
+    a, b = vertices[first[:, 0]] - u, vertices[second[:, 0]] - u
+    edge = _unit(v - u)
+    a_across = a - np.einsum("pj,pj->p", a, edge)[:, None] * edge
+    b_across = b - np.einsum("pj,pj->p", b, edge)[:, None] * edge
+    # The out-of-plane offset of one far corner from the other's plane.
+    offset = np.linalg.norm(np.cross(_unit(a_across), b_across), axis=1)
+    return (offset <= zero) & (np.einsum("pj,pj->p", a_across, b_across) > 0)
+
+
+# ----------------------------------------------------------------------------------------------------------- helpers
+
+
+def _segments_touch(p1, q1, p2, q2, zero):
+    """(P,) bool: 2D segments p1-q1 and p2-q2 (P, 2) cross or come within ``zero`` of each other's ends."""
+
+    def side(p, q, r):  # signed distance of r from the line p-q
+        return _zeroed(_cross2(q - p, r - p) / np.linalg.norm(q - p, axis=1), zero)
+
+    def within(p, q, r):  # r's projection falls on the segment p-q
+        along = q - p
+        length = np.linalg.norm(along, axis=1)
+        t = np.einsum("pj,pj->p", r - p, along) / length
+        return (t >= -zero) & (t <= length + zero)
+
+    d1, d2, d3, d4 = side(p1, q1, p2), side(p1, q1, q2), side(p2, q2, p1), side(p2, q2, q1)
+    proper = (d1 * d2 < 0) & (d3 * d4 < 0)
+    touching = (
+        ((d1 == 0) & within(p1, q1, p2)) | ((d2 == 0) & within(p1, q1, q2))
+        | ((d3 == 0) & within(p2, q2, p1)) | ((d4 == 0) & within(p2, q2, q1))
+    )
+    return proper | touching
+
+
+def _in_triangle_2d(x, a, b, c, zero):
+    """Points x inside counter-clockwise 2D triangles a, b, c or within ``zero`` of them (broadcasting, last axis 2)."""
+    inside = True
+    for p, q in ((a, b), (b, c), (c, a)):
+        inside = inside & (_cross2(q - p, x - p) >= -zero * np.linalg.norm(q - p, axis=-1))
+    return inside
+
+
+def _ccw(triangles):
+    """(P, 3, 2): 2D triangles reordered counter-clockwise."""
+    clockwise = _cross2(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]) < 0
+    return np.where(clockwise[:, None, None], triangles[:, ::-1], triangles)
+
+
+def _rotate_rows(triangles, start):
+    """(T, 3): each row rotated to begin at its column ``start``."""
+    return np.take_along_axis(triangles, (start[:, None] + np.arange(3)) % 3, axis=1)
+
+
+def _triangle_normals(corners):
+    """(..., 3): area-weighted (twice the area) normals of triangles (..., 3, 3)."""
+    return np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
+
+
+def _unit(vectors):
+    return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
+
+
+def _zeroed(values, zero):
+    return np.where(np.abs(values) <= zero, 0.0, values)
+
+
+def _cross2(u, v):
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
 def _enclosed_measure(vertices, facets):

@@ -1,0 +1,414 @@
+"""Cage checks: one test per entry of the bad-input catalogue (docs/what-can-go-wrong.md), plus the repairs
+(welding, orientation) and the triangulation of quads and n-gons."""
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import ConvexHull
+
+from lbc_core.cage import MAX_CONTROL_POINTS, _intersecting_triangles, make_cage
+from lbc_core.errors import CageError
+
+DATA = Path(__file__).parent / "data"
+
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+CUBE = np.array([[x, y, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)])
+CUBE_QUADS = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]  # outward
+TETRA = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+TETRA_FACES = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]  # outward
+
+
+def read_obj(path):
+    """Vertices (n, 3) and faces (lists of 0-based indices) of an OBJ file."""
+    vertices, faces = [], []
+    for line in Path(path).read_text().splitlines():
+        parts = line.split()
+        if parts and parts[0] == "v":
+            vertices.append([float(x) for x in parts[1:4]])
+        elif parts and parts[0] == "f":
+            faces.append([int(p.split("/")[0]) - 1 for p in parts[1:]])
+    return np.array(vertices), faces
+
+
+def sphere(n_points, seed=0):
+    """A triangulated sphere (star-shaped, radii in [0.7, 1.3]): vertices (n, 3), triangles (2n - 4, 3)."""
+    index = np.arange(n_points) + 0.5
+    polar, azimuth = np.arccos(1 - 2 * index / n_points), np.pi * (1 + 5**0.5) * index
+    directions = np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], axis=1)
+    radii = np.random.default_rng(seed).uniform(0.7, 1.3, n_points)
+    return directions * radii[:, None], ConvexHull(directions).simplices
+
+
+def assert_refused(vertices, faces, *words, **options):
+    """make_cage raises CageError whose message contains every word (case-insensitive)."""
+    with pytest.raises(CageError) as caught:
+        make_cage(vertices, faces, **options)
+    message = str(caught.value).lower()
+    for word in words:
+        assert word.lower() in message, message
+    return message
+
+
+# ----------------------------------------------------------------------------------------------- catalogue: inputs
+
+
+def test_wrong_shape_is_refused():
+    assert_refused(np.zeros((4, 4)), None, "(n, 2) or (n, 3)")
+
+
+def test_too_few_polygon_vertices():
+    assert_refused(SQUARE[:2], None, "at least 3 vertices", "got 2")
+
+
+def test_too_few_distinct_polygon_vertices_after_welding():
+    assert_refused(np.array([[0.0, 0], [1, 0], [1, 1e-12]]), None, "at least 3 distinct vertices")
+
+
+def test_too_few_3d_vertices():
+    assert_refused(TETRA[:3], [[0, 1, 2]], "at least 4 vertices")
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nan_or_inf_coordinates(bad):
+    vertices = CUBE.copy()
+    vertices[5, 1] = bad
+    assert_refused(vertices, CUBE_QUADS, "nan or infinite", "(5)")
+    polygon = SQUARE.copy()
+    polygon[2, 0] = bad
+    assert_refused(polygon, None, "nan or infinite")
+
+
+def test_polygon_not_in_a_plane_z_constant():
+    assert_refused(np.c_[SQUARE, [0, 0, 1, 0]], None, "z = constant")
+
+
+def test_faces_with_2d_vertices():
+    assert_refused(SQUARE, [[0, 1, 2], [0, 2, 3]], "3d vertices")
+
+
+def test_no_faces():
+    assert_refused(CUBE, [], "no faces")
+
+
+@pytest.mark.parametrize("face", [[0, 1], [0, 1, 8], [0, -1, 2]])
+def test_invalid_face_indices(face):
+    assert_refused(CUBE, CUBE_QUADS + [face], "face 6", "invalid")
+
+
+def test_non_integer_face_indices():
+    assert_refused(CUBE, CUBE_QUADS[:-1] + [[1.0, 3.0, 7.0, 5.0]], "integer vertex indices")
+
+
+def test_million_faces_refused_up_front():
+    faces = np.zeros((1_000_000, 3), dtype=np.int64)
+    start = time.perf_counter()
+    message = assert_refused(np.random.default_rng(0).random((500_000, 3)), faces, "1000000 faces", str(MAX_CONTROL_POINTS))
+    assert time.perf_counter() - start < 0.5
+    assert "coarser cage" in message
+
+
+def test_too_many_vertices_refused_up_front():
+    assert_refused(np.random.default_rng(0).random((10**6, 2)), None, "1000000 vertices", "coarser cage")
+
+
+def test_too_many_control_points():
+    vertices, triangles = sphere(300)
+    assert_refused(vertices, triangles, "300 distinct vertices", "at most 160 control points", max_control_points=160)
+    angles = np.linspace(0, 2 * np.pi, 300, endpoint=False)
+    assert_refused(np.c_[np.cos(angles), np.sin(angles)], None, "300 distinct", max_control_points=100)
+
+
+# ---------------------------------------------------------------------------------------------- catalogue: polygons
+
+
+def test_polygon_duplicates_are_welded_and_reported():
+    closed = np.r_[SQUARE[:2], SQUARE[1:2] + 1e-13, SQUARE[2:], SQUARE[:1]]  # a doubled corner and a closing copy
+    cage = make_cage(closed)
+    assert len(cage.vertices) == 4
+    assert cage.warnings == ["welded 2 duplicate cage vertices"]
+    np.testing.assert_array_equal(cage.vertex_map, [0, 1, 1, 2, 3, 0])
+
+
+def test_polygon_visiting_a_vertex_twice():
+    figure = np.array([[0.0, 0], [1, 0], [1, 1], [0.5, 0.5], [0, 1], [-1, 1], [-1, 0], [0.5, 0.5]])
+    assert_refused(figure, None, "passes twice through vertex 3", "touches itself")
+
+
+def test_collinear_polygon_has_zero_area():
+    assert_refused(np.array([[0.0, 0], [1, 1], [2, 2], [3, 3]]), None, "zero area", "collinear")
+
+
+def test_polygon_spike():
+    spiked = np.array([[0.0, 0], [2, 0], [2, 2], [2, 3], [2, 2.5], [0, 2]])  # out to (2, 3) and back on itself
+    assert_refused(spiked, None, "doubles back", "vertex 3")
+
+
+def test_self_intersecting_polygon():
+    bowtie = np.array([[0.0, 0], [1, 1], [1, 0], [0, 1]])
+    assert_refused(bowtie, None, "intersects itself", "1 pairs of edges", "0-1 with 2-3")
+
+
+def test_polygon_touching_itself():
+    touching = np.array([[0.0, 0], [4, 0], [4, 4], [2, 0], [0, 4]])  # vertex 3 lies on edge 0-1
+    assert_refused(touching, None, "intersects itself", "touch")
+
+
+def test_collinear_edges_that_do_not_meet_are_fine():
+    comb = np.array([[0.0, 0], [5, 0], [5, 2], [4, 2], [4, 1], [3, 1], [3, 2], [2, 2], [2, 1], [1, 1], [1, 2], [0, 2]])
+    cage = make_cage(comb)
+    assert cage.measure == pytest.approx(8.0)
+
+
+@pytest.mark.parametrize("direction", [1, -1])
+def test_polygon_orientation_either_way(direction):
+    polygon = SQUARE[::direction]
+    cage = make_cage(polygon)
+    np.testing.assert_array_equal(cage.vertices, polygon)  # control points keep the input order
+    assert cage.measure == pytest.approx(1.0)
+    assert sorted(cage.facets[:, 0]) == [0, 1, 2, 3]  # each control point starts one edge
+    assert cage.warnings == []
+
+
+def test_polygon_given_with_constant_z():
+    cage = make_cage(np.c_[SQUARE, np.full(4, 2.5)])
+    assert cage.dim == 2 and cage.measure == pytest.approx(1.0)
+
+
+# ---------------------------------------------------------------------------------------------- catalogue: 3D cages
+
+
+def test_flat_cage_has_zero_volume():
+    flat = CUBE.copy()
+    flat[:, 2] = 0.0
+    flat[4:, 0] += 2.0  # keep the two squares apart so that nothing welds
+    assert_refused(flat, CUBE_QUADS, "flat", "zero volume")
+
+
+def test_open_cage_names_its_boundary_edges():
+    assert_refused(CUBE, CUBE_QUADS[:-1], "not closed", "4 boundary edges")
+
+
+def test_non_manifold_edges():
+    # A second cube sharing the edge x = y = 0 with the first: four faces meet at that edge.
+    vertices = np.r_[CUBE, CUBE - [1.0, 1.0, 0.0]]
+    faces = CUBE_QUADS + [[k + 8 for k in face] for face in CUBE_QUADS]
+    assert_refused(vertices, faces, "1 non-manifold edges", "0-4")
+
+
+def test_non_manifold_vertex():
+    # Two tetrahedra touching at vertex 0.
+    vertices = np.r_[TETRA, -TETRA[1:]]
+    faces = TETRA_FACES + [[0, 4, 5], [0, 6, 4], [0, 5, 6], [4, 6, 5]]
+    assert_refused(vertices, faces, "non-manifold vertices", "vertex 0")
+
+
+def test_several_parts():
+    vertices = np.r_[TETRA, TETRA + 5.0]
+    faces = TETRA_FACES + [[a + 4, b + 4, c + 4] for a, b, c in TETRA_FACES]
+    assert_refused(vertices, faces, "2 separate parts", "own cage")
+
+
+def test_duplicated_face():
+    assert_refused(CUBE, CUBE_QUADS + [CUBE_QUADS[2][::-1]], "duplicated", "faces 2 and 6")
+
+
+def test_loose_vertex():
+    assert_refused(np.r_[CUBE, [[3.0, 3.0, 3.0]]], CUBE_QUADS, "belong to no face", "vertex 8")
+
+
+def test_face_visiting_a_vertex_twice():
+    assert_refused(CUBE, CUBE_QUADS[:-1] + [[1, 3, 7, 3, 5]], "face 5", "twice through vertex 3")
+
+
+def test_zero_area_face():
+    # Vertex 8 sits on the middle of edge 0-1: the sliver triangle 0-8-1 closes the cage but has zero area.
+    vertices = np.r_[CUBE, [[0.5, 0.0, 0.0]]]
+    faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 8, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 8]]
+    assert_refused(vertices, faces, "zero area", "face 6", "degenerate dissolve")
+
+
+def test_n_gon_with_zero_area():
+    vertices = np.r_[CUBE, [[0.2, 0.0, 0.0], [0.4, 0.0, 0.0]]]
+    faces = CUBE_QUADS + [[0, 8, 9, 1, 9]]
+    assert_refused(vertices, faces, "face 6")
+
+
+def test_inconsistent_orientation_is_fixed_and_reported():
+    faces = [face[::-1] if k in (1, 4) else face for k, face in enumerate(CUBE_QUADS)]
+    cage = make_cage(CUBE, faces)
+    assert cage.warnings == ["flipped 2 cage faces to make the orientation consistent and outward"]
+    assert cage.measure == pytest.approx(1.0)
+
+
+def test_inward_cage_is_reversed_and_reported():
+    cage = make_cage(CUBE, [face[::-1] for face in CUBE_QUADS])
+    assert cage.warnings == ["reversed all cage faces: they pointed inward"]
+    assert cage.measure == pytest.approx(1.0)
+
+
+def test_non_orientable_surface():
+    # The 6-vertex projective plane (hemi-icosahedron): closed and manifold, but one-sided.
+    faces = [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [0, 5, 1], [1, 2, 4], [2, 3, 5], [3, 4, 1], [4, 5, 2], [5, 1, 3]]
+    vertices = np.random.default_rng(1).random((6, 3))
+    assert_refused(vertices, faces, "not orientable")
+
+
+def test_3d_duplicates_are_welded_and_reported():
+    soup = np.concatenate([CUBE[face] for face in CUBE_QUADS])  # every quad with its own 4 vertices
+    faces = np.arange(24).reshape(6, 4)
+    cage = make_cage(soup + np.random.default_rng(0).normal(scale=1e-12, size=soup.shape), faces)
+    assert len(cage.vertices) == 8
+    assert cage.warnings == ["welded 16 duplicate cage vertices"]
+    assert cage.measure == pytest.approx(1.0)
+
+
+def test_faces_collapsed_by_welding_are_dropped_and_reported():
+    vertices = np.r_[CUBE, CUBE[:1] + 1e-13]
+    cage = make_cage(vertices, CUBE_QUADS + [[0, 8, 0]])
+    assert "dropped 1 cage faces that welding collapsed" in cage.warnings[1]
+
+
+def test_self_intersecting_cage_names_the_faces():
+    vertices, triangles = sphere(200)
+    top = np.argmax(vertices[:, 2])
+    vertices[top] = [0.0, 0.0, -2.0]  # pull the top vertex down through the bottom of the surface
+    message = assert_refused(vertices, triangles, "intersects itself", "pairs of faces", "3d-print toolbox")
+    faces_around_top = {str(f) for f in np.flatnonzero(np.any(triangles == top, axis=1))}
+    named = message.split("(faces ")[1].split(")")[0].replace(" and ", ",").replace(", ...", "").split(",")
+    assert faces_around_top & {name.strip() for name in named}
+
+
+def test_twisted_quad_is_refused():
+    twisted = CUBE.copy()
+    twisted[[6, 7]] = twisted[[7, 6]]  # the top face becomes a bow-tie
+    assert_refused(twisted, CUBE_QUADS, "intersects itself")
+
+
+# ---------------------------------------------------------------------------------------------- accepted cages
+
+
+@pytest.mark.parametrize("path", sorted((DATA / "cages-3d").glob("*/cage*.obj")), ids=lambda p: p.stem)
+def test_real_3d_cages_are_accepted(path):
+    vertices, faces = read_obj(path)
+    cage = make_cage(vertices, faces)
+    assert cage.warnings == [] and cage.measure > 0
+
+
+@pytest.mark.parametrize("path", sorted(DATA.glob("*-control-edgeset.obj")), ids=lambda p: p.stem)
+def test_real_2d_cages_are_accepted(path):
+    vertices, _ = read_obj(path)
+    cage = make_cage(vertices[:, :2])
+    assert cage.measure > 0 and len(cage.vertices) == len(vertices)
+
+
+def test_subdivided_flat_sides_are_not_self_intersections():
+    # A 2 × 2 × 2 box whose sides are 2 × 2 grids of quads: many coplanar triangles that share only edges or vertices.
+    points, quads = [], []
+    for axis in range(3):
+        for side in (0.0, 2.0):
+            grid = np.array([[u, v] for u in range(3) for v in range(3)], dtype=float)
+            points.append(np.insert(grid, axis, side, axis=1))
+            base = 9 * (len(points) - 1)
+            quads += [[base + 3 * u + v, base + 3 * u + v + 3, base + 3 * u + v + 4, base + 3 * u + v + 1]
+                      for u in range(2) for v in range(2)]
+    cage = make_cage(np.concatenate(points), quads)
+    assert len(cage.vertices) == 26 and len(cage.facets) == 48
+    assert cage.measure == pytest.approx(8.0)
+
+
+def test_self_intersection_check_is_fast():
+    vertices, triangles = sphere(502)  # 1000 triangles
+    assert len(triangles) == 1000
+    start = time.perf_counter()
+    make_cage(vertices, triangles)
+    assert time.perf_counter() - start < 0.5
+
+
+# ---------------------------------------------------------------------------------------------- triangulation
+
+
+def test_quads_split_on_the_shorter_diagonal():
+    skewed = CUBE * [3.0, 1.0, 1.0]
+    skewed[0] += [0.4, 0.0, 0.0]  # bottom quad 0-2-3-1: diagonal 0-3 now shorter than 2-1
+    cage = make_cage(skewed, CUBE_QUADS)
+    bottom = cage.facets[cage.facet_face == 0]
+    assert len(bottom) == 2 and all({0, 3} <= set(t) for t in bottom.tolist())
+    assert len(cage.facets) == 12
+
+
+def test_non_convex_quad_splits_inside():
+    # A prism over a dart a, c, b, r (r the reflex corner): the short diagonal a-b runs outside the dart, so the split
+    # is along r-c.
+    dart = np.array([[0.0, 1], [10, 0], [0, -1], [1, 0]])
+    vertices = np.r_[np.c_[dart, np.zeros(4)], np.c_[dart, np.ones(4)]]
+    faces = [[3, 2, 1, 0], [4, 5, 6, 7]] + [[k, (k + 1) % 4, (k + 1) % 4 + 4, k + 4] for k in range(4)]
+    cage = make_cage(vertices, faces)
+    assert all({1, 3} <= set(t) for t in cage.facets[cage.facet_face == 0].tolist())
+    assert cage.measure == pytest.approx(9.0)
+
+
+def test_n_gons_are_ear_clipped_consistently():
+    # An L-shaped prism: two non-convex hexagon caps and six quad sides.
+    outline = np.array([[0.0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]])
+    vertices = np.r_[np.c_[outline, np.zeros(6)], np.c_[outline, np.ones(6)]]
+    faces = [list(range(5, -1, -1)), list(range(6, 12))] + [[k, (k + 1) % 6, (k + 1) % 6 + 6, k + 6] for k in range(6)]
+    first = make_cage(vertices, faces)
+    again = make_cage(vertices, faces)
+    np.testing.assert_array_equal(first.facets, again.facets)
+    assert np.count_nonzero(first.facet_face == 0) == 4 and np.count_nonzero(first.facet_face == 1) == 4
+    assert first.measure == pytest.approx(3.0)
+    # Every triangle of a cap lies inside the L: the caps' triangle areas add up to the L's area.
+    corners = first.vertices[first.facets[first.facet_face == 1]]
+    areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    assert areas.sum() == pytest.approx(3.0)
+    assert first.warnings == []
+
+
+# ---------------------------------------------------------------------------------------------- intersection tests
+
+
+def _pair(first, second):
+    vertices = np.r_[first, second]
+    return np.array([[0, 1, 2], [3, 4, 5]]), vertices
+
+
+@pytest.mark.parametrize(
+    "second, meets",
+    [
+        ([[0.2, 0.2, -1], [0.2, 0.2, 1], [0.3, 0.3, 1]], True),  # crosses the first one's interior
+        ([[0.2, 0.2, 0.1], [0.2, 0.2, 1], [0.3, 0.3, 1]], False),  # above it
+        ([[0.5, 0.5, 0.0], [0.2, 0.2, 1], [0.3, 0.3, 1]], True),  # touches it on its edge
+        ([[0.2, 0.2, 0.0], [0.4, 0.2, 0.0], [0.2, 0.4, 0.0]], True),  # coplanar, inside it
+        ([[1.0, 1.0, 0.0], [2.0, 1.0, 0.0], [1.0, 2.0, 0.0]], False),  # coplanar, apart
+    ],
+)
+def test_disjoint_triangle_pairs(second, meets):
+    triangles, vertices = _pair([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]], second)
+    assert len(_intersecting_triangles(vertices, triangles, 1e-12)) == int(meets)
+
+
+@pytest.mark.parametrize(
+    "corners, meets",
+    [
+        # Sharing vertex 0 (at the origin) with the triangle (0, 0, 0), (1, 0, 0), (0, 1, 0):
+        ([[0, 0, 0], [1, 1, -1], [1, 1, 1]], True),  # passes through it
+        ([[0, 0, 0], [-1, -1, -1], [-1, -1, 1]], False),  # crosses its plane, but on the far side of the vertex
+        ([[0, 0, 0], [1, 1, 0.5], [1, 0.5, 1]], False),  # above it
+        ([[0, 0, 0], [1, 0.2, 0], [1, 1, 0]], True),  # coplanar wedges overlap
+        ([[0, 0, 0], [-1, 0, 0], [0, -1, 0]], False),  # coplanar wedges apart
+        # Sharing the edge 0-1:
+        ([[0, 0, 0], [1, 0, 0], [0.5, 0.5, 0]], True),  # folded flat onto it
+        ([[0, 0, 0], [1, 0, 0], [0.5, -0.5, 0]], False),  # flat continuation
+        ([[0, 0, 0], [1, 0, 0], [0.5, 0.5, 0.01]], False),  # a sharp but real fold
+    ],
+)
+def test_neighbouring_triangle_pairs(corners, meets):
+    first = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    corners = np.array(corners, dtype=float)
+    extra = [c for c in corners if not any(np.array_equal(c, f) for f in first)]
+    vertices = np.r_[first, extra]
+    index = [next(k for k, v in enumerate(vertices) if np.array_equal(v, c)) for c in corners]
+    triangles = np.array([[0, 1, 2], index])
+    assert len(_intersecting_triangles(vertices, triangles, 1e-12)) == int(meets)
