@@ -1,0 +1,100 @@
+"""Mesh and cage files: the repository's data read as expected, faces keep their order and polygons through every
+format, 2D cages read as polygons, and bad files fail with a CageError naming the file."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lbc_core.cage import make_cage
+from lbc_core.errors import CageError
+from lbc_core.io import read_cage, read_mesh, write_mesh
+
+DATA = Path(__file__).parent / "data"
+GARGOYLE = DATA / "cages-3d" / "gargoyle"
+CLOTHING = DATA / "cages-3d" / "clothing"
+
+CUBE = np.array([[x, y, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)])
+# Quads and triangles mixed, in an order a reader must keep (the cube with its top split into two triangles).
+MIXED_FACES = [[0, 2, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
+
+
+def test_2d_reference_cages_read_as_polygons():
+    vertices, faces = read_cage(DATA / "woody-control-edgeset.obj")
+    assert faces is None
+    assert vertices.shape == (26, 2)
+    assert vertices[0].tolist() == [171.552, 416.365]
+    assert make_cage(vertices).n_control_points == 26
+
+
+def test_3d_data_read():
+    vertices, faces = read_cage(GARGOYLE / "cage_L12.obj")
+    assert vertices.shape == (27, 3) and len(faces) == 50 and all(len(f) == 3 for f in faces)
+    vertices, faces = read_mesh(GARGOYLE / "mesh.off")
+    assert vertices.shape == (2674, 3) and len(faces) == 5344
+
+
+def test_uv_mapped_obj_with_polygons():
+    # 4296 vt lines for 5021 vertices, and triangles, quads and pentagons: meshio 5.3 fails on this file.
+    vertices, faces = read_mesh(CLOTHING / "mesh.obj")
+    assert vertices.shape == (5021, 3)
+    assert len(faces) == 4875
+    assert sorted({len(f) for f in faces}) == [3, 4, 5]
+    assert min(f.min() for f in faces) == 0 and max(f.max() for f in faces) == 5020
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".off", ".ply"])
+def test_round_trip_keeps_polygons_in_order(tmp_path, suffix):
+    path = tmp_path / f"cage{suffix}"
+    write_mesh(path, CUBE, MIXED_FACES)
+    vertices, faces = read_cage(path)
+    np.testing.assert_array_equal(vertices, CUBE)
+    assert [f.tolist() for f in faces] == MIXED_FACES
+    assert make_cage(vertices, faces).facet_face.max() == len(MIXED_FACES) - 1
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".off", ".ply"])
+def test_point_sets_and_2d_vertices(tmp_path, suffix):
+    path = tmp_path / f"points{suffix}"
+    points = np.array([[0.5, 0.25], [1.0, 2.0], [3.0, -1.0]])
+    write_mesh(path, points)
+    vertices, faces = read_mesh(path)
+    assert faces is None
+    np.testing.assert_array_equal(vertices, np.column_stack([points, np.zeros(3)]))
+    np.testing.assert_array_equal(read_cage(path)[0], points)
+
+
+def test_obj_relative_indices_and_slashes(tmp_path):
+    path = tmp_path / "relative.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf -3/1 -2/1 -1/1\nf 1//1 2//1 3//1\n")
+    _, faces = read_mesh(path)
+    assert [f.tolist() for f in faces] == [[0, 1, 2], [0, 1, 2]]
+
+
+def test_off_with_counts_on_the_first_line_and_comments(tmp_path):
+    path = tmp_path / "tetra.off"
+    path.write_text("OFF 4 4 6\n# a comment\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3 255 0 0\n")
+    vertices, faces = read_cage(path)
+    assert vertices.shape == (4, 3) and [f.tolist() for f in faces][-1] == [1, 2, 3]
+
+
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("missing.obj", None, "no such file"),
+        ("cage.stl", "solid", "unknown mesh format"),
+        ("empty.obj", "# nothing\n", "no vertices"),
+        ("bad.obj", "v 0 0\n", "needs x, y and z"),
+        ("short.off", "OFF\n4 1 0\n0 0 0\n", "shorter"),
+        ("notoff.off", "PLY\n", "not an OFF file"),
+        ("bad.ply", "ply\nnonsense\n", "cannot read it as PLY"),
+        ("tilted.obj", "v 0 0 0\nv 1 0 0\nv 0 1 1\n", "z varies"),
+    ],
+)
+def test_bad_files(tmp_path, name, content, message):
+    path = tmp_path / name
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(CageError, match=message) as error:
+        read_cage(path)
+    assert name in str(error.value)
