@@ -1,0 +1,351 @@
+"""Baseline coordinates to compare LBC with: mean value, harmonic and (optionally) bounded biharmonic.
+
+Each ``bind_*`` function returns the same :class:`~lbc_core.binding.Binding` as :func:`lbc_core.bind`, so that every
+statistic and plot works on each scheme. The harmonic and bounded biharmonic baselines are solved on the same
+:class:`~lbc_core.meshing.DomainMesh` with the same Dirichlet boundary values as LBC (pass ``domain=binding.domain``
+to share an LBC binding's mesh); mean value coordinates have a closed form, evaluated at the points themselves and
+at the domain mesh's vertices (so that the locality statistics see them on the same mesh as the others).
+
+References: Hormann & Floater, "Mean value coordinates for arbitrary planar polygons", ACM TOG 25(4), 2006;
+Ju, Schaefer & Warren, "Mean value coordinates for closed triangular meshes", SIGGRAPH 2005;
+Joshi et al., "Harmonic coordinates for character articulation", SIGGRAPH 2007;
+Jacobson et al., "Bounded biharmonic weights for real-time deformation", SIGGRAPH 2011.
+"""
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .boundary import boundary_weights
+from .cage import make_cage
+from .errors import CageError, Cancelled
+from .fem import stiffness_matrix
+from .interpolation import interpolation_matrix
+from .meshing import mesh_domain
+
+# A point closer than this fraction of the cage's bounding-box diagonal to a vertex, edge or face is on it.
+ON_CAGE_TOLERANCE = 1e-10
+# Entries of the (chunk, facets) work arrays per chunk: bounds the memory to a few tens of MB.
+CHUNK_ENTRIES = 200_000
+
+
+def mean_value_coordinates(cage, points, progress=None, cancel=None):
+    """Mean value coordinates of points with respect to a cage, in closed form.
+
+    2D: Hormann and Floater's formula for arbitrary simple polygons, with tan(α/2) taken from whichever of its two
+    equivalent forms does not cancel. 3D: Ju, Schaefer and Warren's formula for closed triangle meshes. Points on a
+    vertex, an edge or a facet get the linear interpolant there (the continuous limit). Points outside the cage get
+    the formula's extension, which still sums to one and reproduces linear functions.
+
+    Parameters
+    ----------
+    cage : Cage
+    points : (m, d) float array
+        In the cage's units and dimension.
+    progress : callable(fraction, message) or None
+    cancel : callable() -> bool or None
+        Checked between chunks; raises :class:`Cancelled` when it returns True.
+
+    Returns
+    -------
+    (m, n) float array
+        One row per point, one column per control point; rows sum to 1.
+    """
+    points = np.asarray(points, dtype=float)
+    vertices, facets = cage.vertices, cage.facets
+    tolerance = ON_CAGE_TOLERANCE * cage.bbox_diagonal
+    chunk = max(1, CHUNK_ENTRIES // len(facets))
+    # Facet corner -> control point: scatters per-corner contributions (chunk, 3E) into (chunk, n) in one product.
+    scatter = sp.csr_matrix(
+        (np.ones(facets.size), (np.arange(facets.size), facets.ravel())), shape=(facets.size, len(vertices))
+    )
+    evaluate = _mvc_2d if cage.dim == 2 else _mvc_3d
+    weights = np.empty((len(points), len(vertices)))
+    for start in range(0, len(points), chunk):
+        if cancel is not None and cancel():
+            raise Cancelled("mean value coordinates cancelled")
+        stop = min(start + chunk, len(points))
+        weights[start:stop] = evaluate(vertices, facets, scatter, points[start:stop], tolerance)
+        if progress is not None:
+            progress(stop / len(points), "mean value coordinates")
+    return weights
+
+
+def _mvc_2d(vertices, facets, scatter, x, tolerance):
+    """Mean value coordinates of a chunk of points x (k, 2) for the polygon's edges ``facets`` (E, 2)."""
+    s = vertices[None, :, :] - x[:, None, :]  # (k, n, 2)
+    r = np.linalg.norm(s, axis=2)  # (k, n)
+    sa, sb = s[:, facets[:, 0]], s[:, facets[:, 1]]  # (k, E, 2)
+    ra, rb = r[:, facets[:, 0]], r[:, facets[:, 1]]
+    cross = sa[..., 0] * sb[..., 1] - sa[..., 1] * sb[..., 0]
+    dot = np.einsum("kei,kei->ke", sa, sb)
+    # tan(α/2) = cross / (ra rb + dot) = (ra rb - dot) / cross; the first cancels when α → π, the second when α → 0.
+    rr = ra * rb
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tan_half = np.where(dot >= 0, cross / (rr + dot), (rr - dot) / cross)
+        per_corner = np.stack([tan_half / ra, tan_half / rb], axis=2)  # (k, E, 2)
+    weights = np.asarray(per_corner.reshape(len(x), -1) @ scatter)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        weights /= weights.sum(axis=1, keepdims=True)
+
+    edge_length = np.linalg.norm(vertices[facets[:, 1]] - vertices[facets[:, 0]], axis=1)
+    on_edge = (np.abs(cross) <= tolerance * edge_length) & (dot < 0)
+    for k, e in zip(*np.nonzero(on_edge)):
+        a, b = facets[e]
+        weights[k] = 0.0
+        weights[k, a] = rb[k, e] / (ra[k, e] + rb[k, e])
+        weights[k, b] = ra[k, e] / (ra[k, e] + rb[k, e])
+    _snap_to_vertices(weights, r, tolerance)
+    return weights
+
+
+def _mvc_3d(vertices, facets, scatter, x, tolerance):
+    """Mean value coordinates of a chunk of points x (k, 3) for the outward triangles ``facets`` (E, 3)."""
+    s = vertices[None, :, :] - x[:, None, :]  # (k, n, 3)
+    distance = np.linalg.norm(s, axis=2)  # (k, n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = s / distance[:, :, None]
+    # Corner j of each facet and its two neighbours j+1, j-1 (cyclically), all (k, E, 3[corner], 3[xyz]).
+    corner_u = u[:, facets]
+    d = distance[:, facets]  # (k, E, 3)
+    nxt, prv = [1, 2, 0], [2, 0, 1]
+    # θ_j, the arc opposite corner j, as 2 atan2(|a - b|, |a + b|): accurate for every angle, unlike arccos or
+    # arcsin near π, which matters where a point nears an edge.
+    a, b = corner_u[:, :, nxt], corner_u[:, :, prv]
+    theta = 2.0 * np.arctan2(np.linalg.norm(a - b, axis=3), np.linalg.norm(a + b, axis=3))
+    h = theta.sum(axis=2) / 2.0  # (k, E)
+    sin_theta = np.sin(theta)
+    sin_adjacent = sin_theta[..., nxt] * sin_theta[..., prv]  # the two arcs meeting at corner j
+    with np.errstate(invalid="ignore"):  # NaN rows are points on a control point, snapped below
+        volume = np.linalg.det(corner_u)  # (k, E), signed
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # Cosine and sine of the spherical triangle's angle at corner j. Ju et al. take the sine as
+        # sqrt(1 - cos²), which loses all precision near a facet (cos → -1); [u1, u2, u3] / (sin b sin c) does not.
+        c = 2.0 * np.sin(h)[..., None] * np.sin(h[..., None] - theta) / sin_adjacent - 1.0
+        sine = volume[..., None] / sin_adjacent
+        per_corner = (theta - c[..., nxt] * theta[..., prv] - c[..., prv] * theta[..., nxt]) / (
+            d * sin_theta[..., nxt] * sine[..., prv]
+        )
+    # A point in a facet's plane but outside the facet: the facet subtends no solid angle and adds nothing.
+    per_corner[np.any(np.abs(sine) <= 1e-12, axis=2)] = 0.0
+    weights = np.asarray(per_corner.reshape(len(x), -1) @ scatter)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        weights /= weights.sum(axis=1, keepdims=True)
+    # [s1, s2, s3] = 2 × area × height, and [u1, u2, u3] = [s1, s2, s3] / (d1 d2 d3).
+    corners = vertices[facets]
+    double_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    height = np.abs(volume) * d.prod(axis=2) / double_area
+    _snap_to_facets(weights, vertices, facets, x, height, tolerance)
+    _snap_to_vertices(weights, distance, tolerance)
+    return weights
+
+
+def _snap_to_facets(weights, vertices, facets, x, height, tolerance):
+    """Points on a facet (edges included) get the linear interpolant on it, the limit of the coordinates there.
+
+    ``height`` (k, E) is each point's distance to each facet's plane; only pairs within ``tolerance`` are examined.
+    """
+    points, candidates = np.nonzero(height <= tolerance)
+    if len(points) == 0:
+        return
+    corners = vertices[facets[candidates]]  # (c, 3, 3)
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    double_area = np.linalg.norm(normal, axis=1)
+    # Signed areas of the sub-triangles opposite each corner over the facet's: the barycentric coordinates of the
+    # point's projection on the facet's plane.
+    rel = corners - x[points, None, :]
+    sub = np.cross(rel[:, [1, 2, 0]], rel[:, [2, 0, 1]])  # (c, 3, 3)
+    bary = np.einsum("cjx,cx->cj", sub, normal) / double_area[:, None] ** 2
+    # Within the tolerance of an edge counts as inside: bary_j × height of corner j is the distance to edge j.
+    edge_length = np.linalg.norm(corners[:, [1, 2, 0]] - corners[:, [2, 0, 1]], axis=2)
+    inside = np.all(bary * double_area[:, None] >= -tolerance * edge_length, axis=1)
+    points, candidates, bary = points[inside], candidates[inside], bary[inside]
+    rows, first = np.unique(points, return_index=True)
+    local = np.clip(bary[first], 0.0, None)
+    local /= local.sum(axis=1, keepdims=True)
+    weights[rows] = 0.0
+    for j in range(3):
+        np.add.at(weights, (rows, facets[candidates[first], j]), local[:, j])
+
+
+def _snap_to_vertices(weights, distance, tolerance):
+    """Points on a control point get the Kronecker delta there (the formulas divide by the distance)."""
+    rows, cols = np.nonzero(distance <= tolerance)
+    weights[rows] = 0.0
+    weights[rows, cols] = 1.0
+
+
+def harmonic_weights(domain, boundary_values):
+    """Harmonic coordinates on a domain mesh: P1 Laplace equations with the given Dirichlet values.
+
+    One sparse LU factorisation of the interior block of the stiffness matrix solves all n coordinates at once.
+
+    Parameters
+    ----------
+    domain : DomainMesh
+    boundary_values : (B, n) float array
+        Values at ``domain.boundary_vertices`` (from :func:`lbc_core.boundary.boundary_weights`).
+
+    Returns
+    -------
+    (N, n) float array
+        Coordinate values at the domain's vertices.
+    """
+    stiffness = stiffness_matrix(domain.vertices, domain.cells)
+    fixed = np.asarray(domain.boundary_vertices)
+    free = np.setdiff1d(np.arange(len(domain.vertices)), fixed)
+    weights = np.zeros((len(domain.vertices), boundary_values.shape[1]))
+    weights[fixed] = boundary_values
+    if len(free):
+        interior = stiffness[free][:, free].tocsc()
+        rhs = -(stiffness[free][:, fixed] @ boundary_values)
+        # The interior block is symmetric positive definite: a symmetric fill-reducing ordering suits it.
+        weights[free] = spla.splu(interior, permc_spec="MMD_AT_PLUS_A").solve(rhs)
+    return weights
+
+
+def bbw_weights(domain, boundary_values):
+    """Bounded biharmonic weights (Jacobson et al. 2011) through libigl's ``igl.bbw``, rows normalised to sum to 1.
+
+    Parameters
+    ----------
+    domain : DomainMesh
+    boundary_values : (B, n) float array
+
+    Returns
+    -------
+    (N, n) float array
+
+    Raises
+    ------
+    ImportError
+        When libigl's Python package (``pip install libigl``) is not installed.
+    """
+    import igl
+
+    weights = igl.bbw(
+        np.ascontiguousarray(domain.vertices, dtype=np.float64),
+        np.ascontiguousarray(domain.cells, dtype=np.int64),
+        np.ascontiguousarray(domain.boundary_vertices, dtype=np.int64),
+        np.ascontiguousarray(boundary_values, dtype=np.float64),
+    )
+    # BBW bounds each weight to [0, 1] but leaves partition of unity to a normalisation (as the paper advises).
+    return weights / weights.sum(axis=1, keepdims=True)
+
+
+def bind_mvc(cage_vertices, cage_faces, points, *, domain=None, cells=None, progress=None, cancel=None):
+    """Bind points to a cage with mean value coordinates (dense, closed form).
+
+    Parameters
+    ----------
+    cage_vertices, cage_faces, points, cells, progress, cancel
+        As for :func:`lbc_core.bind`.
+    domain : DomainMesh or None
+        The mesh the statistics evaluate the coordinates on; None meshes the cage (pass an LBC binding's
+        ``domain`` to compare on the same mesh).
+
+    Returns
+    -------
+    Binding with scheme "mvc"; ``weights`` holds every entry (MVC are nowhere zero inside the cage).
+    """
+    return _bind_baseline("mvc", cage_vertices, cage_faces, points, domain, cells, progress, cancel)
+
+
+def bind_harmonic(cage_vertices, cage_faces, points, *, domain=None, cells=None, progress=None, cancel=None):
+    """Bind points to a cage with harmonic coordinates, solved on the domain mesh, interpolated linearly to points.
+
+    Parameters and returns as :func:`bind_mvc`, with scheme "harmonic".
+    """
+    return _bind_baseline("harmonic", cage_vertices, cage_faces, points, domain, cells, progress, cancel)
+
+
+def bind_bbw(cage_vertices, cage_faces, points, *, domain=None, cells=None, progress=None, cancel=None):
+    """Bind points with bounded biharmonic weights (needs libigl: ``pip install libigl``).
+
+    Parameters and returns as :func:`bind_mvc`, with scheme "bbw".
+
+    Raises
+    ------
+    ImportError
+        When libigl is not installed.
+    """
+    import igl  # noqa: F401  (fail before meshing when the optional dependency is missing)
+
+    return _bind_baseline("bbw", cage_vertices, cage_faces, points, domain, cells, progress, cancel)
+
+
+def bbw_available():
+    """Whether libigl's Python package, which provides bounded biharmonic weights, can be imported."""
+    try:
+        import igl  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, progress, cancel):
+    from .binding import Binding  # binding imports the pipeline; imported here to keep baselines importable alone
+
+    timings = {}
+    clock = time.perf_counter()
+    cage = make_cage(cage_vertices, cage_faces)
+    points = _points_for(cage, points)
+    if domain is None:
+        domain = mesh_domain(cage, cells, progress=_stage(progress, 0.0, 0.4), cancel=cancel)
+        timings["mesh"] = time.perf_counter() - clock
+    clock = time.perf_counter()
+    if scheme == "mvc":
+        domain_weights = mean_value_coordinates(cage, domain.vertices, _stage(progress, 0.4, 0.6), cancel)
+    else:
+        solve = harmonic_weights if scheme == "harmonic" else bbw_weights
+        domain_weights = solve(domain, boundary_weights(domain, cage))
+    timings["solve"] = time.perf_counter() - clock
+    clock = time.perf_counter()
+    located, outside, _ = interpolation_matrix(
+        domain.vertices, domain.cells, points, progress=_stage(progress, 0.6, 0.8), cancel=cancel
+    )
+    if scheme == "mvc":
+        weights = mean_value_coordinates(cage, points, _stage(progress, 0.8, 1.0), cancel)
+    else:
+        weights = located @ domain_weights
+    timings["points"] = time.perf_counter() - clock
+    if progress is not None:
+        progress(1.0, "done")
+    return Binding(
+        cage=cage,
+        rest_cage_vertices=cage.vertices.copy(),
+        weights=sp.csr_matrix(weights),
+        domain=domain,
+        domain_weights=domain_weights,
+        outside=outside,
+        scheme=scheme,
+        options={"cells": cells},
+        timings=timings,
+        iterations=0,
+        converged=True,
+    )
+
+
+def _points_for(cage, points):
+    """Points as (m, d) for a d-dimensional cage; 2D points may come as (m, 3) with a constant z (file data)."""
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise CageError(f"points must be an (m, 2) or (m, 3) array, got shape {points.shape}")
+    if cage.dim == 2 and points.shape[1] == 3:
+        if np.ptp(points[:, 2]) > 1e-9 * cage.bbox_diagonal:
+            raise CageError("the cage is 2D but the points' z varies: bind 2D points (or a z = constant plane)")
+        points = points[:, :2]
+    if points.shape[1] != cage.dim:
+        raise CageError(f"the cage is {cage.dim}D but the points are {points.shape[1]}D")
+    if not np.all(np.isfinite(points)):
+        raise CageError("some points have NaN or infinite coordinates: fix or delete them")
+    return points
+
+
+def _stage(progress, start, stop):
+    """A progress callback mapping a sub-stage's [0, 1] onto [start, stop] of the whole."""
+    if progress is None:
+        return None
+    return lambda fraction, message: progress(start + (stop - start) * fraction, message)
