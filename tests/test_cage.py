@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from lbc_core.cage import MAX_CONTROL_POINTS, _intersecting_triangles, make_cage
+from lbc_core.cage import MAX_CONTROL_POINTS, _intersecting_triangles, _overlapping_boxes, make_cage
 from lbc_core.errors import CageError
 
 DATA = Path(__file__).parent / "data"
@@ -412,3 +412,13 @@ def test_neighbouring_triangle_pairs(corners, meets):
     index = [next(k for k, v in enumerate(vertices) if np.array_equal(v, c)) for c in corners]
     triangles = np.array([[0, 1, 2], index])
     assert len(_intersecting_triangles(vertices, triangles, 1e-12)) == int(meets)
+
+
+def test_broad_phase_finds_every_overlapping_box_pair():
+    rng = np.random.default_rng(3)
+    low = rng.random((300, 3))
+    high = low + rng.random((300, 3)) ** 4 * 0.5  # mostly small boxes, a few large ones
+    overlap = np.all((low[:, None] <= high[None]) & (low[None] <= high[:, None]), axis=2)
+    expected = {tuple(p) for p in np.argwhere(np.triu(overlap, k=1)).tolist()}
+    for chunk in (7, 2_000_000):  # several chunks, and one
+        assert {tuple(p) for p in _overlapping_boxes(low, high, chunk).tolist()} == expected
