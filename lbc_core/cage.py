@@ -36,9 +36,11 @@ from .errors import CageError
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
-# The solver keeps several dense (cells × control points) arrays and its per-iteration cost grows as
-# (mesh vertices) × (control points)², with a mesh that needs several vertices per control point: beyond ~2000 control
-# points even the coarsest useful domain mesh needs several GB in 2D and tens of GB in 3D.
+# The solve's memory grows as control points × (d · cells + mesh vertices) (measured peak ≈ 46 × 8 bytes times that
+# with the solver's Anderson memory of 5) and its time per iteration as mesh vertices × control points². At 2000 control
+# points the default resolutions already need about 6 GB in 2D (3000 triangles) and 47 GB in 3D (20000 tetrahedra):
+# beyond that no machine binds in reasonable time, so such cages are refused before any work. The solver refuses
+# smaller problems that do not fit the machine's memory.
 MAX_CONTROL_POINTS = 2000
 # Closed triangle meshes have about 2 triangles per vertex; 4 leaves room for handles and unwelded input.
 _FACES_PER_CONTROL_POINT = 4
@@ -155,7 +157,8 @@ def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE, max_c
     if not np.all(np.isfinite(vertices)):
         bad = np.flatnonzero(~np.all(np.isfinite(vertices), axis=1))
         raise CageError(
-            f"{len(bad)} cage vertices have NaN or infinite coordinates ({_some(bad)}): fix or delete them"
+            f"NaN or infinite coordinates at {_count(len(bad), 'cage vertex', 'cage vertices')} ({_some(bad)}): "
+            "fix or delete them"
         )
     if faces is None:
         return _make_polygon_cage(vertices, weld_tolerance, max_control_points)
@@ -181,6 +184,11 @@ def _refuse_size(what, max_control_points):
         "grows with control points × cells and its time with mesh vertices × control points²): use a coarser cage, "
         "e.g. with a Decimate modifier or a low-poly retopology"
     )
+
+
+def _count(number, singular, plural=None):
+    """'1 edge', '4 edges': a count with its noun, for messages."""
+    return f"{number} {singular if number == 1 else plural or singular + 's'}"
 
 
 def _some(indices):
@@ -246,7 +254,7 @@ def _make_polygon_cage(vertices, weld_tolerance, max_control_points):
     warnings = []
     welded, vertex_map = _weld(vertices, weld_tolerance)
     if len(welded) < len(vertices):
-        warnings.append(f"welded {len(vertices) - len(welded)} duplicate cage vertices")
+        warnings.append(f"welded {_count(len(vertices) - len(welded), 'duplicate cage vertex', 'duplicate cage vertices')}")
         # Consecutive duplicates collapse; the polygon order follows the first occurrences.
         order = vertex_map[np.r_[True, vertex_map[1:] != vertex_map[:-1]]]
         if len(order) > 1 and order[0] == order[-1]:
@@ -309,8 +317,8 @@ def _check_polygon_simple(vertices, zero, names):
             f"{names[a]}-{names[(a + 1) % n]} with {names[b]}-{names[(b + 1) % n]}" for a, b in zip(i[:_LISTED], j)
         )
         raise CageError(
-            f"the polygon cage intersects itself: {len(i)} pairs of edges cross or touch (edges between input "
-            f"vertices {pairs}{', ...' if len(i) > _LISTED else ''}); move its vertices so that the outline does not "
+            f"the polygon cage intersects itself at {_count(len(i), 'pair')} of crossing or touching edges (between "
+            f"input vertices {pairs}{', ...' if len(i) > _LISTED else ''}); move its vertices so that the outline does not "
             "cross itself"
         )
 
@@ -322,14 +330,14 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     if vertices.shape[1] != 3:
         raise CageError("a cage with faces must have 3D vertices; for a 2D polygon pass faces=None")
     if len(vertices) < 4:
-        raise CageError(f"a 3D cage needs at least 4 vertices, got {len(vertices)}")
+        raise CageError(f"a 3D cage needs at least 4 vertices (a tetrahedron), got {len(vertices)}")
     faces = _face_list(faces, len(vertices))
     warnings = []
     welded, vertex_map = _weld(vertices, weld_tolerance)
     if len(welded) < len(vertices):
-        warnings.append(f"welded {len(vertices) - len(welded)} duplicate cage vertices")
+        warnings.append(f"welded {_count(len(vertices) - len(welded), 'duplicate cage vertex', 'duplicate cage vertices')}")
     if len(welded) < 4:
-        raise CageError(f"a 3D cage needs at least 4 distinct vertices, got {len(welded)} after welding")
+        raise CageError(f"a 3D cage needs at least 4 distinct vertices (a tetrahedron), got {len(welded)} after welding")
     _check_control_points(len(welded), max_control_points)
     diagonal = np.linalg.norm(np.ptp(welded, axis=0))
     zero = ZERO_LENGTH * diagonal
@@ -341,14 +349,14 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     names = _first_inputs(vertex_map)
     faces, collapsed = _collapse_welded(faces, vertex_map, names)
     if collapsed:
-        warnings.append(f"dropped {collapsed} cage faces that welding collapsed to an edge or a point")
+        warnings.append(f"dropped {_count(collapsed, 'cage face')} that welding collapsed to an edge or a point")
     triangles, triangle_face = _triangulate(welded, faces, zero)
     _check_degenerate(welded, triangles, triangle_face, zero)
     unused = np.setdiff1d(np.arange(len(welded)), triangles)
     if len(unused):
         raise CageError(
-            f"{len(unused)} cage vertices belong to no face (vertex {_some(names[unused])}): delete loose vertices "
-            "from the cage (in Blender: Mesh > Clean Up > Delete Loose)"
+            f"the cage has {_count(len(unused), 'loose vertex', 'loose vertices')}, in no face (vertex "
+            f"{_some(names[unused])}): delete them from the cage (in Blender: Mesh > Clean Up > Delete Loose)"
         )
     pairing = _check_closed_manifold(triangles, names)
     triangles, flipped = _orient_outward(welded, triangles, pairing)
@@ -356,8 +364,8 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
         warnings.append("reversed all cage faces: they pointed inward")
     elif np.any(flipped):
         warnings.append(
-            f"flipped {len(np.unique(triangle_face[flipped]))} cage faces to make the orientation consistent and "
-            "outward"
+            f"flipped {_count(len(np.unique(triangle_face[flipped])), 'cage face')} to make the orientation consistent "
+            "and outward"
         )
     _check_self_intersection(welded, triangles, triangle_face, zero)
     if _enclosed_measure(welded, triangles) <= ZERO_LENGTH * diagonal**3:
@@ -374,7 +382,7 @@ def _face_list(faces, n_vertices):
     except TypeError:
         raise CageError("cage faces must be sequences of integer vertex indices") from None
     if not faces:
-        raise CageError("the 3D cage has no faces")
+        raise CageError("the 3D cage has no faces: pass its faces, or faces=None for a 2D polygon")
     for index, face in enumerate(faces):
         if len(face) < 3 or min(face) < 0 or max(face) >= n_vertices:
             raise CageError(
@@ -498,7 +506,7 @@ def _check_degenerate(vertices, triangles, triangle_face, zero):
     if np.any(bad):
         faces = np.unique(triangle_face[bad])
         raise CageError(
-            f"{len(faces)} cage faces have zero area (face {_some(faces)}): delete them or dissolve them "
+            f"the cage has {_count(len(faces), 'face')} of zero area (face {_some(faces)}): delete or dissolve them "
             "(in Blender: Mesh > Clean Up > Degenerate Dissolve)"
         )
 
@@ -553,15 +561,15 @@ def _check_closed_manifold(triangles, names):
     if np.any(counts == 1):
         where = ", ".join(f"{names[a]}-{names[b]}" for a, b in edge_of[counts == 1][:_LISTED])
         raise CageError(
-            f"the cage is not closed: {np.count_nonzero(counts == 1)} boundary edges belong to only one face (between "
-            f"vertices {where}{', ...' if np.count_nonzero(counts == 1) > _LISTED else ''}); fill the holes "
+            f"the cage is not closed: it has {_count(np.count_nonzero(counts == 1), 'boundary edge')}, each in only one "
+            f"face (between vertices {where}{', ...' if np.count_nonzero(counts == 1) > _LISTED else ''}); fill the holes "
             "(in Blender: select the boundary edges with Select > Select All by Trait > Non Manifold, and press F)"
         )
     if np.any(counts > 2):
         where = ", ".join(f"{names[a]}-{names[b]}" for a, b in edge_of[counts > 2][:_LISTED])
         raise CageError(
-            f"the cage has {np.count_nonzero(counts > 2)} non-manifold edges shared by more than two faces (between "
-            f"vertices {where}{', ...' if np.count_nonzero(counts > 2) > _LISTED else ''}): make every edge belong to "
+            f"the cage has {_count(np.count_nonzero(counts > 2), 'non-manifold edge')} shared by more than two faces "
+            f"(between vertices {where}{', ...' if np.count_nonzero(counts > 2) > _LISTED else ''}): make every edge belong to "
             "exactly two faces (in Blender: Select > Select All by Trait > Non Manifold)"
         )
     first, second = order[0::2], order[1::2]
@@ -596,7 +604,7 @@ def _check_manifold_vertices(triangles, directed, first, second, names):
     pinched = np.flatnonzero(fans_per_vertex > 1)
     if len(pinched):
         raise CageError(
-            f"the cage has {len(pinched)} non-manifold vertices where separate sheets of the surface touch at a point "
+            f"the cage has {_count(len(pinched), 'non-manifold vertex', 'non-manifold vertices')} where separate sheets of the surface touch at a point "
             f"(vertex {_some(names[pinched])}): pull the sheets apart or merge them along an edge"
         )
 
@@ -646,7 +654,7 @@ def _check_self_intersection(vertices, triangles, triangle_face, zero):
         faces = np.unique(np.sort(triangle_face[pairs], axis=1), axis=0)
         listed = ", ".join(f"{a} and {b}" if a != b else f"{a} with itself" for a, b in faces[:_LISTED])
         raise CageError(
-            f"the cage intersects itself: {len(faces)} pairs of faces cross or touch (faces {listed}"
+            f"the cage intersects itself at {_count(len(faces), 'pair')} of crossing or touching faces (faces {listed}"
             f"{', ...' if len(faces) > _LISTED else ''}); move them apart so that the surface does not pass through "
             "itself (in Blender the 3D-Print Toolbox's Intersections check selects them)"
         )
