@@ -235,6 +235,14 @@ def test_n_gon_with_zero_area():
     assert_refused(np.r_[vertices, [[0.7, 0.0, 0.0]]], faces, "face 6 has zero area")
 
 
+def test_n_gon_without_an_ear():
+    # A self-crossing hexagon whose every convex corner holds another corner: the base of a pyramid.
+    outline = np.array([[0.18, 0.86], [0.54, 0.3], [0.42, 0.03], [0.12, 0.67], [0.65, 0.62], [0.38, 1.0]])
+    vertices = np.r_[np.c_[outline, np.zeros(6)], [[0.4, 0.5, 1.0]]]
+    faces = [list(range(6))] + [[k, (k + 1) % 6, 6] for k in range(6)]
+    assert_refused(vertices, faces, "face 0 cannot be triangulated", "crosses itself")
+
+
 def test_inconsistent_orientation_is_fixed_and_reported():
     faces = [face[::-1] if k in (1, 4) else face for k, face in enumerate(CUBE_QUADS)]
     cage = make_cage(CUBE, faces)
