@@ -150,9 +150,14 @@ def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE, max_c
     CageError
         With a message that names the problem and what to do.
     """
-    vertices = np.asarray(vertices, dtype=float)
+    try:
+        vertices = np.asarray(vertices, dtype=float)
+    except (TypeError, ValueError):
+        raise CageError("cage vertices must be numbers in an (n, 2) or (n, 3) array") from None
     if vertices.ndim != 2 or vertices.shape[1] not in (2, 3):
         raise CageError(f"cage vertices must be an (n, 2) or (n, 3) array, got shape {vertices.shape}")
+    if faces is not None and not hasattr(faces, "__len__"):
+        faces = list(faces)
     _check_size(len(vertices), None if faces is None else len(faces), max_control_points)
     if not np.all(np.isfinite(vertices)):
         bad = np.flatnonzero(~np.all(np.isfinite(vertices), axis=1))

@@ -58,6 +58,16 @@ def test_wrong_shape_is_refused():
     assert_refused(np.zeros((4, 4)), None, "(n, 2) or (n, 3)")
 
 
+@pytest.mark.parametrize("vertices", [[[0, 0], [1, 0, 0], [1, 1]], [["a", "b"], ["c", "d"], ["e", "f"]]])
+def test_vertices_that_are_not_numbers(vertices):
+    assert_refused(vertices, None, "must be numbers")
+
+
+def test_faces_from_a_generator():
+    cage = make_cage(CUBE, (face for face in CUBE_QUADS))
+    assert cage.measure == pytest.approx(1.0)
+
+
 def test_too_few_polygon_vertices():
     assert_refused(SQUARE[:2], None, "at least 3 vertices", "got 2")
 
