@@ -286,28 +286,28 @@ def bbw_available():
 
 
 def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, progress, cancel):
-    from .binding import Binding  # binding imports the pipeline; imported here to keep baselines importable alone
+    from .binding import Binding, check_points, stage_progress
 
     timings = {}
     clock = time.perf_counter()
     cage = make_cage(cage_vertices, cage_faces)
-    points = _points_for(cage, points)
+    points = check_points(cage, points)
     if domain is None:
-        domain = mesh_domain(cage, cells, progress=_stage(progress, 0.0, 0.4), cancel=cancel)
+        domain = mesh_domain(cage, cells, progress=stage_progress(progress, 0.0, 0.4), cancel=cancel)
         timings["mesh"] = time.perf_counter() - clock
     clock = time.perf_counter()
     if scheme == "mvc":
-        domain_weights = mean_value_coordinates(cage, domain.vertices, _stage(progress, 0.4, 0.6), cancel)
+        domain_weights = mean_value_coordinates(cage, domain.vertices, stage_progress(progress, 0.4, 0.6), cancel)
     else:
         solve = harmonic_weights if scheme == "harmonic" else bbw_weights
         domain_weights = solve(domain, boundary_weights(domain, cage))
     timings["solve"] = time.perf_counter() - clock
     clock = time.perf_counter()
     located, outside, _ = interpolation_matrix(
-        domain.vertices, domain.cells, points, progress=_stage(progress, 0.6, 0.8), cancel=cancel
+        domain.vertices, domain.cells, points, progress=stage_progress(progress, 0.6, 0.8), cancel=cancel
     )
     if scheme == "mvc":
-        weights = mean_value_coordinates(cage, points, _stage(progress, 0.8, 1.0), cancel)
+        weights = mean_value_coordinates(cage, points, stage_progress(progress, 0.8, 1.0), cancel)
     else:
         weights = located @ domain_weights
     timings["points"] = time.perf_counter() - clock
@@ -320,32 +320,10 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
         domain=domain,
         domain_weights=domain_weights,
         outside=outside,
+        points=points,
         scheme=scheme,
         options={"cells": cells},
         timings=timings,
         iterations=0,
         converged=True,
     )
-
-
-def _points_for(cage, points):
-    """Points as (m, d) for a d-dimensional cage; 2D points may come as (m, 3) with a constant z (file data)."""
-    points = np.asarray(points, dtype=float)
-    if points.ndim != 2 or points.shape[1] not in (2, 3):
-        raise CageError(f"points must be an (m, 2) or (m, 3) array, got shape {points.shape}")
-    if cage.dim == 2 and points.shape[1] == 3:
-        if np.ptp(points[:, 2]) > 1e-9 * cage.bbox_diagonal:
-            raise CageError("the cage is 2D but the points' z varies: bind 2D points (or a z = constant plane)")
-        points = points[:, :2]
-    if points.shape[1] != cage.dim:
-        raise CageError(f"the cage is {cage.dim}D but the points are {points.shape[1]}D")
-    if not np.all(np.isfinite(points)):
-        raise CageError("some points have NaN or infinite coordinates: fix or delete them")
-    return points
-
-
-def _stage(progress, start, stop):
-    """A progress callback mapping a sub-stage's [0, 1] onto [start, stop] of the whole."""
-    if progress is None:
-        return None
-    return lambda fraction, message: progress(start + (stop - start) * fraction, message)
