@@ -18,9 +18,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .binding import Binding, check_points, stage_progress
 from .boundary import boundary_weights
 from .cage import make_cage
-from .errors import CageError, Cancelled
+from .errors import Cancelled
 from .fem import stiffness_matrix
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain
@@ -118,7 +119,7 @@ def _mvc_3d(vertices, facets, scatter, x, tolerance):
     h = theta.sum(axis=2) / 2.0  # (k, E)
     sin_theta = np.sin(theta)
     sin_adjacent = sin_theta[..., nxt] * sin_theta[..., prv]  # the two arcs meeting at corner j
-    with np.errstate(invalid="ignore"):  # NaN rows are points on a control point, snapped below
+    with np.errstate(divide="ignore", invalid="ignore"):  # NaN rows: points on a control point, snapped below
         volume = np.linalg.det(corner_u)  # (k, E), signed
     with np.errstate(divide="ignore", invalid="ignore"):
         # Cosine and sine of the spherical triangle's angle at corner j. Ju et al. take the sine as
@@ -286,15 +287,13 @@ def bbw_available():
 
 
 def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, progress, cancel):
-    from .binding import Binding, check_points, stage_progress
-
     timings = {}
     clock = time.perf_counter()
     cage = make_cage(cage_vertices, cage_faces)
     points = check_points(cage, points)
     if domain is None:
         domain = mesh_domain(cage, cells, progress=stage_progress(progress, 0.0, 0.4), cancel=cancel)
-        timings["mesh"] = time.perf_counter() - clock
+        timings["meshing"] = time.perf_counter() - clock
     clock = time.perf_counter()
     if scheme == "mvc":
         domain_weights = mean_value_coordinates(cage, domain.vertices, stage_progress(progress, 0.4, 0.6), cancel)
@@ -306,13 +305,13 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
     located, outside, _ = interpolation_matrix(
         domain.vertices, domain.cells, points, progress=stage_progress(progress, 0.6, 0.8), cancel=cancel
     )
-    if scheme == "mvc":
+    if scheme == "mvc":  # the closed form at the points themselves, not its interpolant
         weights = mean_value_coordinates(cage, points, stage_progress(progress, 0.8, 1.0), cancel)
     else:
         weights = located @ domain_weights
-    timings["points"] = time.perf_counter() - clock
+    timings["interpolation"] = time.perf_counter() - clock
     if progress is not None:
-        progress(1.0, "done")
+        progress(1.0, "bound")
     return Binding(
         cage=cage,
         rest_cage_vertices=cage.vertices.copy(),
@@ -322,8 +321,6 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
         outside=outside,
         points=points,
         scheme=scheme,
-        options={"cells": cells},
+        options={"cells": len(domain.cells)},
         timings=timings,
-        iterations=0,
-        converged=True,
     )
