@@ -1,0 +1,444 @@
+"""The ``lbc`` command line: bind, deform, inspect and compare coordinates from scripts and pipelines.
+
+    lbc bind CAGE MESH -o binding.npz [--scheme lbc|mvc|harmonic|bbw] [--cells N] [--weighting W] [--threshold T]
+    lbc deform binding.npz NEW_CAGE -o deformed.obj [--mesh MESH] [--plot before_after.png]
+    lbc stats binding.npz [--plot pq.png] [--coordinate INDEX coordinate.png]
+    lbc compare CAGE [MESH] --schemes lbc,mvc,harmonic [--plot pq.png]
+    lbc table1 [DATA ...] [--pair CAGE MESH] [--min-control N] [--max-control N]
+
+Every command takes --quiet (no progress on stderr) and --json (figures as JSON on stdout). Bad input (unreadable
+files, invalid cages, points that do not fit the cage) exits with code 2 and one line on stderr; a cancelled run
+(Ctrl-C) exits with 130.
+"""
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CageError, Cancelled
+
+SCHEMES = ("lbc", "mvc", "harmonic", "bbw")
+EXIT_BAD_INPUT = 2
+EXIT_CANCELLED = 130
+DEFAULT_TABLE1_DATA = Path(__file__).resolve().parent.parent / "tests" / "data" / "cages-3d"
+
+
+def main(argv=None):
+    """Run the command line; returns the exit code (0, 2 on bad input, 130 when cancelled)."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.command(args) or 0
+    except CageError as error:
+        print(f"lbc: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (Cancelled, KeyboardInterrupt):
+        print("lbc: cancelled", file=sys.stderr)
+        return EXIT_CANCELLED
+
+
+def _parser():
+    parser = argparse.ArgumentParser(prog="lbc", description="Local Barycentric Coordinates for cage deformation.")
+    commands = parser.add_subparsers(required=True, metavar="COMMAND")
+
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    common.add_argument("--json", action="store_true", help="print the figures as JSON on stdout")
+
+    solving = argparse.ArgumentParser(add_help=False)
+    solving.add_argument("--cells", type=_cell_count, help="about how many domain triangles / tetrahedra")
+    solving.add_argument("--weighting", default="quadratic", choices=_weightings(), help="LBC's TV weighting")
+    solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default: the library's)")
+
+    bind = commands.add_parser("bind", parents=[common, solving], help="bind a mesh to a cage, save the binding")
+    bind.add_argument("cage", help="cage file (.obj/.off/.ply); a file without faces is a 2D polygon")
+    bind.add_argument("mesh", help="mesh or point file whose vertices are bound")
+    bind.add_argument("-o", "--output", required=True, help="binding file to write (.npz)")
+    bind.add_argument("--scheme", default="lbc", choices=SCHEMES, help="coordinates to use (default lbc)")
+    bind.set_defaults(command=_run_bind)
+
+    deform = commands.add_parser("deform", parents=[common], help="deform a bound mesh with a posed cage")
+    deform.add_argument("binding", help="binding file from `lbc bind`")
+    deform.add_argument("new_cage", help="the cage in its new pose (same vertices and faces as bound)")
+    deform.add_argument("-o", "--output", required=True, help="deformed mesh to write (.obj/.off/.ply)")
+    deform.add_argument("--mesh", help="the bound mesh, whose faces the output keeps (else points only)")
+    deform.add_argument("--plot", help="2D only: figure of the domain before and after, with a checkerboard")
+    deform.set_defaults(command=_run_deform)
+
+    stats = commands.add_parser("stats", parents=[common], help="locality figures of a binding")
+    stats.add_argument("binding", help="binding file from `lbc bind`")
+    stats.add_argument("--plot", help="figure of P(t) and Q(k) (.png/.svg)")
+    stats.add_argument(
+        "--coordinate", nargs=2, metavar=("INDEX", "PATH"), help="2D only: figure of one coordinate function"
+    )
+    stats.set_defaults(command=_run_stats)
+
+    compare = commands.add_parser("compare", parents=[common, solving], help="compare schemes on one cage")
+    compare.add_argument("cage", help="cage file")
+    compare.add_argument("mesh", nargs="?", help="mesh or point file (default: the domain mesh's vertices)")
+    compare.add_argument("--schemes", default="lbc,mvc,harmonic", type=_scheme_list, help="comma-separated")
+    compare.add_argument("--plot", help="figure of P(t) and Q(k) for every scheme (.png/.svg)")
+    compare.set_defaults(command=_run_compare)
+
+    table1 = commands.add_parser(
+        "table1", parents=[common, solving], help="Table 1: memory and deform time of reduced LBC vs dense MVC"
+    )
+    table1.add_argument(
+        "data", nargs="*", help="folders searched for mesh.* with cage*.* beside it (default: the test data)"
+    )
+    table1.add_argument("--pair", nargs=2, action="append", default=[], metavar=("CAGE", "MESH"), help="a pair")
+    table1.add_argument("--min-control", type=int, default=0, help="skip cages with fewer control points")
+    table1.add_argument("--max-control", type=int, default=None, help="skip cages with more control points")
+    table1.set_defaults(command=_run_table1)
+    return parser
+
+
+def _cell_count(text):
+    value = int(text)
+    if value < 10:
+        raise argparse.ArgumentTypeError(f"must be at least 10, got {value}")
+    return value
+
+
+def _weightings():
+    from .geodesics import WEIGHTINGS
+
+    return sorted(WEIGHTINGS)
+
+
+def _scheme_list(text):
+    schemes = [s.strip().lower() for s in text.split(",") if s.strip()]
+    unknown = [s for s in schemes if s not in SCHEMES]
+    if unknown or not schemes:
+        raise argparse.ArgumentTypeError(f"unknown scheme(s) {', '.join(unknown)}: choose from {', '.join(SCHEMES)}")
+    return schemes
+
+
+# Commands -------------------------------------------------------------------------------------------------------
+
+
+def _run_bind(args):
+    from .io import read_cage
+
+    cage_vertices, cage_faces = read_cage(args.cage)
+    points = _read_points(args.mesh, cage_faces is None)
+    with _Progress(f"bind ({args.scheme})", args.quiet) as progress:
+        binding = _bind(args.scheme, cage_vertices, cage_faces, points, args, progress)
+    binding.save(args.output)
+    _warn(binding.cage.warnings, args.quiet)
+    nonzeros = binding.weights.nnz / max(binding.weights.shape[0], 1)
+    figures = {
+        "output": str(args.output),
+        "scheme": binding.scheme,
+        "control_points": int(binding.weights.shape[1]),
+        "points": int(binding.weights.shape[0]),
+        "outside": int(np.count_nonzero(binding.outside)),
+        "nonzeros_per_point": float(nonzeros),
+        "timings": {stage: float(seconds) for stage, seconds in binding.timings.items()},
+        "iterations": binding.iterations,
+        "converged": binding.converged,
+        "warnings": list(binding.cage.warnings),
+    }
+    if args.json:
+        _print_json(figures)
+    else:
+        total = sum(binding.timings.values())
+        print(
+            f"bound {figures['points']} points to {figures['control_points']} control points with {binding.scheme}: "
+            f"{nonzeros:.2f} stored weights per point, {figures['outside']} points outside the cage, "
+            f"{total:.2f} s; wrote {args.output}"
+        )
+    return 0
+
+
+def _run_deform(args):
+    from .io import read_cage, read_mesh, write_mesh
+
+    binding = _load(args.binding)
+    new_vertices, _ = read_cage(args.new_cage)
+    if binding.cage.dim == 3 and new_vertices.shape[1] == 2:
+        raise CageError(f"{args.new_cage}: the binding is for a 3D cage, this cage has no faces")
+    faces = None
+    if args.mesh:
+        mesh_vertices, faces = read_mesh(args.mesh)
+        if len(mesh_vertices) != binding.weights.shape[0]:
+            raise CageError(
+                f"{args.mesh} has {len(mesh_vertices)} vertices but the binding has {binding.weights.shape[0]} "
+                "points: give the mesh that was bound"
+            )
+    start = time.perf_counter()
+    deformed = binding.deform(new_vertices[:, : binding.cage.dim])
+    seconds = time.perf_counter() - start
+    write_mesh(args.output, deformed, faces)
+    if args.plot:
+        from .plots import plot_deformation
+
+        plot_deformation(binding, new_vertices[:, : binding.cage.dim], args.plot)
+    figures = {"output": str(args.output), "points": int(len(deformed)), "deform_seconds": seconds}
+    if args.json:
+        _print_json(figures)
+    else:
+        print(f"deformed {len(deformed)} points in {seconds * 1e3:.2f} ms; wrote {args.output}")
+    return 0
+
+
+def _run_stats(args):
+    from .statistics import summary
+
+    binding = _load(args.binding)
+    figures = summary(binding)
+    if args.plot:
+        from .plots import LABELS, plot_locality
+
+        plot_locality({LABELS.get(binding.scheme, binding.scheme): binding}, args.plot)
+    if args.coordinate:
+        from .plots import plot_coordinate
+
+        index, path = args.coordinate
+        plot_coordinate(binding, _control_index(index, binding.weights.shape[1]), path)
+    if args.json:
+        _print_json(figures)
+    else:
+        print(_table([figures], _SUMMARY_COLUMNS))
+    return 0
+
+
+def _run_compare(args):
+    from .io import read_cage
+    from .meshing import mesh_domain
+    from .cage import make_cage
+
+    cage_vertices, cage_faces = read_cage(args.cage)
+    bindings, domain = {}, None
+    if args.mesh:
+        points, points_from = _read_points(args.mesh, cage_faces is None), str(args.mesh)
+    else:
+        domain = mesh_domain(make_cage(cage_vertices, cage_faces), args.cells)
+        points, points_from = domain.vertices, "the domain mesh's vertices"
+    # LBC first: the baselines then share its domain mesh, so every scheme is measured on the same cells.
+    for scheme in sorted(args.schemes, key=lambda s: s != "lbc"):
+        with _Progress(f"bind ({scheme})", args.quiet) as progress:
+            bindings[scheme] = _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=domain)
+        domain = bindings[scheme].domain
+    from .statistics import summary
+
+    rows = [summary(binding) for binding in bindings.values()]
+    if args.plot:
+        from .plots import LABELS, plot_locality
+
+        plot_locality({LABELS.get(scheme, scheme): binding for scheme, binding in bindings.items()}, args.plot)
+    if args.json:
+        _print_json({"cage": str(args.cage), "points": points_from, "schemes": rows})
+    else:
+        first = rows[0]
+        print(
+            f"{args.cage}: {first['control_points']} control points; {first['points']} points ({points_from}); "
+            f"domain {first['domain_vertices']} vertices, {first['domain_cells']} cells"
+        )
+        print(_table(rows, _SUMMARY_COLUMNS))
+    return 0
+
+
+def _run_table1(args):
+    from .baselines import bind_mvc
+    from .cage import make_cage
+    from .io import read_cage
+    from .statistics import table1_row
+
+    pairs = [(Path(c), Path(m)) for c, m in args.pair] + _find_pairs(args.data or ([] if args.pair else None))
+    rows = []
+    for cage_path, mesh_path in pairs:
+        cage_vertices, cage_faces = read_cage(cage_path)
+        n = make_cage(cage_vertices, cage_faces).n_control_points
+        if n < args.min_control or (args.max_control is not None and n > args.max_control):
+            continue
+        points = _read_points(mesh_path, cage_faces is None)
+        name = f"{cage_path.parent.name}/{cage_path.stem}"
+        with _Progress(f"{name} (lbc)", args.quiet) as progress:
+            lbc = _bind("lbc", cage_vertices, cage_faces, points, args, progress)
+        mvc = bind_mvc(cage_vertices, cage_faces, points, domain=lbc.domain)
+        rows.append({"model": name, **table1_row(lbc, mvc)})
+    if not rows:
+        raise CageError("no (cage, mesh) pair to measure: check the folders and the control point limits")
+    if args.json:
+        _print_json({"pairs": rows})
+    else:
+        print(_table(rows, _TABLE1_COLUMNS))
+    return 0
+
+
+# Helpers ----------------------------------------------------------------------------------------------------------
+
+
+def _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=None):
+    """One binding with the command's options; the baselines reuse ``domain`` when given."""
+    if scheme == "lbc":
+        from .binding import bind
+
+        options = {"weighting": args.weighting}
+        if args.threshold is not None:
+            options["threshold"] = args.threshold
+        return bind(cage_vertices, cage_faces, points, cells=args.cells, progress=progress, **options)
+    from . import baselines
+
+    if scheme == "bbw" and not baselines.bbw_available():
+        raise CageError("bounded biharmonic weights need libigl: pip install libigl")
+    function = {"mvc": baselines.bind_mvc, "harmonic": baselines.bind_harmonic, "bbw": baselines.bind_bbw}[scheme]
+    return function(cage_vertices, cage_faces, points, domain=domain, cells=args.cells, progress=progress)
+
+
+def _read_points(path, planar):
+    from . import io
+
+    vertices, _ = io.read_mesh(path)
+    return io.planar(vertices, path) if planar else vertices
+
+
+def _load(path):
+    from .binding import load_binding
+
+    if not Path(path).is_file():
+        raise CageError(f"{path}: no such file")
+    return load_binding(path)
+
+
+def _control_index(text, n):
+    try:
+        index = int(text)
+    except ValueError:
+        raise CageError(f"the coordinate index must be an integer, got {text!r}") from None
+    if not 0 <= index < n:
+        raise CageError(f"the coordinate index must be in 0 … {n - 1}, got {index}")
+    return index
+
+
+def _find_pairs(folders):
+    """(cage, mesh) pairs in folders: each folder holding a mesh.* gives one pair per cage*.* beside it."""
+    if folders is None:
+        if not DEFAULT_TABLE1_DATA.is_dir():
+            raise CageError("give the data folders (each with mesh.* and cage*.* files) or --pair CAGE MESH")
+        folders = [DEFAULT_TABLE1_DATA]
+    pairs = []
+    for folder in map(Path, folders):
+        if not folder.is_dir():
+            raise CageError(f"{folder}: not a folder")
+        for mesh in sorted(p for p in folder.rglob("mesh.*") if p.suffix.lower() in (".obj", ".off", ".ply")):
+            cages = sorted(
+                p
+                for p in mesh.parent.glob("cage*.*")
+                if p.suffix.lower() in (".obj", ".off", ".ply") and "deformed" not in p.stem
+            )
+            pairs += [(cage, mesh) for cage in cages]
+    return pairs
+
+
+def _warn(warnings, quiet):
+    if not quiet:
+        for warning in warnings:
+            print(f"lbc: warning: {warning}", file=sys.stderr)
+
+
+def _print_json(figures):
+    print(json.dumps(figures, indent=2, default=_json_default))
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot write {type(value).__name__} as JSON")
+
+
+# (key, header, format) of the printed tables
+_SUMMARY_COLUMNS = [
+    ("scheme", "scheme", "{}"),
+    ("influence_mean", "influence mean", "{:.2f}"),
+    ("influence_max", "max", "{}"),
+    ("P_tau", "P(1e-3/n)", "{:.3f}"),
+    ("Q_4", "Q(4)", "{:.3f}"),
+    ("Q_8", "Q(8)", "{:.3f}"),
+    ("memory_bytes", "weights KB", "{:.0f}", 1e-3),
+    ("deform_seconds", "deform µs", "{:.1f}", 1e6),
+    ("time_total", "bind s", "{:.2f}"),
+]
+_TABLE1_COLUMNS = [
+    ("model", "cage", "{}"),
+    ("control_points", "n", "{}"),
+    ("points", "points", "{}"),
+    ("lbc_nonzeros_per_point", "LBC weights/pt", "{:.2f}"),
+    ("lbc_bytes", "LBC KB", "{:.1f}", 1e-3),
+    ("mvc_bytes", "MVC KB", "{:.1f}", 1e-3),
+    ("memory_ratio", "memory", "{:.0%}"),
+    ("lbc_seconds", "LBC µs", "{:.1f}", 1e6),
+    ("mvc_seconds", "MVC µs", "{:.1f}", 1e6),
+    ("time_ratio", "time", "{:.0%}"),
+]
+
+
+def _table(rows, columns):
+    """Rows of figures as an aligned text table (numbers right-aligned)."""
+    cells = [[header for _, header, *_ in columns]]
+    for row in rows:
+        row = dict(row, time_total=sum(v for k, v in row.items() if k.startswith("time_") and k != "time_total"))
+        line = []
+        for key, _, form, *scale in columns:
+            value = row.get(key)
+            line.append("-" if value is None else form.format(value * scale[0] if scale else value))
+        cells.append(line)
+    widths = [max(len(line[k]) for line in cells) for k in range(len(columns))]
+    text = []
+    for number, line in enumerate(cells):
+        parts = [c.ljust(w) if k == 0 else c.rjust(w) for k, (c, w) in enumerate(zip(line, widths))]
+        text.append("  ".join(parts))
+        if number == 0:
+            text.append("  ".join("-" * w for w in widths))
+    return "\n".join(text)
+
+
+class _Progress:
+    """A progress bar on stderr for a terminal, a line per tenth of the work otherwise (logs); nothing when quiet.
+
+    Used as a context manager; the instance is the ``progress(fraction, message)`` callback.
+    """
+
+    def __init__(self, label, quiet):
+        self.label = label
+        self.enabled = not quiet
+        self.tty = sys.stderr.isatty()
+        self.last_draw = 0.0
+        self.last_tenth = -1
+        self.start = time.perf_counter()
+
+    def __call__(self, fraction, message):
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if self.tty:
+            if now - self.last_draw < 0.1 and fraction < 1.0:
+                return
+            filled = int(round(30 * min(max(fraction, 0.0), 1.0)))
+            bar = "#" * filled + "-" * (30 - filled)
+            line = f"\r{self.label} [{bar}] {fraction:4.0%} {message}"[:120]
+            sys.stderr.write(line.ljust(121))
+            sys.stderr.flush()
+            self.last_draw = now
+        elif int(10 * fraction) > self.last_tenth:
+            self.last_tenth = int(10 * fraction)
+            sys.stderr.write(f"{self.label}: {fraction:4.0%} {message}\n")
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if not self.enabled:
+            return False
+        if exc[0] is not None:  # the error message is the one line to read: only clear a drawn bar
+            if self.tty:
+                sys.stderr.write("\r" + " " * 121 + "\r")
+            return False
+        seconds = time.perf_counter() - self.start
+        sys.stderr.write(("\r" if self.tty else "") + f"{self.label}: done in {seconds:.1f} s".ljust(121 if self.tty else 0) + "\n")
+        return False

@@ -1,0 +1,150 @@
+"""The lbc command line: bind, deform, stats, compare and table1 through main(argv), and bad input through a real
+subprocess (exit code 2, one line on stderr)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lbc_core.cli import main
+from lbc_core.io import read_cage, read_mesh, write_mesh
+
+DATA = Path(__file__).parent / "data"
+LOGO = DATA / "LBClogo-control-edgeset.obj"  # 6 control points: a quick 2D bind
+GARGOYLE = DATA / "cages-3d" / "gargoyle"
+AFFINE = np.array([[1.2, 0.3], [-0.1, 0.9]])
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.fixture(scope="module")
+def logo_mesh(tmp_path_factory):
+    """A small triangle mesh inside the LBC logo (a grid over its middle), as an OBJ file."""
+    vertices, _ = read_cage(LOGO)
+    lower, upper = vertices.min(axis=0), vertices.max(axis=0)
+    u, v = np.meshgrid(np.linspace(0.1, 0.9, 9), np.linspace(0.1, 0.9, 7), indexing="ij")
+    points = lower + np.column_stack([u.ravel(), v.ravel()]) * (upper - lower)
+    index = np.arange(points.shape[0]).reshape(u.shape)
+    quads = [[index[i, j], index[i + 1, j], index[i + 1, j + 1], index[i, j + 1]] for i in range(8) for j in range(6)]
+    path = tmp_path_factory.mktemp("logo") / "grid.obj"
+    write_mesh(path, points, quads)
+    return path
+
+
+@pytest.fixture(scope="module")
+def gargoyle_points(tmp_path_factory):
+    path = tmp_path_factory.mktemp("gargoyle") / "points.ply"
+    write_mesh(path, read_mesh(GARGOYLE / "mesh.off")[0][::25])
+    return path
+
+
+def test_bind_stats_deform_2d(tmp_path, capsys, logo_mesh):
+    binding = tmp_path / "logo.npz"
+    code, out, err = run(capsys, "bind", LOGO, logo_mesh, "-o", binding, "--cells", 400, "--json")
+    assert code == 0, err
+    figures = json.loads(out)
+    assert figures["scheme"] == "lbc" and figures["points"] == 63 and figures["control_points"] == 6
+    assert figures["converged"] and "bind (lbc)" in err and binding.is_file()
+
+    code, out, err = run(capsys, "stats", binding, "--json", "--plot", tmp_path / "pq.png",
+                         "--coordinate", 1, tmp_path / "w1.svg")
+    assert code == 0, err
+    stats = json.loads(out)
+    assert 1 <= stats["influence_mean"] <= stats["influence_max"] <= 6 and 0 < stats["P_tau"] < 1
+    assert (tmp_path / "pq.png").stat().st_size > 5000 and (tmp_path / "w1.svg").stat().st_size > 5000
+
+    # An affine map of the cage moves every point by the same map (linear reproduction), faces kept.
+    cage, _ = read_cage(LOGO)
+    moved_cage = tmp_path / "moved.obj"
+    write_mesh(moved_cage, cage @ AFFINE.T + [5.0, -2.0])
+    deformed = tmp_path / "deformed.off"
+    code, out, err = run(capsys, "deform", binding, moved_cage, "-o", deformed, "--mesh", logo_mesh,
+                         "--plot", tmp_path / "before_after.png", "--quiet")
+    assert code == 0 and err == ""
+    assert "deformed 63 points" in out
+    result, faces = read_mesh(deformed)
+    original, original_faces = read_mesh(logo_mesh)
+    np.testing.assert_allclose(result[:, :2], original[:, :2] @ AFFINE.T + [5.0, -2.0], atol=1e-6)
+    assert [f.tolist() for f in faces] == [f.tolist() for f in original_faces]
+    assert (tmp_path / "before_after.png").stat().st_size > 5000
+
+
+def test_bind_mvc_3d_and_deform_at_rest(tmp_path, capsys, gargoyle_points):
+    binding = tmp_path / "mvc.npz"
+    code, out, err = run(capsys, "bind", GARGOYLE / "cage_L16.obj", gargoyle_points, "-o", binding,
+                         "--scheme", "mvc", "--cells", 300, "--quiet")
+    assert code == 0 and err == "" and "with mvc" in out
+    code, out, _ = run(capsys, "deform", binding, GARGOYLE / "cage_L16.obj", "-o", tmp_path / "same.ply")
+    assert code == 0
+    np.testing.assert_allclose(read_mesh(tmp_path / "same.ply")[0], read_mesh(gargoyle_points)[0], atol=1e-6)
+
+
+def test_compare_2d(tmp_path, capsys):
+    plot = tmp_path / "pq.png"
+    code, out, err = run(capsys, "compare", LOGO, "--schemes", "lbc,mvc,harmonic", "--cells", 600, "--plot", plot,
+                         "--json", "--quiet")
+    assert code == 0, err
+    rows = {row["scheme"]: row for row in json.loads(out)["schemes"]}
+    assert set(rows) == {"lbc", "mvc", "harmonic"}
+    assert rows["lbc"]["influence_mean"] < min(rows["mvc"]["influence_mean"], rows["harmonic"]["influence_mean"])
+    assert rows["lbc"]["P_tau"] > max(rows["mvc"]["P_tau"], rows["harmonic"]["P_tau"])
+    assert plot.stat().st_size > 10_000
+
+    code, out, _ = run(capsys, "compare", LOGO, "--schemes", "mvc,harmonic", "--cells", 600, "--quiet")
+    assert code == 0
+    header = out.splitlines()[1]
+    assert "influence mean" in header and "P(1e-3/n)" in header
+    assert out.splitlines()[3].startswith("mvc") and out.splitlines()[4].startswith("harmonic")
+
+
+def test_table1_on_a_pair(capsys, gargoyle_points):
+    code, out, err = run(capsys, "table1", "--pair", GARGOYLE / "cage_L16.obj", gargoyle_points, "--cells", 400,
+                         "--json", "--quiet")
+    assert code == 0, err
+    (row,) = json.loads(out)["pairs"]
+    assert row["control_points"] == 6 and row["points"] == 107
+    assert row["mvc_bytes"] == 107 * 6 * 8
+    assert 0 < row["memory_ratio"] and 0 < row["time_ratio"]
+    code, out, err = run(capsys, "table1", GARGOYLE.parent, "--min-control", 1000, "--quiet")
+    assert code == 2 and "no (cage, mesh) pair" in err
+
+
+@pytest.mark.parametrize(
+    "make_input, argv, message",
+    [
+        (lambda d: (d / "cross.obj").write_text("v 0 0 0\nv 1 1 0\nv 1 0 0\nv 0 1 0\n"),
+         ["bind", "{d}/cross.obj", "{d}/cross.obj", "-o", "{d}/x.npz"], "intersects itself"),
+        (lambda d: None, ["bind", "{d}/missing.obj", "{d}/missing.obj", "-o", "{d}/x.npz"], "no such file"),
+        (lambda d: (d / "fake.npz").write_bytes(b"not a binding"), ["stats", "{d}/fake.npz"], "not an lbc binding"),
+        (lambda d: None, ["table1", "{d}/nowhere"], "not a folder"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(tmp_path, make_input, argv, message):
+    make_input(tmp_path)
+    argv = [a.format(d=tmp_path) for a in argv]
+    result = subprocess.run([sys.executable, "-m", "lbc_core", *argv], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("lbc: error:") and message in lines[0]
+
+
+def test_deform_with_another_cage_exits_2(tmp_path, capsys, gargoyle_points):
+    binding = tmp_path / "mvc.npz"
+    assert run(capsys, "bind", GARGOYLE / "cage_L16.obj", gargoyle_points, "-o", binding, "--scheme", "mvc",
+               "--cells", 300, "--quiet")[0] == 0
+    code, _, err = run(capsys, "deform", binding, GARGOYLE / "cage_L15.obj", "-o", tmp_path / "x.obj")
+    assert code == 2 and "vertices" in err
+
+
+def test_bad_options_exit_2(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["compare", str(LOGO), "--schemes", "lbc,nope"])
+    assert exit_info.value.code == 2
+    assert "unknown scheme" in capsys.readouterr().err
