@@ -1,0 +1,110 @@
+""""Show influence": one cage vertex's weights painted on the mesh as a color attribute (the paper's Fig. 7).
+
+The colors live in a visible color attribute that :func:`hide` removes again, together with the display settings
+:func:`show` changed, so showing and hiding leaves the mesh as it was.
+"""
+
+import bmesh
+import bpy
+import numpy as np
+
+from . import storage
+
+ATTRIBUTE_NAME = "LBC Influence"
+
+# A blue-to-red ramp like the paper's figures: weight 0 (not influenced) is dark blue.
+_RAMP_STOPS = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+_RAMP_COLORS = np.array(
+    [[0.02, 0.02, 0.25], [0.0, 0.35, 0.9], [0.1, 0.8, 0.3], [1.0, 0.85, 0.0], [0.85, 0.05, 0.0]]
+)
+
+
+def selected_cage_vertex(cage_obj):
+    """The cage vertex to show: the active one of the selection history in edit mode, else the first selected.
+
+    Returns None when no vertex is selected.
+    """
+    if cage_obj.mode == "EDIT":
+        edit = bmesh.from_edit_mesh(cage_obj.data)
+        active = edit.select_history.active
+        if isinstance(active, bmesh.types.BMVert):
+            return active.index
+        selected = [v.index for v in edit.verts if v.select]
+        return selected[0] if selected else None
+    flags = np.zeros(len(cage_obj.data.vertices), dtype=bool)
+    cage_obj.data.vertices.foreach_get("select", flags)
+    selected = np.flatnonzero(flags)
+    return int(selected[0]) if len(selected) else None
+
+
+def vertex_weights(mesh, cage_vertex):
+    """Each mesh vertex's weight for one cage vertex, from the cached slots."""
+    index, weight = storage.read(mesh)
+    return np.where(index == cage_vertex, weight, 0.0).sum(axis=1)
+
+
+def ramp(values):
+    """(m,) values in [0, 1] to (m, 4) RGBA colors."""
+    values = np.clip(values, 0.0, 1.0)
+    rgb = np.stack([np.interp(values, _RAMP_STOPS, _RAMP_COLORS[:, c]) for c in range(3)], axis=1)
+    return np.concatenate([rgb, np.ones((len(values), 1))], axis=1)
+
+
+def _view_spaces():
+    """The 3D views of every open window: their Solid shading is switched to attribute colors and back."""
+    return [
+        space
+        for window in bpy.context.window_manager.windows
+        for area in window.screen.areas
+        if area.type == "VIEW_3D"
+        for space in area.spaces
+        if space.type == "VIEW_3D"
+    ]
+
+
+def show(mesh_obj, cage_vertex):
+    """Paint the weights of ``cage_vertex`` on a bound mesh and show colors in the 3D views' Solid shading.
+
+    Returns the largest weight painted (the colors are scaled to it).
+    """
+    mesh = mesh_obj.data
+    settings = mesh_obj.lbc
+    values = vertex_weights(mesh, cage_vertex)
+    peak = float(values.max()) if len(values) else 0.0
+    attribute = mesh.color_attributes.get(ATTRIBUTE_NAME)
+    if attribute is None:
+        settings.previous_color = mesh.color_attributes.active_color_name or ""
+        attribute = mesh.color_attributes.new(ATTRIBUTE_NAME, "FLOAT_COLOR", "POINT")
+    colors = ramp(values / peak if peak > 0 else values)
+    attribute.data.foreach_set("color", colors.astype(np.float32).ravel())
+    mesh.color_attributes.active_color = attribute
+    for space in _view_spaces():
+        if space.shading.color_type != "ATTRIBUTE":
+            settings.previous_color_type = space.shading.color_type
+            space.shading.color_type = "ATTRIBUTE"
+    settings.show_influence = True
+    settings.influence_vertex = cage_vertex
+    mesh.update()
+    return peak
+
+
+def hide(mesh_obj):
+    """Remove the painted influence and give back the display settings :func:`show` changed."""
+    settings = mesh_obj.lbc
+    if not settings.show_influence:
+        return
+    mesh = mesh_obj.data
+    attribute = mesh.color_attributes.get(ATTRIBUTE_NAME)
+    if attribute is not None:
+        mesh.color_attributes.remove(attribute)
+    previous = mesh.color_attributes.get(settings.previous_color)
+    if previous is not None:
+        mesh.color_attributes.active_color = previous
+    if settings.previous_color_type:
+        for space in _view_spaces():
+            if space.shading.color_type == "ATTRIBUTE":
+                space.shading.color_type = settings.previous_color_type
+    settings.show_influence = False
+    settings.previous_color = ""
+    settings.previous_color_type = ""
+    mesh.update()

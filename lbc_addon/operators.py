@@ -1,0 +1,309 @@
+"""Operators: Bind, Unbind, Rebind, Show / Hide Influence.
+
+Bind runs modal in the UI: the solve goes to a worker thread, a timer polls it, the status bar shows its progress and
+Esc cancels it; the scene is only written when the solve succeeded. In background mode (``blender -b``, the bpy
+module) there is no event loop, so it runs synchronously and prints its progress.
+"""
+
+import bpy
+
+from lbc_core import CageError, Cancelled
+
+from . import influence, jobs
+from .properties import BindOptions
+
+_running = []  # the Worker of the bind in progress: one at a time, so two binds never write the same mesh
+
+
+def _bound_selection(context):
+    """Selected objects holding a binding (the active one included)."""
+    objects = list(context.selected_objects)
+    if context.active_object is not None and context.active_object not in objects:
+        objects.append(context.active_object)
+    return [obj for obj in objects if obj.type == "MESH" and obj.lbc.is_bound]
+
+
+def _report_result(operator, mesh_obj):
+    """Warnings about a finished bind: vertices outside the cage, repairs lbc_core made."""
+    settings = mesh_obj.lbc
+    if settings.outside:
+        operator.report(
+            {"WARNING"},
+            f"{mesh_obj.name}: {settings.outside} vertices lie outside the cage; they follow the closest point inside",
+        )
+    if settings.warnings:
+        operator.report({"WARNING"}, f"{mesh_obj.name}: {settings.warnings}")
+
+
+def _apply_all(operator, pairs):
+    """Write every solved binding; returns the bound objects. Reports what could not be written."""
+    bound = []
+    for request, result in pairs:
+        try:
+            bound.append(jobs.apply(request, result))
+        except CageError as error:
+            operator.report({"ERROR"}, str(error))
+    for mesh_obj in bound:
+        _report_result(operator, mesh_obj)
+    return bound
+
+
+def _solve_printing(requests):
+    """Solve in this thread, printing progress lines (background mode has no status bar)."""
+    last = [None]
+
+    def progress(fraction, message):
+        line = f"LBC bind: {100 * fraction:3.0f}% {message}"
+        if line != last[0]:
+            print(line, flush=True)
+            last[0] = line
+
+    return [(request, jobs.solve(request, progress)) for request in requests]
+
+
+class _Binder:
+    """What Bind and Rebind share: snapshot on the main thread, solve (modal or not), apply.
+
+    Subclasses define ``targets(context)``: the (mesh, cage, options) triples to bind.
+    """
+
+    def snapshot(self, context):
+        depsgraph = context.evaluated_depsgraph_get()
+        return [jobs.snapshot(mesh, cage, depsgraph, **options) for mesh, cage, options in self.targets(context)]
+
+    def execute(self, context):
+        try:
+            pairs = _solve_printing(self.snapshot(context))
+        except Cancelled:
+            self.report({"WARNING"}, "Bind cancelled: nothing changed")
+            return {"CANCELLED"}
+        except CageError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        bound = _apply_all(self, pairs)
+        if not bound:
+            return {"CANCELLED"}
+        seconds = sum(obj.lbc.bind_seconds for obj in bound)
+        self.report({"INFO"}, f"Bound {len(bound)} mesh(es) in {seconds:.1f} s")
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        try:
+            requests = self.snapshot(context)
+        except CageError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        worker = jobs.Worker(requests)
+        _running.append(worker)
+        worker.start()
+        self._worker = worker
+        self._timer = context.window_manager.event_timer_add(0.1, window=context.window)
+        context.window_manager.modal_handler_add(self)
+        context.workspace.status_text_set("LBC bind: starting (Esc to cancel)")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        worker = self._worker
+        if event.type == "ESC":
+            worker.cancel()
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            # The UI stays usable while the solve runs; apply() checks the objects did not change meanwhile.
+            return {"PASS_THROUGH"}
+        if not worker.done:
+            state = "cancelling" if worker.cancelled else f"{100 * worker.fraction:.0f}% {worker.message}"
+            context.workspace.status_text_set(f"LBC bind: {state} (Esc to cancel)")
+            return {"RUNNING_MODAL"}
+        self._finish(context)
+        if worker.cancelled:
+            self.report({"WARNING"}, "Bind cancelled: nothing changed")
+            return {"CANCELLED"}
+        if worker.error is not None:
+            self.report({"ERROR"}, str(worker.error))
+            return {"CANCELLED"}
+        bound = _apply_all(self, worker.results)
+        if not bound:
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Bound {len(bound)} mesh(es) in {sum(o.lbc.bind_seconds for o in bound):.1f} s")
+        return {"FINISHED"}
+
+    def _finish(self, context):
+        context.window_manager.event_timer_remove(self._timer)
+        context.workspace.status_text_set(None)
+        _running.remove(self._worker)
+
+
+def _bind_poll_message(context):
+    """Why Bind cannot run now, or None when it can."""
+    if _running:
+        return "A bind is already running (Esc cancels it)"
+    if context.mode != "OBJECT":
+        return "Bind works in Object Mode"
+    cage = context.active_object
+    if cage is None or cage.type != "MESH":
+        return "Select the mesh(es) to bind, then the cage mesh last so it is active"
+    if not any(obj.type == "MESH" and obj != cage for obj in context.selected_objects):
+        return "Select the mesh(es) to bind as well as the cage (active)"
+    return None
+
+
+class OBJECT_OT_lbc_bind(_Binder, BindOptions, bpy.types.Operator):
+    """Bind the selected meshes to the active cage with Local Barycentric Coordinates"""
+
+    bl_idname = "object.lbc_bind"
+    bl_label = "Bind to Cage"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        message = _bind_poll_message(context)
+        if message:
+            cls.poll_message_set(message)
+        return message is None
+
+    def targets(self, context):
+        cage = context.active_object
+        options = self.bind_options()
+        return [(obj, cage, options) for obj in context.selected_objects if obj.type == "MESH" and obj != cage]
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        for name in ("mode", "resolution", "weighting", "epsilon", "tolerance", "threshold"):
+            layout.prop(self, name)
+
+
+class OBJECT_OT_lbc_rebind(_Binder, bpy.types.Operator):
+    """Bind the selected bound meshes again to their cage as it is now, with the same options"""
+
+    bl_idname = "object.lbc_rebind"
+    bl_label = "Rebind"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        if _running:
+            cls.poll_message_set("A bind is already running (Esc cancels it)")
+            return False
+        if context.mode != "OBJECT":
+            cls.poll_message_set("Rebind works in Object Mode")
+            return False
+        if not _bound_selection(context):
+            cls.poll_message_set("Select a bound mesh")
+            return False
+        return True
+
+    def targets(self, context):
+        triples = []
+        for obj in _bound_selection(context):
+            if obj.lbc.cage is None:
+                raise CageError(f"the cage of '{obj.name}' was deleted: select a cage and Bind instead")
+            triples.append((obj, obj.lbc.cage, obj.lbc.bind_options()))
+        return triples
+
+
+class OBJECT_OT_lbc_unbind(bpy.types.Operator):
+    """Remove the binding: the mesh is exactly as before binding (data, modifiers, attributes)"""
+
+    bl_idname = "object.lbc_unbind"
+    bl_label = "Unbind"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        if _running:
+            cls.poll_message_set("Wait for the running bind, or cancel it with Esc")
+            return False
+        if not _bound_selection(context):
+            cls.poll_message_set("Select a bound mesh")
+            return False
+        return True
+
+    def execute(self, context):
+        objects = _bound_selection(context)
+        for obj in objects:
+            jobs.remove(obj)
+        self.report({"INFO"}, f"Unbound {len(objects)} mesh(es)")
+        return {"FINISHED"}
+
+
+def _influence_targets(context):
+    """The meshes whose influence to show: the active bound mesh, or every mesh bound to the active cage."""
+    active = context.active_object
+    if active is None:
+        return []
+    if active.type == "MESH" and active.lbc.is_bound:
+        return [active]
+    return [obj for obj in context.scene.objects if obj.type == "MESH" and obj.lbc.is_bound and obj.lbc.cage == active]
+
+
+class OBJECT_OT_lbc_show_influence(bpy.types.Operator):
+    """Paint the weights of the selected cage vertex on the bound mesh (select a vertex of the cage in Edit Mode)"""
+
+    bl_idname = "object.lbc_show_influence"
+    bl_label = "Show Influence"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        if not _influence_targets(context):
+            cls.poll_message_set("Make a bound mesh or its cage active")
+            return False
+        return True
+
+    def execute(self, context):
+        shown = 0
+        for mesh_obj in _influence_targets(context):
+            cage = mesh_obj.lbc.cage
+            if cage is None:
+                self.report({"WARNING"}, f"The cage of '{mesh_obj.name}' was deleted")
+                continue
+            vertex = influence.selected_cage_vertex(cage)
+            if vertex is None:
+                self.report({"ERROR"}, f"Select a vertex of the cage '{cage.name}' (in Edit Mode)")
+                return {"CANCELLED"}
+            peak = influence.show(mesh_obj, vertex)
+            self.report({"INFO"}, f"{mesh_obj.name}: cage vertex {vertex}, largest weight {peak:.3f}")
+            shown += 1
+        return {"FINISHED"} if shown else {"CANCELLED"}
+
+
+class OBJECT_OT_lbc_hide_influence(bpy.types.Operator):
+    """Remove the painted influence colors"""
+
+    bl_idname = "object.lbc_hide_influence"
+    bl_label = "Hide Influence"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        if not any(obj.lbc.show_influence for obj in _influence_targets(context)):
+            cls.poll_message_set("No influence is shown")
+            return False
+        return True
+
+    def execute(self, context):
+        for mesh_obj in _influence_targets(context):
+            influence.hide(mesh_obj)
+        return {"FINISHED"}
+
+
+CLASSES = (
+    OBJECT_OT_lbc_bind,
+    OBJECT_OT_lbc_rebind,
+    OBJECT_OT_lbc_unbind,
+    OBJECT_OT_lbc_show_influence,
+    OBJECT_OT_lbc_hide_influence,
+)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

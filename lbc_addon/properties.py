@@ -1,0 +1,110 @@
+"""What the add-on remembers per object (``Object.lbc``): the binding's cage, options, figures and state.
+
+Stored as ID properties, so it is saved in the .blend; Unbind removes the whole group again.
+"""
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+
+# lbc_core's weighting functions ρ of the geodesic distance D in the TV weights ω = ρ(D).
+WEIGHTING_ITEMS = (
+    ("quadratic", "Quadratic", "ρ(D) = D², the paper's choice: the most local coordinates"),
+    ("linear", "Linear", "ρ(D) = D"),
+    ("sqrt", "Square Root", "ρ(D) = √D: smoother, less local"),
+    ("constant", "Constant", "ρ(D) = 1: plain total variation, no locality prior"),
+)
+
+MODE_ITEMS = (
+    ("AUTO", "Automatic", "2D when the cage and the mesh lie flat in one plane (image planes, flat meshes), else 3D"),
+    ("3D", "3D", "A closed cage around the mesh"),
+    ("2D", "2D", "A flat cage: its outline is the 2D polygon; the mesh must lie in its plane"),
+)
+
+
+class BindOptions:
+    """The bind options shared by the operators' properties and the stored binding (annotations only)."""
+
+    resolution: IntProperty(
+        name="Resolution",
+        description="Cells (triangles in 2D, tetrahedra in 3D) filling the cage; 0 uses lbc_core's default "
+        "(3000 in 2D, 20000 in 3D). More cells: finer weights, slower bind",
+        default=0,
+        min=0,
+        soft_max=200000,
+    )
+    weighting: EnumProperty(name="Weighting", description="How the geodesic distance weighs the total variation",
+                            items=WEIGHTING_ITEMS, default="quadratic")
+    epsilon: FloatProperty(
+        name="Relaxation ε",
+        description="Relaxation of the interpolation constraint (0: exact); a little relaxation smooths the weights",
+        default=0.0,
+        min=0.0,
+        soft_max=0.1,
+        precision=4,
+    )
+    tolerance: FloatProperty(
+        name="Tolerance",
+        description="Stopping tolerance of the solver (ADMM residual); 0 uses lbc_core's default (1e-4). "
+        "Smaller: more accurate weights, slower bind",
+        default=0.0,
+        min=0.0,
+        soft_max=0.01,
+        precision=6,
+    )
+    threshold: FloatProperty(
+        name="Threshold",
+        description="Weights below this are dropped (partition of unity and linear reproduction are then restored); "
+        "0 uses lbc_core's default (0.001 / control points). Larger: fewer influences per vertex, faster deform",
+        default=0.0,
+        min=0.0,
+        soft_max=0.05,
+        precision=5,
+    )
+    mode: EnumProperty(name="Dimension", items=MODE_ITEMS, default="AUTO")
+
+    def bind_options(self):
+        """The options as keyword arguments for :func:`lbc_addon.jobs.snapshot`."""
+        return {
+            "resolution": self.resolution,
+            "weighting": self.weighting,
+            "epsilon": self.epsilon,
+            "tolerance": self.tolerance,
+            "threshold": self.threshold,
+            "mode": self.mode,
+        }
+
+
+class LBC_PG_binding(BindOptions, bpy.types.PropertyGroup):
+    """A mesh object's binding to a cage."""
+
+    is_bound: BoolProperty(name="Bound", default=False)
+    cage: PointerProperty(name="Cage", type=bpy.types.Object,
+                          description="The cage this mesh is bound to")
+    node_group: PointerProperty(type=bpy.types.NodeTree)
+    dimension: IntProperty(name="Dimension", description="2 or 3: how the weights were computed")
+    cage_vertex_count: IntProperty(name="Cage Vertices")
+    cage_topology: StringProperty(name="Cage Topology", description="Fingerprint of the cage's topology at bind time")
+    core_fingerprint: StringProperty(name="Core Fingerprint", description="lbc_core's fingerprint of the welded cage")
+    control_points: IntProperty(name="Control Points", description="Cage vertices after welding duplicates")
+    slots: IntProperty(name="Slots", description="K: the largest number of cage vertices moving one mesh vertex")
+    mean_influences: FloatProperty(name="Mean Influences")
+    outside: IntProperty(name="Outside", description="Mesh vertices outside the cage at bind time")
+    bind_seconds: FloatProperty(name="Bind Time", unit="TIME_ABSOLUTE")
+    warnings: StringProperty(name="Warnings", description="What lbc_core repaired or noticed at bind time")
+    status: StringProperty(name="Status", description="Why the deformer works or stopped")
+    active_modifier: StringProperty(description="The modifier that was active before binding, made active again on "
+                                    "unbind")
+    show_influence: BoolProperty(name="Show Influence", default=False)
+    influence_vertex: IntProperty(name="Influence Vertex", description="The cage vertex whose weights are shown")
+    previous_color: StringProperty(description="The active color attribute before showing the influence")
+    previous_color_type: StringProperty(description="The 3D views' Solid color type before showing the influence")
+
+
+def register():
+    bpy.utils.register_class(LBC_PG_binding)
+    bpy.types.Object.lbc = PointerProperty(type=LBC_PG_binding)
+
+
+def unregister():
+    del bpy.types.Object.lbc
+    bpy.utils.unregister_class(LBC_PG_binding)

@@ -1,0 +1,103 @@
+"""The binding's cache in the mesh data: hidden point attributes saved with the .blend.
+
+Each mesh vertex keeps K (index, weight) slots, K being the largest number of cage vertices that influence one mesh
+vertex; rows with fewer influences are padded with weight 0. Beside them ``.lbc_rest`` holds Σ w_k c_k at bind time
+(c_k the cage's rest positions), so the deformer adds the displacement Σ w_k c_k − rest to the vertex's own position
+and the rest pose is the mesh exactly, not its reconstruction from the weights. Names start with a dot: Blender hides
+such attributes from the attribute lists and keeps them through deform modifiers.
+"""
+
+import numpy as np
+
+INDEX_PREFIX = ".lbc_index_"
+WEIGHT_PREFIX = ".lbc_weight_"
+REST_NAME = ".lbc_rest"
+
+
+def index_name(slot):
+    """Name of the attribute holding each vertex's ``slot``-th cage vertex index."""
+    return f"{INDEX_PREFIX}{slot}"
+
+
+def weight_name(slot):
+    """Name of the attribute holding each vertex's ``slot``-th weight."""
+    return f"{WEIGHT_PREFIX}{slot}"
+
+
+def slot_arrays(weights, column_vertex):
+    """Sparse weights to K padded slots.
+
+    Parameters
+    ----------
+    weights : scipy.sparse matrix (m, n)
+    column_vertex : (n,) int array
+        The cage vertex each column stands for.
+
+    Returns
+    -------
+    index (m, K) int32, weight (m, K) float32
+    """
+    weights = weights.tocsr()
+    weights.sort_indices()
+    counts = np.diff(weights.indptr)
+    slots = max(int(counts.max()) if len(counts) else 0, 1)
+    rows = np.repeat(np.arange(weights.shape[0]), counts)
+    position = np.arange(weights.nnz) - np.repeat(weights.indptr[:-1], counts)
+    index = np.zeros((weights.shape[0], slots), dtype=np.int32)
+    weight = np.zeros((weights.shape[0], slots), dtype=np.float32)
+    index[rows, position] = np.asarray(column_vertex)[weights.indices]
+    weight[rows, position] = weights.data
+    return index, weight
+
+
+def rest_offsets(index, weight, cage_rest):
+    """Σ_k w_k c_k at rest, from the float32 weights and positions the deformer will multiply."""
+    rest = np.asarray(cage_rest, dtype=np.float32).astype(np.float64)
+    return np.einsum("mk,mkd->md", weight.astype(np.float64), rest[index])
+
+
+def write(mesh, index, weight, rest):
+    """Store the slots and rest offsets on a ``bpy.types.Mesh`` (one value per vertex)."""
+    for slot in range(index.shape[1]):
+        attribute = mesh.attributes.new(index_name(slot), "INT", "POINT")
+        attribute.data.foreach_set("value", np.ascontiguousarray(index[:, slot]))
+        attribute = mesh.attributes.new(weight_name(slot), "FLOAT", "POINT")
+        attribute.data.foreach_set("value", np.ascontiguousarray(weight[:, slot]))
+    attribute = mesh.attributes.new(REST_NAME, "FLOAT_VECTOR", "POINT")
+    attribute.data.foreach_set("vector", np.asarray(rest, dtype=np.float32).ravel())
+
+
+def slot_count(mesh):
+    """K, the number of slots stored on the mesh (0 when it holds no binding)."""
+    slots = 0
+    while mesh.attributes.get(index_name(slots)) is not None:
+        slots += 1
+    return slots
+
+
+def read(mesh):
+    """The slots stored on a mesh: index (m, K) int32 and weight (m, K) float32."""
+    slots = slot_count(mesh)
+    count = len(mesh.vertices)
+    index = np.zeros((count, slots), dtype=np.int32)
+    weight = np.zeros((count, slots), dtype=np.float32)
+    column = np.empty(count, dtype=np.int32)
+    values = np.empty(count, dtype=np.float32)
+    for slot in range(slots):
+        mesh.attributes[index_name(slot)].data.foreach_get("value", column)
+        index[:, slot] = column
+        mesh.attributes[weight_name(slot)].data.foreach_get("value", values)
+        weight[:, slot] = values
+    return index, weight
+
+
+def remove(mesh):
+    """Delete every attribute this add-on wrote, leaving the mesh's own attributes as they were."""
+    names = [a.name for a in mesh.attributes if a.name.startswith((INDEX_PREFIX, WEIGHT_PREFIX)) or a.name == REST_NAME]
+    for name in names:
+        mesh.attributes.remove(mesh.attributes[name])
+
+
+def memory_bytes(vertex_count, slots):
+    """Bytes the cache takes in memory and in the .blend (before compression)."""
+    return vertex_count * (slots * (4 + 4) + 3 * 4)

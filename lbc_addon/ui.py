@@ -1,0 +1,109 @@
+"""Panels: the same content in the Properties editor (Object tab) and the 3D view's sidebar (LBC tab)."""
+
+import bpy
+
+from . import storage
+
+
+def _bound_to(cage, scene):
+    """Meshes of the scene bound to ``cage``."""
+    return [obj for obj in scene.objects if obj.type == "MESH" and obj.lbc.is_bound and obj.lbc.cage == cage]
+
+
+def _format_bytes(count):
+    for unit in ("B", "KB", "MB", "GB"):
+        if count < 1024 or unit == "GB":
+            return f"{count:.0f} {unit}" if unit == "B" else f"{count:.1f} {unit}"
+        count /= 1024
+
+
+def draw_binding(layout, obj):
+    """State, figures and actions of a bound mesh."""
+    settings = obj.lbc
+    ok = settings.status.startswith("Following")
+    box = layout.box()
+    box.label(text=settings.status or "Bound", icon="CHECKMARK" if ok else "ERROR")
+    if not ok:
+        box.operator("object.lbc_rebind", icon="FILE_REFRESH")
+    column = layout.column(align=True)
+    column.label(text=f"Cage: {settings.cage.name if settings.cage else '(deleted)'}", icon="MESH_CUBE")
+    column.label(text=f"{settings.dimension}D binding, {settings.control_points} control points")
+    column.label(text=f"{len(obj.data.vertices)} mesh vertices, {settings.outside} outside the cage")
+    column.label(text=f"Influences per vertex: mean {settings.mean_influences:.1f}, max {settings.slots}")
+    memory = storage.memory_bytes(len(obj.data.vertices), settings.slots)
+    column.label(text=f"Cache in the .blend: {_format_bytes(memory)}")
+    column.label(text=f"Bind time: {settings.bind_seconds:.1f} s")
+    if settings.warnings:
+        layout.label(text=settings.warnings, icon="INFO")
+    row = layout.row(align=True)
+    row.operator("object.lbc_rebind", icon="FILE_REFRESH")
+    row.operator("object.lbc_unbind", icon="X")
+    draw_influence(layout, obj)
+
+
+def draw_influence(layout, obj):
+    row = layout.row(align=True)
+    row.operator("object.lbc_show_influence", icon="COLOR")
+    if obj.lbc.show_influence:
+        row.operator("object.lbc_hide_influence", icon="HIDE_ON")
+        layout.label(text=f"Showing cage vertex {obj.lbc.influence_vertex}")
+
+
+def draw(layout, context):
+    """Whatever fits the active object: a bound mesh, a cage with bound meshes, or a selection ready to bind."""
+    obj = context.active_object
+    if obj is None:
+        layout.label(text="Select the mesh(es), then the cage (active)")
+        return
+    if obj.type == "MESH" and obj.lbc.is_bound:
+        draw_binding(layout, obj)
+        return
+    meshes = _bound_to(obj, context.scene)
+    if meshes:
+        layout.label(text=f"Cage of {len(meshes)} mesh(es):", icon="MOD_MESHDEFORM")
+        for mesh_obj in meshes:
+            layout.label(text=f"{mesh_obj.name}: {mesh_obj.lbc.status}")
+        if obj.mode == "EDIT":
+            layout.label(text="Select a cage vertex, then:")
+            draw_influence(layout, meshes[0])
+    to_bind = [o for o in context.selected_objects if o.type == "MESH" and o != obj]
+    layout.label(text=f"Bind {len(to_bind)} selected mesh(es) to '{obj.name}':" if to_bind
+                 else "Select the mesh(es), then the cage (active)")
+    layout.operator("object.lbc_bind", icon="MOD_MESHDEFORM")
+
+
+class OBJECT_PT_lbc(bpy.types.Panel):
+    bl_label = "LBC Cage Binding"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def draw(self, context):
+        draw(self.layout, context)
+
+
+class VIEW3D_PT_lbc(bpy.types.Panel):
+    bl_label = "LBC Cage Binding"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "LBC"
+
+    def draw(self, context):
+        draw(self.layout, context)
+
+
+CLASSES = (OBJECT_PT_lbc, VIEW3D_PT_lbc)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)
