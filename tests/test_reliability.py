@@ -387,3 +387,26 @@ def test_empty_mesh_gives_an_empty_binding():
     binding = lbc_core.bind(STAR, None, np.zeros((0, 2)), cells=300)
     assert binding.weights.shape == (0, len(STAR)) and binding.outside_count == 0
     assert binding.deform(STAR).shape == (0, 2)
+
+
+@pytest.mark.parametrize(
+    "points, message",
+    [
+        (np.zeros((3, 4)), "must be an \\(m, 2\\) or \\(m, 3\\) array"),
+        (np.array([[np.nan, 0.0]]), "NaN or infinite"),
+    ],
+)
+def test_bad_points_are_refused(points, message):
+    with pytest.raises(CageError, match=message):
+        lbc_core.bind(STAR, None, points, cells=300)
+
+
+def test_points_of_another_dimension_are_refused(clothing):
+    cage, faces, _, _ = clothing
+    with pytest.raises(CageError, match="the cage is 3D but the points are 2D"):
+        lbc_core.bind(cage, faces, np.zeros((2, 2)))
+
+
+def test_cancelled_bind_raises_cancelled():
+    with pytest.raises(lbc_core.Cancelled):
+        lbc_core.bind(STAR, None, GRID, cells=300, cancel=lambda: True)
