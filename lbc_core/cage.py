@@ -230,18 +230,11 @@ def _first_inputs(vertex_map):
     return np.unique(vertex_map, return_index=True)[1]
 
 
-def _spread_direction(points):
-    """Unit direction of least spread of the points (the normal of their best-fit line or plane) and that spread.
-
-    Returns
-    -------
-    normal : (d,) float array
-    spread : float
-        Largest distance of a point from the best-fit line (2D) or plane (3D), in the points' units.
-    """
+def _flatness(points):
+    """Largest distance of the points from their best-fit line (2D) or plane (3D), in the points' units."""
     centred = points - points.mean(axis=0)
     normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
-    return normal, float(np.max(np.abs(centred @ normal)))
+    return float(np.max(np.abs(centred @ normal)))
 
 
 # ---------------------------------------------------------------------------------------------------------- 2D polygon
@@ -275,7 +268,7 @@ def _make_polygon_cage(vertices, weld_tolerance, max_control_points):
         raise CageError(f"a polygon cage needs at least 3 distinct vertices, got {len(welded)} after welding")
     _check_control_points(len(welded), max_control_points)
     zero = ZERO_LENGTH * np.linalg.norm(np.ptp(welded, axis=0))
-    if _spread_direction(welded)[1] <= zero:
+    if _flatness(welded) <= zero:
         raise CageError("the polygon cage encloses zero area: its vertices are collinear; spread them out")
     names = _first_inputs(vertex_map)
     _check_polygon_simple(welded, zero, names)
@@ -346,7 +339,7 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     _check_control_points(len(welded), max_control_points)
     diagonal = np.linalg.norm(np.ptp(welded, axis=0))
     zero = ZERO_LENGTH * diagonal
-    if _spread_direction(welded)[1] <= zero:
+    if _flatness(welded) <= zero:
         raise CageError(
             "the cage is flat (all its vertices lie in one plane) and encloses zero volume: give it thickness, "
             "or bind in 2D with a polygon cage"
