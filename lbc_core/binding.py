@@ -309,7 +309,7 @@ def check_points(cage, points):
     if points.ndim != 2 or points.shape[1] not in (2, 3):
         raise CageError(f"points must be an (m, 2) or (m, 3) array, got shape {points.shape}")
     if cage.dim == 2 and points.shape[1] == 3:
-        if np.ptp(points[:, 2], initial=0.0) > 1e-9 * cage.bbox_diagonal:
+        if len(points) and np.ptp(points[:, 2]) > 1e-9 * cage.bbox_diagonal:
             raise CageError("the cage is 2D but the points' z varies: bind 2D points (or a z = constant plane)")
         points = points[:, :2]
     if points.shape[1] != cage.dim:

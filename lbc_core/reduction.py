@@ -82,6 +82,9 @@ def constraint_residuals(weights, controls, positions, columns=None):
 def reduce_weights(weights, controls, positions, threshold, tolerance):
     """Drop weights below ``threshold`` and restore the constraints on what remains.
 
+    A point whose reduced support cannot meet the constraints (it lies outside the hull of its remaining control
+    points) tries again with the threshold divided by 10, then 100, and last keeps its full support.
+
     Parameters
     ----------
     weights : (m, n) scipy.sparse matrix
@@ -92,8 +95,7 @@ def reduce_weights(weights, controls, positions, threshold, tolerance):
     threshold : float
         Weights below it are dropped (the paper uses 1e-3 / n).
     tolerance : float
-        Largest reproduction error accepted after the correction, in the units of ``positions``; a point whose
-        reduced support cannot meet it keeps its full support.
+        Largest reproduction error accepted after the correction, in the units of ``positions``.
 
     Returns
     -------
@@ -101,22 +103,31 @@ def reduce_weights(weights, controls, positions, threshold, tolerance):
     """
     full = sp.csr_matrix(weights)
     full.sum_duplicates()
-    kept = full.copy()
-    kept.data[kept.data < threshold] = 0.0
-    kept.eliminate_zeros()
-    slots, columns = _padded(kept)
-    corrected = restore_constraints(slots, controls, positions, columns)
-    unity, reproduction = constraint_residuals(corrected, controls, positions, columns)
-    failed = (unity > 1e-9) | (reproduction > tolerance) | (corrected < 0).any(axis=1)
-    if failed.any():
-        fallback = full[failed]
-        fallback_slots, fallback_columns = _padded(fallback)
-        fixed = restore_constraints(fallback_slots, controls, positions[failed], fallback_columns)
-        reduced = sp.vstack([_from_padded(corrected[~failed], columns[~failed], controls.shape[0]),
-                             _from_padded(fixed, fallback_columns, controls.shape[0])]).tocsr()
-        order = np.r_[np.flatnonzero(~failed), np.flatnonzero(failed)]
-        return reduced[np.argsort(order)]
-    return _from_padded(corrected, columns, controls.shape[0])
+    n = controls.shape[0]
+    reduced = sp.csr_matrix(full.shape)
+    pending = np.arange(full.shape[0])
+    for level in (threshold, threshold / 10, threshold / 100, 0.0):
+        kept = full[pending]
+        kept.data[kept.data < level] = 0.0
+        kept.eliminate_zeros()
+        slots, columns = _padded(kept)
+        corrected = restore_constraints(slots, controls, positions[pending], columns)
+        unity, reproduction = constraint_residuals(corrected, controls, positions[pending], columns)
+        done = (unity <= 1e-9) & (reproduction <= tolerance) & (corrected >= 0).all(axis=1)
+        if level == 0.0:
+            done[:] = True
+        rows = _from_padded(corrected[done], columns[done], n)
+        reduced = _scatter_rows(reduced, pending[done], rows)
+        pending = pending[~done]
+        if not len(pending):
+            break
+    return reduced
+
+
+def _scatter_rows(matrix, rows, values):
+    """``matrix``, whose given rows are empty, with those rows filled from ``values`` (CSR, same column count)."""
+    placement = sp.csr_matrix((np.ones(len(rows)), (rows, np.arange(len(rows)))), shape=(matrix.shape[0], len(rows)))
+    return (matrix + placement @ values).tocsr()
 
 
 def _padded(matrix):

@@ -11,10 +11,12 @@ iterate satisfies them to round-off. ADMM splits X = ∇Z (per-cell gradients) a
 
 Where this differs from the authors' reference, and why:
 - The splitting is weighted by the mesh's measures (cell measure for X, lumped vertex mass for W), on a cage scaled to
-  unit diagonal. The penalty then means the same on every mesh and the Y-step matrix is the P1 stiffness plus β times
-  the mass matrix; the reference's unweighted splitting needs more iterations as the mesh is refined.
-- The penalty adapts (residual balancing); that needs no new factorisation because both blocks share it.
-- The start is the harmonic coordinates (the reference computes them and throws them away).
+  unit diagonal. The penalty then means the same on every mesh (it is a discretisation of one continuous splitting)
+  and the Y-step matrix is the P1 stiffness plus β times the mass matrix.
+- ADMM runs as a Douglas-Rachford map on one state, accelerated by Anderson extrapolation with the safeguard of
+  Zhang, Peng, Deng et al. (ACM TOG 2019), in float32 (half the memory traffic of the loop).
+- The penalty is picked from the number of control points; the start is the harmonic coordinates (the reference
+  computes them and throws them away).
 - The stopping rule is relative (Boyd et al. 2011, §3.3.1), so it behaves the same across mesh sizes.
 - The result is projected onto the non-negative set with the equality constraints kept, so the output satisfies all
   constraints (the reference returns Z, which dips below zero).
@@ -24,7 +26,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -33,9 +34,12 @@ from .objective import tv_objective
 from .errors import Cancelled, CageError
 from .reduction import restore_constraints
 
-BETA = 0.05
-DEFAULT_PENALTY = 0.3
-MEMORY = 5
+# Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
+# gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
+BETA = {2: 20.0, 3: 20.0}
+PENALTY_SCALE = {2: 1.3, 3: 1.3}
+# The dual residual is allowed this many times the primal tolerance: it lags, and the objective settles first.
+DUAL_TOLERANCE_FACTOR = 10.0
 
 
 @dataclass
@@ -82,6 +86,8 @@ def solve_on_mesh(
     penalty=None,
     relaxation=1.6,
     check_every=10,
+    anderson_memory=5,
+    single_precision=True,
     progress=None,
     cancel=None,
 ):
@@ -106,14 +112,20 @@ def solve_on_mesh(
         unit-diagonal cage, linear above), which makes the coordinates smoother at the cost of some locality.
         0 is the paper's plain total variation.
     tolerance : float
-        Relative primal and dual residual tolerance of the stopping rule.
+        Relative primal residual tolerance of the stopping rule (the dual one is 10 times larger). The default
+        stops with objectives within about 0.1 % of the optimum on the paper's 2D cages.
     max_iterations : int
     penalty : float, optional
-        Initial ADMM penalty ρ (adapted during the solve); None picks one from the problem's scale.
+        ADMM penalty ρ on the unit-diagonal cage; None picks c_d / n^(1/(d-1)).
     relaxation : float
         Over-relaxation α in (0, 2).
     check_every : int
         Iterations between convergence checks, progress reports and cancel checks.
+    anderson_memory : int
+        Steps remembered by Anderson acceleration (0: plain ADMM).
+    single_precision : bool
+        Iterate in float32 (half the memory traffic); the result is corrected in float64, so the constraints hold
+        to round-off either way.
     progress : callable(fraction, message), optional
     cancel : callable() -> bool, optional
         When it returns True the solve raises :class:`lbc_core.Cancelled`.
@@ -147,25 +159,28 @@ def solve_on_mesh(
     unit_controls = (control_points - centre) / scale
 
     interior = np.setdiff1d(np.arange(n_vertices), boundary_vertices)
-    problem = _Problem(unit_vertices, cells, boundary_vertices, boundary_weights, unit_controls, interior)
-    problem.length_scale = scale
-    timer.lap("setup")
-
     weights = np.empty((n_vertices, n))
     weights[boundary_vertices] = boundary_weights
+    iterations, converged, history = 0, True, []
     if len(interior):
-        factor = _Factor(problem.system)
+        dtype = np.float32 if single_precision else np.float64
+        problem = _Problem(unit_vertices, cells, boundary_vertices, boundary_weights, unit_controls, interior,
+                           BETA[d], dtype)
         timer.lap("factorisation")
         Z, iterations, converged, history = _admm(
-            problem, factor, tv_weights, epsilon, tolerance, max_iterations, penalty, relaxation, check_every,
-            progress, cancel,
+            problem, tv_weights, epsilon, tolerance, max_iterations, _default_penalty(d, n) if penalty is None else penalty,
+            relaxation, check_every, anderson_memory, progress, cancel,
         )
+        for record in history:  # objectives in the input's units
+            record["objective"] *= scale ** (d - 1)
         timer.lap("solve")
         weights[interior] = restore_constraints(Z, unit_controls, unit_vertices[interior])
-    else:
-        iterations, converged, history = 0, True, []
     objective = tv_objective(vertices, cells, weights, tv_weights)
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds)
+
+
+def _default_penalty(d, n):
+    return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
 
 
 def _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights):
@@ -196,217 +211,229 @@ def _control_vertices(vertices, control_points):
 
 
 class _Problem:
-    """The fixed data of one solve, on the unit-diagonal cage."""
+    """The fixed data of one solve, on the unit-diagonal cage, in measure-scaled variables.
 
-    def __init__(self, vertices, cells, boundary_vertices, boundary_weights, controls, interior):
-        n_vertices, d = vertices.shape
+    X̃ = √|c| ∇w per cell and W̃ = √(β m_v) w per vertex, so the penalty's weighted norms become Euclidean.
+    """
+
+    def __init__(self, vertices, cells, boundary_vertices, boundary_weights, controls, interior, beta, dtype):
+        d = vertices.shape[1]
         G, measures = fem.gradient_operator(vertices, cells)
-        G = G.tocsc()
         self.d = d
-        self.measures = measures  # (F,)
-        self.cell_weight = np.repeat(measures, d)[:, None]  # (d F, 1): the X block's weighting
-        self.G = G[:, interior].tocsr()  # (d F, N_in)
+        self.n_cells = len(measures)
+        self.n_interior = len(interior)
+        self.measures = measures
+        self.beta = beta
+        sqrt_measure = np.sqrt(np.repeat(measures, d))
+        G = (sp.diags(sqrt_measure) @ G).tocsc()
+        self.G = G[:, interior].tocsr().astype(dtype)  # (d F, N_in)
         self.GT = self.G.T.tocsr()
-        self.E = G[:, boundary_vertices] @ boundary_weights  # (d F, n): gradient of the fixed boundary part
-        self.mass = fem.mass_matrix(vertices, cells, lumped=True).diagonal()[interior][:, None]  # (N_in, 1)
+        self.E = (G[:, boundary_vertices] @ boundary_weights).astype(dtype)  # (d F, n): the fixed boundary part
+        mass = fem.mass_matrix(vertices, cells, lumped=True).diagonal()[interior]
+        self.sqrt_mass = np.sqrt(beta * mass)[:, None].astype(dtype)  # (N_in, 1)
         # Equality constraints z K = [x, 1] per vertex, K = [C, 1] (n, d+1): Z = Y M + H.
         K = np.c_[controls, np.ones(len(controls))]
         _, singular, vt = np.linalg.svd(K.T)
         rank = int(np.sum(singular > 1e-12 * singular[0]))
         if rank < d + 1:
             raise CageError("the control points are affinely dependent (all on a line or plane): the cage is flat")
-        self.M = vt[rank:]  # (n - d - 1, n), orthonormal rows
-        self.H = np.c_[vertices[interior], np.ones(len(interior))] @ np.linalg.pinv(K)  # (N_in, n)
-        # β balances the two blocks: |∇w|² is in 1/length², |w|² is not; on the unit cage β ~ 1 per unit length².
-        self.beta = 1.0 / np.mean(measures) ** (2.0 / d) * BETA
-        stiffness = self.GT @ sp.diags(self.cell_weight.ravel()) @ self.G
-        self.system = (stiffness + sp.diags(self.beta * self.mass.ravel())).tocsc()
-        self.n_interior = len(interior)
+        self.M = vt[rank:].astype(dtype)  # (n - d - 1, n), orthonormal rows
+        self.MT = np.ascontiguousarray(self.M.T)
+        self.H = (np.c_[vertices[interior], np.ones(len(interior))] @ np.linalg.pinv(K)).astype(dtype)  # (N_in, n)
+        system = G[:, interior].T @ G[:, interior] + sp.diags(beta * mass)  # stiffness + β mass
+        self.factor = _Factor(system.tocsc(), dtype)
+        # √|c| of each cell, to turn scaled gradients back into ω |c| |∇w|.
+        self.sqrt_cell = np.sqrt(measures)[:, None]
 
 
 class _Factor:
     """A factorisation of the SPD Y-step matrix that solves for many right-hand sides in one call."""
 
-    def __init__(self, matrix):
+    def __init__(self, matrix, dtype):
         try:
-            from cholespy import CholeskySolverD, MatrixType
+            import cholespy
 
             coo = matrix.tocoo()
-            self._solver = CholeskySolverD(matrix.shape[0], coo.row, coo.col, coo.data, MatrixType.COO)
+            solver_class = cholespy.CholeskySolverF if dtype == np.float32 else cholespy.CholeskySolverD
+            self._solver = solver_class(matrix.shape[0], coo.row, coo.col, coo.data, cholespy.MatrixType.COO)
             self._kind = "cholespy"
         except ImportError:
             self._solver = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A")
             self._kind = "splu"
+        self.dtype = dtype
 
     def solve(self, rhs):
         if self._kind == "cholespy":
             out = np.empty_like(rhs)
             self._solver.solve(np.ascontiguousarray(rhs), out)
             return out
-        return self._solver.solve(rhs)
+        return self._solver.solve(rhs).astype(self.dtype)
 
 
-class _AdmmMap:
-    """One over-relaxed ADMM iteration as a map on the state (X, W, U, V), stored in one flat array.
+class _DouglasRachford:
+    """One over-relaxed ADMM iteration as a Douglas-Rachford map on the state v = (X̃ + Ũ, W̃ + Ṽ).
 
-    The Y-step depends only on that state, so the iteration is a fixed-point map that Anderson acceleration can
-    extrapolate.
+    X̃ = shrink(v_X) and W̃ = clip(v_W) are the split variables and v minus them the scaled duals, so one array of
+    the size of (X, W) carries the whole iteration. Its fixed-point residual is the primal residual and never grows
+    for plain steps, which is what the Anderson safeguard relies on.
     """
 
-    def __init__(self, problem, factor, tv_weights, epsilon, alpha):
+    def __init__(self, problem, tv_weights, epsilon, alpha, rho):
         p = problem
-        self.p, self.factor, self.epsilon, self.alpha = p, factor, epsilon, alpha
-        self.tv_weights = tv_weights
-        self.n_cells, self.d = len(p.measures), p.d
+        self.p, self.epsilon, self.alpha = p, epsilon, alpha
         n = tv_weights.shape[1]
-        self.shape_x = (self.n_cells * self.d, n)
-        self.shape_w = (p.n_interior, n)
-        size_x, size_w = self.shape_x[0] * n, self.shape_w[0] * n
-        self.bounds = np.cumsum([0, size_x, size_w, size_x, size_w])
-        # The metric of the residuals: cell measures on X and U, β-weighted vertex masses on W and V.
-        sqrt_x = np.broadcast_to(np.sqrt(p.cell_weight), self.shape_x).ravel()
-        sqrt_w = np.broadcast_to(np.sqrt(p.beta * p.mass), self.shape_w).ravel()
-        self.metric = np.concatenate([sqrt_x, sqrt_w, sqrt_x, sqrt_w])
-        self.cell_weight = p.cell_weight
-        self.mass_weight = p.beta * p.mass
-        self.rho = 1.0
+        self.size_x = p.n_cells * p.d * n
+        self.shape_x, self.shape_w = (p.n_cells * p.d, n), (p.n_interior, n)
+        self.tv_weights = tv_weights
+        self.set_penalty(rho)
 
-    def views(self, state):
-        """(X, W, U, V) as 2D views into a flat state."""
-        b = self.bounds
-        return (state[b[0]:b[1]].reshape(self.shape_x), state[b[1]:b[2]].reshape(self.shape_w),
-                state[b[2]:b[3]].reshape(self.shape_x), state[b[3]:b[4]].reshape(self.shape_w))
+    def set_penalty(self, rho):
+        # In scaled variables the shrink threshold of cell c is √|c| ω / ρ; the clip bound of vertex v is √(β m_v).
+        self.rho = rho
+        self.thresholds = (self.p.sqrt_cell * self.tv_weights / rho).astype(self.p.G.dtype)
+
+    def split(self, state):
+        return state[:self.size_x].reshape(self.shape_x), state[self.size_x:].reshape(self.shape_w)
 
     def initial_state(self):
-        """The harmonic coordinates (the Y-step with zero fields and duals), with X, W taken from them."""
+        """The harmonic coordinates (the Y-step with X̃ = W̃ = 0) with zero duals."""
         p = self.p
-        Z = self.factor.solve(-(p.GT @ (self.cell_weight * p.E)) @ p.M.T) @ p.M + p.H
-        state = np.zeros(self.bounds[-1])
-        X, W, _, _ = self.views(state)
-        X[:] = p.G @ Z + p.E
-        W[:] = np.clip(Z, 0.0, 1.0)
-        return state
+        Z = p.factor.solve(-(p.GT @ p.E) @ p.MT) @ p.M + p.H
+        return np.concatenate([(p.G @ Z + p.E).ravel(), (p.sqrt_mass * np.clip(Z, 0.0, 1.0)).ravel()])
 
-    def __call__(self, state, out):
-        """Write the next state into ``out``; return Z and its gradient (for residuals and the objective)."""
+    def __call__(self, state):
+        """Return the next state, and X̃, W̃, Z and the scaled gradient g̃ of this step (for residuals)."""
         p, alpha = self.p, self.alpha
-        X, W, U, V = self.views(state)
-        rhs = p.GT @ (self.cell_weight * (X - p.E - U)) + self.mass_weight * (W - V)
-        Z = self.factor.solve(rhs @ p.M.T) @ p.M + p.H
-        gradient = p.G @ Z + p.E
-        relaxed_gradient = alpha * gradient + (1.0 - alpha) * X
-        relaxed_Z = alpha * Z + (1.0 - alpha) * W
-        X_new, W_new, U_new, V_new = self.views(out)
-        np.add(relaxed_gradient, U, out=U_new)
-        X_new[:] = _shrink(U_new, self.tv_weights / self.rho, self.epsilon, self.n_cells, self.d)
-        U_new -= X_new
-        np.add(relaxed_Z, V, out=V_new)
-        np.clip(V_new, 0.0, 1.0, out=W_new)
-        V_new -= W_new
-        return Z, gradient
+        v_x, v_w = self.split(state)
+        X = _shrink(v_x, self.thresholds, self.epsilon, p.n_cells, p.d)
+        W = np.clip(v_w, 0.0, p.sqrt_mass)
+        reflected_x = 2.0 * X
+        reflected_x -= v_x
+        reflected_x -= p.E
+        reflected_w = 2.0 * W
+        reflected_w -= v_w
+        rhs = p.GT @ reflected_x
+        rhs += p.sqrt_mass * reflected_w
+        Z = p.factor.solve(rhs @ p.MT) @ p.M
+        Z += p.H
+        gradient = p.G @ Z
+        gradient += p.E
+        new_state = np.empty_like(state)
+        new_x, new_w = self.split(new_state)
+        np.subtract(gradient, X, out=new_x)
+        new_x *= alpha
+        new_x += v_x
+        np.multiply(p.sqrt_mass, Z, out=new_w)
+        new_w -= W
+        new_w *= alpha
+        new_w += v_w
+        return new_state, X, W, Z, gradient
 
     def objective(self, gradient):
-        """Σ ω |c| |∇w| on the unit-diagonal cage."""
-        return float(np.sum(self.tv_weights * self.p.measures[:, None] * _group_norms(gradient, self.n_cells, self.d)))
+        """Σ ω |c| |∇w| on the unit-diagonal cage, from a scaled gradient."""
+        p = self.p
+        norms = _group_norms(gradient, p.n_cells, p.d)
+        return float(np.sum(self.tv_weights * p.sqrt_cell * norms))
 
 
 class _Anderson:
     """Anderson acceleration (type II) of a fixed-point map, with the residual safeguard of Zhang et al. 2019."""
 
-    def __init__(self, size, memory, metric):
+    def __init__(self, size, memory, dtype):
         self.memory = memory
-        self.metric = metric
-        self.dF = np.zeros((memory, size))  # weighted residual differences
-        self.dG = np.zeros((memory, size))  # map-value differences
+        self.dF = np.zeros((memory, size), dtype=dtype)  # residual differences
+        self.dG = np.zeros((memory, size), dtype=dtype)  # map-value differences
+        self.gram = np.zeros((memory, memory))
         self.count = 0
 
     def reset(self):
         self.count = 0
 
-    def extrapolate(self, value, residual, previous_value, previous_residual):
-        """Record the newest step and return the extrapolated next state (or None without history)."""
-        if previous_value is not None:
-            slot = self.count % self.memory
-            self.dF[slot] = self.metric * (residual - previous_residual)
-            self.dG[slot] = value - previous_value
-            self.count += 1
+    def push(self, value, residual, previous_value, previous_residual):
+        slot = self.count % self.memory
+        np.subtract(residual, previous_residual, out=self.dF[slot])
+        np.subtract(value, previous_value, out=self.dG[slot])
+        self.count += 1
+        used = min(self.count, self.memory)
+        row = self.dF[:used] @ self.dF[slot].astype(np.float64, copy=False)
+        self.gram[slot, :used] = row
+        self.gram[:used, slot] = row
+
+    def extrapolate(self, value, residual):
+        """The extrapolated next state, or None without history."""
         used = min(self.count, self.memory)
         if used == 0:
             return None
-        dF, dG = self.dF[:used], self.dG[:used]
-        gram = dF @ dF.T
-        gram += 1e-10 * np.trace(gram) / used * np.eye(used)
-        theta = np.linalg.solve(gram, dF @ (self.metric * residual))
-        return value - theta @ dG
+        gram = self.gram[:used, :used] + 1e-10 * np.trace(self.gram[:used, :used]) / used * np.eye(used)
+        theta = np.linalg.solve(gram, self.dF[:used] @ residual.astype(np.float64, copy=False))
+        return value - (theta.astype(value.dtype) @ self.dG[:used])
 
 
-def _admm(problem, factor, tv_weights, epsilon, tolerance, max_iterations, penalty, alpha, check_every, progress,
-          cancel, memory=None):
-    memory = MEMORY if memory is None else memory
-    step = _AdmmMap(problem, factor, tv_weights, epsilon, alpha)
-    step.rho = penalty if penalty is not None else DEFAULT_PENALTY
-    metric = step.metric
-    anderson = _Anderson(step.bounds[-1], memory, metric) if memory else None
+def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alpha, check_every, memory, progress,
+          cancel):
+    step = _DouglasRachford(problem, tv_weights, epsilon, alpha, penalty)
+    anderson = _Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype) if memory else None
 
     state = step.initial_state()
-    value = np.empty_like(state)
-    Z, gradient = step(state, value)
+    value, X, W, Z, gradient = step(state)
     residual = value - state
-    residual_norm = np.linalg.norm(metric * residual)
-    previous_value = previous_residual = None
+    residual_norm = np.linalg.norm(residual)
     history = []
     converged = False
     iteration = 1
     while iteration < max_iterations:
-        candidate = anderson.extrapolate(value, residual, previous_value, previous_residual) if anderson else None
-        accelerated = candidate is not None
-        if not accelerated:
+        candidate = anderson.extrapolate(value, residual) if anderson else None
+        if candidate is None:
             candidate = value
-        next_value = np.empty_like(state)
-        Z_next, gradient_next = step(candidate, next_value)
+        X_old, W_old = X, W
+        next_value, X, W, Z, gradient = step(candidate)
         iteration += 1
         next_residual = next_value - candidate
-        next_norm = np.linalg.norm(metric * next_residual)
-        if accelerated and next_norm > residual_norm:
-            # Safeguard: the extrapolation did not reduce the combined residual; take the plain step instead.
+        next_norm = np.linalg.norm(next_residual)
+        if candidate is not value and next_norm > residual_norm:
+            # Safeguard: the extrapolation did not reduce the residual; take the plain step instead.
             anderson.reset()
             candidate = value
-            Z_next, gradient_next = step(candidate, next_value)
+            next_value, X, W, Z, gradient = step(candidate)
             iteration += 1
             next_residual = next_value - candidate
-            next_norm = np.linalg.norm(metric * next_residual)
-            previous_value = previous_residual = None
-        else:
-            previous_value, previous_residual = value, residual
+            next_norm = np.linalg.norm(next_residual)
+        elif anderson:
+            anderson.push(next_value, next_residual, value, residual)
         state, value, residual, residual_norm = candidate, next_value, next_residual, next_norm
-        Z, gradient = Z_next, gradient_next
         if iteration % check_every and iteration < max_iterations:
             continue
-        X, W, U, V = step.views(value)
-        X_old, W_old, _, _ = step.views(state)
-        sqrt_cell, sqrt_mass = np.sqrt(step.cell_weight), np.sqrt(step.mass_weight)
-        primal = _weighted_norm(sqrt_cell, gradient - X, sqrt_mass, Z - W)
-        # Dual residual and its scale in the (X, W) space: the Y-block has no objective term, so Aᵀy is itself the
-        # dual residual and cannot be its scale; the scaled duals U, V can.
-        dual = _weighted_norm(sqrt_cell, X - X_old, sqrt_mass, W - W_old)
-        scale_dual = _weighted_norm(sqrt_cell, U, sqrt_mass, V)
-        scale_primal = max(
-            _weighted_norm(sqrt_cell, gradient, sqrt_mass, Z), _weighted_norm(sqrt_cell, X, sqrt_mass, W)
-        )
-        history.append({
-            "iteration": iteration,
-            "objective": step.objective(gradient) * problem.length_scale ** (problem.d - 1),
-            "primal": primal / scale_primal,
-            "dual": dual / max(scale_dual, 1e-300),
-        })
-        if primal <= tolerance * scale_primal and dual <= tolerance * scale_dual:
+        record = _residuals(step, state, X, W, Z, gradient, X_old, W_old)
+        record["iteration"] = iteration
+        history.append(record)
+        if record["primal"] <= tolerance and record["dual"] <= DUAL_TOLERANCE_FACTOR * tolerance:
             converged = True
             break
         if progress is not None:
             progress(iteration / max_iterations, f"ADMM iteration {iteration}")
         if cancel is not None and cancel():
             raise Cancelled("cancelled during the LBC solve")
-    return Z, iteration, converged, history
+    return Z.astype(np.float64), iteration, converged, history
+
+
+def _residuals(step, state, X, W, Z, gradient, X_old, W_old):
+    """Relative primal and dual residuals (Boyd et al. 2011, §3.3.1) and the objective of the current iterate.
+
+    The dual residual is measured in the (X, W) space against the scaled duals: the Y-block has no objective term,
+    so Aᵀy is itself the dual residual and cannot serve as its scale.
+    """
+    p = step.p
+    v_x, v_w = step.split(state)
+    Z_scaled = p.sqrt_mass * Z
+    primal = np.hypot(np.linalg.norm(gradient - X), np.linalg.norm(Z_scaled - W))
+    scale_primal = max(np.hypot(np.linalg.norm(gradient), np.linalg.norm(Z_scaled)), np.hypot(np.linalg.norm(X), np.linalg.norm(W)))
+    dual = np.hypot(np.linalg.norm(X - X_old), np.linalg.norm(W - W_old))
+    scale_dual = np.hypot(np.linalg.norm(v_x - X), np.linalg.norm(v_w - W))
+    return {
+        "primal": float(primal / max(scale_primal, 1e-300)),
+        "dual": float(dual / max(scale_dual, 1e-300)),
+        "objective": step.objective(gradient),
+    }
 
 
 def _shrink(values, thresholds, epsilon, n_cells, d):
@@ -417,17 +444,12 @@ def _shrink(values, thresholds, epsilon, n_cells, d):
         # prox of τ·huber_ε: shrink by τ beyond ε + τ, scale by ε / (ε + τ) inside.
         scale = np.where(
             norms > epsilon + thresholds,
-            1.0 - thresholds / np.maximum(norms, 1e-300),
+            1.0 - thresholds / np.maximum(norms, np.finfo(norms.dtype).tiny),
             epsilon / (epsilon + thresholds),
         )
     else:
-        scale = np.maximum(1.0 - thresholds / np.maximum(norms, 1e-300), 0.0)
+        scale = np.maximum(1.0 - thresholds / np.maximum(norms, np.finfo(norms.dtype).tiny), 0.0)
     return (grouped * scale[:, None, :]).reshape(values.shape)
-
-
-def _weighted_norm(weight_x, x, weight_w, w):
-    """sqrt(Σ weight_x² x² + Σ weight_w² w²): the measure-weighted norm of an (X, W) pair."""
-    return float(np.sqrt(np.sum((weight_x * x) ** 2) + np.sum((weight_w * w) ** 2)))
 
 
 def _group_norms(values, n_cells, d):

@@ -1,0 +1,128 @@
+"""bind end to end: quality at the points, affine exactness, locality, save and load."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lbc_core
+from lbc_core.io import read_cage, read_mesh
+
+DATA = Path(__file__).parent / "data"
+
+
+def polygon_points(vertices, count, seed=0):
+    from matplotlib.path import Path as PolygonPath
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(vertices.min(axis=0), vertices.max(axis=0), (count, 2))
+    return points[PolygonPath(vertices).contains_points(points)]
+
+
+@pytest.fixture(scope="module")
+def woody():
+    vertices, _ = read_cage(DATA / "woody-control-edgeset.obj")
+    vertices = vertices[:, :2]
+    points = polygon_points(vertices, 4000)
+    return vertices, points, lbc_core.bind(vertices, None, points)
+
+
+@pytest.fixture(scope="module")
+def gargoyle():
+    vertices, faces = read_cage(DATA / "cages-3d" / "gargoyle" / "cage_L12.obj")
+    points, _ = read_mesh(DATA / "cages-3d" / "gargoyle" / "mesh.off")
+    return vertices, faces, points, lbc_core.bind(vertices, faces, points, cells=3000)
+
+
+def assert_point_quality(binding, points):
+    weights = binding.weights.toarray()
+    diagonal = binding.cage.bbox_diagonal
+    assert np.abs(weights.sum(axis=1) - 1).max() <= 1e-9
+    assert np.abs(weights @ binding.rest_cage_vertices - points).max() <= 1e-9 * diagonal
+    assert weights.min() >= -1e-6
+
+
+def random_affine(d, seed=1):
+    rng = np.random.default_rng(seed)
+    return np.eye(d) + 0.3 * rng.normal(size=(d, d)), rng.normal(size=d)
+
+
+def test_2d_quality_affine_and_locality(woody):
+    vertices, points, binding = woody
+    assert_point_quality(binding, points)
+    matrix, shift = random_affine(2)
+    moved = binding.deform(vertices @ matrix.T + shift)
+    assert np.abs(moved - (points @ matrix.T + shift)).max() <= 1e-6 * binding.cage.bbox_diagonal
+    counts = binding.influence_counts()
+    print(f"woody: mean {counts.mean():.2f}, max {counts.max()} of {binding.cage.n_control_points} control points")
+    assert counts.mean() < binding.cage.n_control_points / 4
+
+
+def test_3d_quality_affine_and_locality(gargoyle):
+    vertices, faces, points, binding = gargoyle
+    assert binding.outside_count == 0
+    assert_point_quality(binding, points)
+    matrix, shift = random_affine(3)
+    moved = binding.deform(vertices @ matrix.T + shift)
+    assert np.abs(moved - (points @ matrix.T + shift)).max() <= 1e-6 * binding.cage.bbox_diagonal
+    counts = binding.influence_counts()
+    print(f"gargoyle L12: mean {counts.mean():.2f}, max {counts.max()} of {binding.cage.n_control_points}")
+    assert counts.mean() < binding.cage.n_control_points / 2
+
+
+def test_rest_pose_is_exact_and_moving_one_vertex_is_local(gargoyle):
+    vertices, faces, points, binding = gargoyle
+    np.testing.assert_array_equal(binding.deform(vertices), points)
+    moved = vertices.copy()
+    moved[0] += 0.1 * binding.cage.bbox_diagonal
+    displaced = np.linalg.norm(binding.deform(moved) - points, axis=1) > 0
+    assert displaced.mean() < 0.5
+
+
+def test_save_and_load_give_identical_deformations(gargoyle, tmp_path):
+    vertices, faces, points, binding = gargoyle
+    path = tmp_path / "binding.npz"
+    binding.save(path)
+    loaded = lbc_core.load_binding(path, vertices, faces)
+    posed = vertices + np.random.default_rng(2).normal(0, 0.01, vertices.shape)
+    np.testing.assert_array_equal(loaded.deform(posed), binding.deform(posed))
+    assert loaded.options == binding.options and loaded.cage.fingerprint() == binding.cage.fingerprint()
+
+
+def test_load_against_another_cage_is_refused(woody, tmp_path):
+    vertices, _, binding = woody
+    path = tmp_path / "binding.npz"
+    binding.save(path)
+    with pytest.raises(lbc_core.CageError, match="another cage"):
+        lbc_core.load_binding(path, vertices[:-1], None)
+    (tmp_path / "junk.npz").write_bytes(b"not a binding")
+    with pytest.raises(lbc_core.CageError, match="not an lbc binding"):
+        lbc_core.load_binding(tmp_path / "junk.npz")
+
+
+def test_points_outside_are_bound_and_counted():
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    points = np.array([[0.5, 0.5], [1.5, 0.5], [0.25, -0.5]])
+    binding = lbc_core.bind(square, None, points, cells=200)
+    np.testing.assert_array_equal(binding.outside, [False, True, True])
+    assert binding.outside_count == 2
+    # Outside points follow their closest domain point: a translation moves them rigidly.
+    np.testing.assert_allclose(binding.deform(square + [2.0, 3.0]), points + [2.0, 3.0], atol=1e-12)
+
+
+def test_progress_is_monotonic_and_cancel_stops():
+    house = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.5, 1.5], [0.0, 1.0]])
+    fractions = []
+    lbc_core.bind(house, None, np.array([[0.5, 0.5]]), cells=300,
+                  progress=lambda fraction, message: fractions.append(fraction))
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    with pytest.raises(lbc_core.Cancelled):
+        lbc_core.bind(house, None, np.array([[0.5, 0.5]]), cells=300, cancel=lambda: True)
+
+
+def test_bad_points_are_refused():
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    with pytest.raises(lbc_core.CageError, match="NaN"):
+        lbc_core.bind(square, None, np.array([[np.nan, 0.5]]))
+    with pytest.raises(lbc_core.CageError, match="2D"):
+        lbc_core.bind(square, None, np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.7]]))

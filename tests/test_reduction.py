@@ -1,0 +1,67 @@
+"""Reduction: sparse weights that keep partition of unity, reproduction and non-negativity."""
+
+import numpy as np
+import scipy.sparse as sp
+
+from lbc_core.reduction import constraint_residuals, reduce_weights, restore_constraints
+
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+
+
+def bilinear_weights(points):
+    x, y = points[:, 0], points[:, 1]
+    return np.stack([(1 - x) * (1 - y), x * (1 - y), x * y, (1 - x) * y], axis=1)
+
+
+def test_restore_fixes_perturbed_weights_exactly():
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0.1, 0.9, (200, 2))
+    noisy = bilinear_weights(points) + rng.normal(0, 1e-4, (200, 4))
+    fixed = restore_constraints(noisy, SQUARE, points)
+    unity, reproduction = constraint_residuals(fixed, SQUARE, points)
+    assert unity.max() < 1e-13 and reproduction.max() < 1e-13
+    assert fixed.min() >= 0
+    assert np.abs(fixed - noisy).max() < 1e-3
+
+
+def test_restore_clamps_negatives_and_keeps_constraints():
+    points = np.array([[0.5, 0.5]])
+    weights = np.array([[0.5, -1e-5, 0.5, 1e-5]])
+    fixed = restore_constraints(weights, SQUARE, points)
+    assert fixed.min() >= 0
+    unity, reproduction = constraint_residuals(fixed, SQUARE, points)
+    assert unity.max() < 1e-14 and reproduction.max() < 1e-14
+
+
+def test_reduce_drops_small_weights_and_restores_linear_precision():
+    # Eight control points on a circle; weights spread a little onto all of them.
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    controls = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    rng = np.random.default_rng(1)
+    points = rng.uniform(-0.5, 0.5, (300, 2))
+    dense = np.abs(rng.normal(0, 1e-5, (300, 8)))
+    # Main weights: barycentric coordinates in a fan triangle (centroid, i, i+1) replaced by three control points.
+    for row, p in enumerate(points):
+        k = int(np.floor((np.arctan2(p[1], p[0]) % (2 * np.pi)) / (2 * np.pi / 8)))
+        a, b, c = controls[k], controls[(k + 1) % 8], controls[(k + 4) % 8]
+        bary = np.linalg.solve(np.array([[a[0], b[0], c[0]], [a[1], b[1], c[1]], [1, 1, 1]]), [p[0], p[1], 1])
+        dense[row, [k, (k + 1) % 8, (k + 4) % 8]] += bary
+    dense /= dense.sum(axis=1, keepdims=True)
+    threshold = 1e-3 / 8
+    reduced = reduce_weights(sp.csr_matrix(dense), controls, dense @ controls, threshold, tolerance=1e-9)
+    assert reduced.nnz < dense.size / 2
+    assert reduced.data.min() >= 0
+    values = reduced.toarray()
+    assert np.abs(values.sum(axis=1) - 1).max() < 1e-12
+    assert np.abs(values @ controls - dense @ controls).max() < 1e-9
+
+
+def test_reduce_keeps_more_support_where_the_reduced_one_cannot_reproduce():
+    controls = SQUARE
+    point = np.array([[0.5, 0.001]])
+    # Two big weights on the bottom edge, tiny ones above: dropping them cannot reproduce y = 0.001.
+    weights = np.array([[0.4995, 0.4995, 0.0005, 0.0005]])
+    reduced = reduce_weights(sp.csr_matrix(weights), controls, point, threshold=0.01, tolerance=1e-12)
+    values = reduced.toarray()
+    assert np.abs(values @ controls - point).max() < 1e-12
+    assert values.min() >= 0 and abs(values.sum() - 1) < 1e-12
