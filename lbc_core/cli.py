@@ -360,7 +360,7 @@ _SUMMARY_COLUMNS = [
     ("P_tau", "P(1e-3/n)", "{:.3f}"),
     ("Q_4", "Q(4)", "{:.3f}"),
     ("Q_8", "Q(8)", "{:.3f}"),
-    ("memory_bytes", "weights KB", "{:.0f}", 1e-3),
+    ("memory_bytes", "weights KB", "{:.1f}", 1e-3),
     ("deform_seconds", "deform µs", "{:.1f}", 1e6),
     ("time_total", "bind s", "{:.2f}"),
 ]
