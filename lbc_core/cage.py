@@ -198,8 +198,16 @@ def _count(number, singular, plural=None):
 
 def _some(indices):
     """'3, 7, 9' or '3, 7, 9, 12, 15, ...': a few of the offending indices for a message."""
-    indices = [str(int(i)) for i in np.ravel(indices)]
-    return ", ".join(indices[:_LISTED]) + (", ..." if len(indices) > _LISTED else "")
+    return _listed([str(int(i)) for i in np.ravel(indices)])
+
+
+def _listed(items):
+    """The first few of the strings ``items``, comma-separated, with ', ...' when some are left out."""
+    return ", ".join(items[:_LISTED]) + (", ..." if len(items) > _LISTED else "")
+
+
+def _welded_warning(count):
+    return f"welded {_count(count, 'duplicate cage vertex', 'duplicate cage vertices')}"
 
 
 def _weld(vertices, weld_tolerance):
@@ -252,7 +260,7 @@ def _make_polygon_cage(vertices, weld_tolerance, max_control_points):
     warnings = []
     welded, vertex_map = _weld(vertices, weld_tolerance)
     if len(welded) < len(vertices):
-        warnings.append(f"welded {_count(len(vertices) - len(welded), 'duplicate cage vertex', 'duplicate cage vertices')}")
+        warnings.append(_welded_warning(len(vertices) - len(welded)))
         # Consecutive duplicates collapse; the polygon order follows the first occurrences.
         order = vertex_map[np.r_[True, vertex_map[1:] != vertex_map[:-1]]]
         if len(order) > 1 and order[0] == order[-1]:
@@ -311,13 +319,10 @@ def _check_polygon_simple(vertices, zero, names):
     crossing = _segments_touch(start[i], end[i], start[j], end[j], zero)
     if np.any(crossing):
         i, j = i[crossing], j[crossing]
-        pairs = ", ".join(
-            f"{names[a]}-{names[(a + 1) % n]} with {names[b]}-{names[(b + 1) % n]}" for a, b in zip(i[:_LISTED], j)
-        )
+        pairs = _listed([f"{names[a]}-{names[(a + 1) % n]} with {names[b]}-{names[(b + 1) % n]}" for a, b in zip(i, j)])
         raise CageError(
             f"the polygon cage intersects itself at {_count(len(i), 'pair')} of crossing or touching edges (between "
-            f"input vertices {pairs}{', ...' if len(i) > _LISTED else ''}); move its vertices so that the outline does not "
-            "cross itself"
+            f"input vertices {pairs}); move its vertices so that the outline does not cross itself"
         )
 
 
@@ -333,9 +338,11 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     warnings = []
     welded, vertex_map = _weld(vertices, weld_tolerance)
     if len(welded) < len(vertices):
-        warnings.append(f"welded {_count(len(vertices) - len(welded), 'duplicate cage vertex', 'duplicate cage vertices')}")
+        warnings.append(_welded_warning(len(vertices) - len(welded)))
     if len(welded) < 4:
-        raise CageError(f"a 3D cage needs at least 4 distinct vertices (a tetrahedron), got {len(welded)} after welding")
+        raise CageError(
+            f"a 3D cage needs at least 4 distinct vertices (a tetrahedron), got {len(welded)} after welding"
+        )
     _check_control_points(len(welded), max_control_points)
     diagonal = np.linalg.norm(np.ptp(welded, axis=0))
     zero = ZERO_LENGTH * diagonal
@@ -557,18 +564,19 @@ def _check_closed_manifold(triangles, names):
     directed, order, counts = _edge_pairing(triangles)
     edge_of = directed[order[np.cumsum(counts) - counts]]
     if np.any(counts == 1):
-        where = ", ".join(f"{names[a]}-{names[b]}" for a, b in edge_of[counts == 1][:_LISTED])
+        where = _listed([f"{names[a]}-{names[b]}" for a, b in edge_of[counts == 1]])
+        open_edges = _count(np.count_nonzero(counts == 1), "boundary edge")
         raise CageError(
-            f"the cage is not closed: it has {_count(np.count_nonzero(counts == 1), 'boundary edge')}, each in only one "
-            f"face (between vertices {where}{', ...' if np.count_nonzero(counts == 1) > _LISTED else ''}); fill the holes "
-            "(in Blender: select the boundary edges with Select > Select All by Trait > Non Manifold, and press F)"
+            f"the cage is not closed: it has {open_edges}, each in only one face (between vertices {where}); fill "
+            "the holes (in Blender: select the boundary edges with Select > Select All by Trait > Non Manifold, and "
+            "press F)"
         )
     if np.any(counts > 2):
-        where = ", ".join(f"{names[a]}-{names[b]}" for a, b in edge_of[counts > 2][:_LISTED])
+        where = _listed([f"{names[a]}-{names[b]}" for a, b in edge_of[counts > 2]])
         raise CageError(
             f"the cage has {_count(np.count_nonzero(counts > 2), 'non-manifold edge')} shared by more than two faces "
-            f"(between vertices {where}{', ...' if np.count_nonzero(counts > 2) > _LISTED else ''}): make every edge belong to "
-            "exactly two faces (in Blender: Select > Select All by Trait > Non Manifold)"
+            f"(between vertices {where}): make every edge belong to exactly two faces "
+            "(in Blender: Select > Select All by Trait > Non Manifold)"
         )
     first, second = order[0::2], order[1::2]
     n_tri = len(triangles)
@@ -602,8 +610,9 @@ def _check_manifold_vertices(triangles, directed, first, second, names):
     pinched = np.flatnonzero(fans_per_vertex > 1)
     if len(pinched):
         raise CageError(
-            f"the cage has {_count(len(pinched), 'non-manifold vertex', 'non-manifold vertices')} where separate sheets of the surface touch at a point "
-            f"(vertex {_some(names[pinched])}): pull the sheets apart or merge them along an edge"
+            f"the cage has {_count(len(pinched), 'non-manifold vertex', 'non-manifold vertices')} where separate "
+            f"sheets of the surface touch at a point (vertex {_some(names[pinched])}): pull the sheets apart or merge "
+            "them along an edge"
         )
 
 
@@ -650,11 +659,11 @@ def _check_self_intersection(vertices, triangles, triangle_face, zero):
     pairs = _intersecting_triangles(vertices, triangles, zero)
     if len(pairs):
         faces = np.unique(np.sort(triangle_face[pairs], axis=1), axis=0)
-        listed = ", ".join(f"{a} and {b}" if a != b else f"{a} with itself" for a, b in faces[:_LISTED])
+        listed = _listed([f"{a} and {b}" if a != b else f"{a} with itself" for a, b in faces])
         raise CageError(
-            f"the cage intersects itself at {_count(len(faces), 'pair')} of crossing or touching faces (faces {listed}"
-            f"{', ...' if len(faces) > _LISTED else ''}); move them apart so that the surface does not pass through "
-            "itself (in Blender the 3D-Print Toolbox's Intersections check selects them)"
+            f"the cage intersects itself at {_count(len(faces), 'pair')} of crossing or touching faces (faces "
+            f"{listed}); move them apart so that the surface does not pass through itself (in Blender the 3D-Print "
+            "Toolbox's Intersections check selects them)"
         )
 
 
@@ -832,8 +841,10 @@ def _wedges_overlap(a, b, c, d, normal, tolerance=1e-9):
     """(P,) bool: the wedges a-v-b and c-v-d (directions from v, in the plane of ``normal``) overlap."""
     axis_u = _unit(a)
     axis_v = np.cross(normal, axis_u)
-    flat = [np.stack([np.einsum("pj,pj->p", x, axis_u), np.einsum("pj,pj->p", x, axis_v)], axis=1) for x in (a, b, c, d)]
-    a, b, c, d = (x / np.linalg.norm(x, axis=1, keepdims=True) for x in flat)
+    def flatten(x):  # unit directions in the plane's (u, v) frame
+        return _unit(np.stack([np.einsum("pj,pj->p", x, axis_u), np.einsum("pj,pj->p", x, axis_v)], axis=1))
+
+    a, b, c, d = (flatten(x) for x in (a, b, c, d))
     # Order each wedge counter-clockwise; wedges of triangles are narrower than a half-turn.
     swap = _cross2(a, b) < 0
     a, b = np.where(swap[:, None], b, a), np.where(swap[:, None], a, b)

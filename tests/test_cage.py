@@ -114,7 +114,8 @@ def test_non_integer_face_indices():
 def test_million_faces_refused_up_front():
     faces = np.zeros((1_000_000, 3), dtype=np.int64)
     start = time.perf_counter()
-    message = assert_refused(np.random.default_rng(0).random((500_000, 3)), faces, "1000000 faces", str(MAX_CONTROL_POINTS))
+    vertices = np.random.default_rng(0).random((500_000, 3))
+    message = assert_refused(vertices, faces, "1000000 faces", str(MAX_CONTROL_POINTS))
     assert time.perf_counter() - start < 0.5
     assert "coarser cage" in message
 
@@ -268,7 +269,8 @@ def test_inward_cage_is_reversed_and_reported():
 
 def test_non_orientable_surface():
     # The 6-vertex projective plane (hemi-icosahedron): closed and manifold, but one-sided.
-    faces = [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [0, 5, 1], [1, 2, 4], [2, 3, 5], [3, 4, 1], [4, 5, 2], [5, 1, 3]]
+    faces = [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [0, 5, 1],
+             [1, 2, 4], [2, 3, 5], [3, 4, 1], [4, 5, 2], [5, 1, 3]]
     vertices = np.random.default_rng(1).random((6, 3))
     assert_refused(vertices, faces, "not orientable")
 
@@ -292,7 +294,7 @@ def test_self_intersecting_cage_names_the_faces():
     vertices, triangles = sphere(200)
     top = np.argmax(vertices[:, 2])
     vertices[top] = [0.0, 0.0, -2.0]  # pull the top vertex down through the bottom of the surface
-    message = assert_refused(vertices, triangles, "intersects itself", "of crossing or touching faces", "3d-print toolbox")
+    message = assert_refused(vertices, triangles, "intersects itself", "crossing or touching faces", "3d-print toolbox")
     faces_around_top = {str(f) for f in np.flatnonzero(np.any(triangles == top, axis=1))}
     named = message.split("(faces ")[1].split(")")[0].replace(" and ", ",").replace(", ...", "").split(",")
     assert faces_around_top & {name.strip() for name in named}
@@ -322,7 +324,7 @@ def test_real_2d_cages_are_accepted(path):
 
 
 def test_subdivided_flat_sides_are_not_self_intersections():
-    # A 2 × 2 × 2 box whose sides are 2 × 2 grids of quads: many coplanar triangles that share only edges or vertices.
+    # A 2 × 2 × 2 box whose sides are 2 × 2 grids of quads: coplanar triangles sharing only edges or vertices.
     points, quads = [], []
     for axis in range(3):
         for side in (0.0, 2.0):

@@ -163,8 +163,8 @@ def test_triangle_intersection_agrees_with_a_linear_program(corners, shared):
     corners = np.array(corners)
     first, second = corners[:3], corners[3:]
     second[:shared] = first[:shared]
-    normal = np.cross(first[1] - first[0], first[2] - first[0])
-    assume(np.linalg.norm(normal) > 1e-3 and np.linalg.norm(np.cross(second[1] - second[0], second[2] - second[0])) > 1e-3)
+    for triangle in (first, second):
+        assume(np.linalg.norm(np.cross(triangle[1] - triangle[0], triangle[2] - triangle[0])) > 1e-3)
     # Keep generic positions: no corner within reach of the tolerance of the other triangle's plane.
     for a, b in ((first, second), (second, first)):
         n = np.cross(a[1] - a[0], a[2] - a[0])
