@@ -159,6 +159,7 @@ def _run_deform(args):
     from .io import read_cage, read_mesh, write_mesh
 
     binding = _load(args.binding)
+    _check_2d_figure(binding, args.plot, "--plot")
     new_vertices, _ = read_cage(args.new_cage)
     if binding.cage.dim == 3 and new_vertices.shape[1] == 2:
         raise CageError(f"{args.new_cage}: the binding is for a 3D cage, this cage has no faces")
@@ -190,6 +191,7 @@ def _run_stats(args):
     from .statistics import summary
 
     binding = _load(args.binding)
+    _check_2d_figure(binding, args.coordinate, "--coordinate")
     figures = summary(binding)
     if args.plot:
         from .plots import LABELS, plot_locality
@@ -304,6 +306,11 @@ def _load(path):
     if not Path(path).is_file():
         raise CageError(f"{path}: no such file")
     return load_binding(path)
+
+
+def _check_2d_figure(binding, wanted, option):
+    if wanted and binding.cage.dim != 2:
+        raise CageError(f"{option} draws 2D bindings only; this binding is 3D")
 
 
 def _control_index(text, n):

@@ -24,6 +24,7 @@ import numpy as np
 from .errors import CageError
 
 FORMATS = (".obj", ".off", ".ply")
+_FACE_TYPES = ("triangle", "quad", "polygon")  # meshio's cell types that are faces
 
 
 def read_mesh(path):
@@ -144,9 +145,6 @@ def _read_ply(path):
     # meshio splits faces into blocks of equal size, in file order: concatenating them restores that order.
     faces = [np.asarray(f, dtype=np.int64) for block in mesh.cells if block.type in _FACE_TYPES for f in block.data]
     return vertices, (faces or None)
-
-
-_FACE_TYPES = ("triangle", "quad", "polygon")
 
 
 def _cell_blocks(faces):

@@ -223,7 +223,7 @@ def deform_seconds(weights, control_points, min_total=0.2, max_repeats=200):
     return best
 
 
-def summary(binding, thresholds=None):
+def summary(binding):
     """The locality figures of one binding, as a flat dict of plain numbers (JSON-ready).
 
     Returns

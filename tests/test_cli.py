@@ -141,6 +141,8 @@ def test_deform_with_another_cage_exits_2(tmp_path, capsys, gargoyle_points):
                "--cells", 300, "--quiet")[0] == 0
     code, _, err = run(capsys, "deform", binding, GARGOYLE / "cage_L15.obj", "-o", tmp_path / "x.obj")
     assert code == 2 and "vertices" in err
+    code, _, err = run(capsys, "stats", binding, "--coordinate", 0, tmp_path / "w0.png")
+    assert code == 2 and "2D bindings only" in err
 
 
 def test_bad_options_exit_2(capsys):
