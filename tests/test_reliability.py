@@ -410,3 +410,11 @@ def test_points_of_another_dimension_are_refused(clothing):
 def test_cancelled_bind_raises_cancelled():
     with pytest.raises(lbc_core.Cancelled):
         lbc_core.bind(STAR, None, GRID, cells=300, cancel=lambda: True)
+
+
+def test_2d_points_given_with_a_z_coordinate():
+    # File data: 2D points as (m, 3) with a constant z are bound; a varying z is refused.
+    binding = lbc_core.bind(STAR, None, np.c_[GRID, np.full(len(GRID), 2.0)], cells=300)
+    assert binding.weights.shape == (len(GRID), len(STAR))
+    with pytest.raises(CageError, match="z varies"):
+        lbc_core.bind(STAR, None, np.zeros((2, 3)) + [[0, 0, 0], [0, 0, 1]], cells=300)
