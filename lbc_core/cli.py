@@ -176,9 +176,7 @@ def _run_deform(args):
     seconds = time.perf_counter() - start
     write_mesh(args.output, deformed, faces)
     if args.plot:
-        from .plots import plot_deformation
-
-        plot_deformation(binding, new_vertices[:, : binding.cage.dim], args.plot)
+        _plots().plot_deformation(binding, new_vertices[:, : binding.cage.dim], args.plot)
     figures = {"output": str(args.output), "points": int(len(deformed)), "deform_seconds": seconds}
     if args.json:
         _print_json(figures)
@@ -194,14 +192,11 @@ def _run_stats(args):
     _check_2d_figure(binding, args.coordinate, "--coordinate")
     figures = summary(binding)
     if args.plot:
-        from .plots import LABELS, plot_locality
-
-        plot_locality({LABELS.get(binding.scheme, binding.scheme): binding}, args.plot)
+        plots = _plots()
+        plots.plot_locality({plots.LABELS.get(binding.scheme, binding.scheme): binding}, args.plot)
     if args.coordinate:
-        from .plots import plot_coordinate
-
         index, path = args.coordinate
-        plot_coordinate(binding, _control_index(index, binding.weights.shape[1]), path)
+        _plots().plot_coordinate(binding, _control_index(index, binding.weights.shape[1]), path)
     if args.json:
         _print_json(figures)
     else:
@@ -214,6 +209,8 @@ def _run_compare(args):
     from .meshing import mesh_domain
     from .cage import make_cage
 
+    if args.plot:
+        _plots()  # fail before binding when matplotlib is missing
     cage_vertices, cage_faces = read_cage(args.cage)
     bindings, domain = {}, None
     if args.mesh:
@@ -230,9 +227,8 @@ def _run_compare(args):
 
     rows = [summary(binding) for binding in bindings.values()]
     if args.plot:
-        from .plots import LABELS, plot_locality
-
-        plot_locality({LABELS.get(scheme, scheme): binding for scheme, binding in bindings.items()}, args.plot)
+        plots = _plots()
+        plots.plot_locality({plots.LABELS.get(s, s): binding for s, binding in bindings.items()}, args.plot)
     if args.json:
         _print_json({"cage": str(args.cage), "points": points_from, "schemes": rows})
     else:
@@ -308,9 +304,21 @@ def _load(path):
     return load_binding(path)
 
 
+def _plots():
+    """The plots module; matplotlib is an optional dependency, so its absence is a one-line error."""
+    try:
+        from . import plots
+    except ImportError:
+        raise CageError("figures need matplotlib: pip install matplotlib") from None
+    return plots
+
+
 def _check_2d_figure(binding, wanted, option):
+    """Refuse a 2D-only figure for a 3D binding, and a figure without matplotlib, before any work is done."""
     if wanted and binding.cage.dim != 2:
         raise CageError(f"{option} draws 2D bindings only; this binding is 3D")
+    if wanted:
+        _plots()
 
 
 def _control_index(text, n):

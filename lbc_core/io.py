@@ -121,9 +121,7 @@ def write_mesh(path, vertices, faces=None):
     if suffix != ".ply":
         {".obj": _write_obj, ".off": _write_off}[suffix](path, vertices, faces)
         return
-    import meshio
-    import meshio.ply
-
+    meshio = _meshio_ply()
     meshio.ply.write(path, meshio.Mesh(vertices, _cell_blocks(faces)))
 
 
@@ -134,8 +132,17 @@ def _suffix(path):
     return suffix
 
 
+def _meshio_ply():
+    try:
+        import meshio
+        import meshio.ply
+    except ImportError:
+        raise CageError("PLY files need meshio: pip install meshio (or use OBJ or OFF)") from None
+    return meshio
+
+
 def _read_ply(path):
-    import meshio.ply
+    meshio = _meshio_ply()
 
     # The format's own reader: meshio.read() prints and calls sys.exit(1) when a file does not parse.
     mesh = meshio.ply.read(path)
