@@ -34,8 +34,9 @@ from scipy.spatial import Delaunay, cKDTree
 from .errors import CageError, Cancelled
 
 DEFAULT_CELLS_2D = 3000  # the reference solver's resolution for the paper's 2D figures
-# Whole 3D bind of the 168-control-point gargoyle cage (cage_L08) on the 2-core test machine under load: 3.2k
-# tetrahedra 22 s, 4.6k 62 s, 5.5k 85 s, 10.4k 237 s; the ADMM solve is 95 % of it, meshing 1 to 1.7 s.
+# Whole 3D bind (lbc_core.binding.bind) of the 168-control-point gargoyle cage_L08 and its 2674-vertex mesh on the
+# shared 2-core test machine (load 3 to 5), solver of commit 11af8ba: 4.1k tetrahedra 50 s, 10.1k 155 s (490 solver
+# iterations each; the solve is 95 % of the time, meshing 1.2 to 1.8 s). 60 s allows about 4k.
 DEFAULT_CELLS_3D = 4000
 METHODS = {2: ("auto", "triangle", "delaunay"), 3: ("auto", "delaunay")}
 
