@@ -167,12 +167,17 @@ def solve_on_mesh(
         problem = _Problem(unit_vertices, cells, boundary_vertices, boundary_weights, unit_controls, interior,
                            BETA[d], dtype)
         timer.lap("factorisation")
-        Z, iterations, converged, history = _admm(
-            problem, tv_weights, epsilon, tolerance, max_iterations, _default_penalty(d, n) if penalty is None else penalty,
-            relaxation, check_every, anderson_memory, progress, cancel,
-        )
-        for record in history:  # objectives in the input's units
-            record["objective"] *= scale ** (d - 1)
+        if problem.M.shape[0] == 0:
+            # n = d + 1: a simplex cage. The constraints leave no freedom; Z = H are its barycentric coordinates.
+            Z = problem.H.astype(np.float64)
+        else:
+            Z, iterations, converged, history = _admm(
+                problem, tv_weights, epsilon, tolerance, max_iterations,
+                _default_penalty(d, n) if penalty is None else penalty, relaxation, check_every, anderson_memory,
+                progress, cancel,
+            )
+            for record in history:  # objectives in the input's units
+                record["objective"] *= scale ** (d - 1)
         timer.lap("solve")
         weights[interior] = restore_constraints(Z, unit_controls, unit_vertices[interior])
     objective = tv_objective(vertices, cells, weights, tv_weights)
@@ -355,7 +360,8 @@ class _Anderson:
         np.subtract(value, previous_value, out=self.dG[slot])
         self.count += 1
         used = min(self.count, self.memory)
-        row = self.dF[:used] @ self.dF[slot].astype(np.float64, copy=False)
+        # BLAS in the history's own precision: mixing in float64 would copy the whole history each call.
+        row = (self.dF[:used] @ self.dF[slot]).astype(np.float64)
         self.gram[slot, :used] = row
         self.gram[:used, slot] = row
 
@@ -365,7 +371,7 @@ class _Anderson:
         if used == 0:
             return None
         gram = self.gram[:used, :used] + 1e-10 * np.trace(self.gram[:used, :used]) / used * np.eye(used)
-        theta = np.linalg.solve(gram, self.dF[:used] @ residual.astype(np.float64, copy=False))
+        theta = np.linalg.solve(gram, (self.dF[:used] @ residual).astype(np.float64))
         return value - (theta.astype(value.dtype) @ self.dG[:used])
 
 
@@ -439,26 +445,28 @@ def _residuals(step, state, X, W, Z, gradient, X_old, W_old):
 def _shrink(values, thresholds, epsilon, n_cells, d):
     """Group soft-thresholding of each cell's gradient vector (prox of ω|g|, or of its Huber smoothing)."""
     grouped = values.reshape(n_cells, d, -1)
-    norms = _group_norms(values, n_cells, d)
+    scale = _group_norms(values, n_cells, d)
+    np.maximum(scale, np.finfo(scale.dtype).tiny, out=scale)
     if epsilon > 0:
         # prox of τ·huber_ε: shrink by τ beyond ε + τ, scale by ε / (ε + τ) inside.
-        scale = np.where(
-            norms > epsilon + thresholds,
-            1.0 - thresholds / np.maximum(norms, np.finfo(norms.dtype).tiny),
-            epsilon / (epsilon + thresholds),
-        )
+        inside = scale <= epsilon + thresholds
+        np.divide(thresholds, scale, out=scale)
+        np.subtract(1.0, scale, out=scale)
+        scale[inside] = (epsilon / (epsilon + thresholds))[inside]
     else:
-        scale = np.maximum(1.0 - thresholds / np.maximum(norms, np.finfo(norms.dtype).tiny), 0.0)
+        np.divide(thresholds, scale, out=scale)
+        np.subtract(1.0, scale, out=scale)
+        np.maximum(scale, 0.0, out=scale)
     return (grouped * scale[:, None, :]).reshape(values.shape)
 
 
 def _group_norms(values, n_cells, d):
     """|g| of each cell's d-vector in a cell-major (d F, n) array; returns (F, n)."""
     grouped = values.reshape(n_cells, d, -1)
-    squared = grouped[:, 0] * grouped[:, 0]
+    squared = np.square(grouped[:, 0])
     for k in range(1, d):
-        squared += grouped[:, k] * grouped[:, k]
-    return np.sqrt(squared)
+        squared += np.square(grouped[:, k])
+    return np.sqrt(squared, out=squared)
 
 
 class _Timer:

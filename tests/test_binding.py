@@ -126,3 +126,25 @@ def test_bad_points_are_refused():
         lbc_core.bind(square, None, np.array([[np.nan, 0.5]]))
     with pytest.raises(lbc_core.CageError, match="2D"):
         lbc_core.bind(square, None, np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.7]]))
+
+
+@pytest.mark.parametrize(
+    "cage, faces",
+    [("[[0, 0], [1, 0], [0, 1]]", "None"),
+     ("[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]", "[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]")],
+    ids=["triangle", "tetrahedron"],
+)
+def test_simplex_cages_bind(cage, faces):
+    # A simplex leaves the solver nothing to optimise; run in a child process so a crash fails the test, not the run.
+    import subprocess
+    import sys
+
+    script = (
+        "import numpy as np, lbc_core\n"
+        f"cage = np.array({cage}, dtype=float)\n"
+        f"b = lbc_core.bind(cage, {faces}, cage.mean(axis=0, keepdims=True), cells=300)\n"
+        "w = b.weights.toarray()\n"
+        "assert np.allclose(w, 1 / len(cage), atol=1e-9), w\n"
+    )
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, f"bind on a simplex cage failed (exit code {run.returncode}): {run.stderr[-2000:]}"
