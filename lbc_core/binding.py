@@ -17,7 +17,8 @@ from .errors import CageError
 from .interpolation import interpolation_matrix
 from .meshing import DomainMesh, mesh_domain
 from .reduction import reduce_weights
-from .solver import solve_on_mesh
+from .meshing import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D
+from .solver import check_memory, solve_on_mesh
 
 # Share of the progress bar each stage gets (the solve dominates).
 _STAGES = {"meshing": (0.0, 0.08), "solve": (0.08, 0.92), "interpolation": (0.92, 1.0)}
@@ -249,6 +250,8 @@ def bind(
     points = check_points(cage, points)
     n = cage.n_control_points
     threshold = 1e-3 / n if threshold is None else float(threshold)
+    # Refuse a resolution the machine cannot hold before meshing it, not after the OS kills the process.
+    check_memory(n, cells or (DEFAULT_CELLS_2D if cage.dim == 2 else DEFAULT_CELLS_3D), cage.dim)
 
     domain = mesh_domain(cage, cells, method, progress=stage_progress(progress, *_STAGES["meshing"]), cancel=cancel)
     timings["meshing"] = time.perf_counter() - clock

@@ -113,3 +113,12 @@ def test_bad_shapes_are_refused():
     with pytest.raises(lbc_core.CageError, match="tv_weights"):
         solve_on_mesh(vertices, pack["triangles"], pack["boundary_vertex"], pack["boundary_weights"],
                       vertices[pack["control_vertex"]], pack["tv_weights"][:10])
+
+
+def test_memory_estimate_refuses_what_the_machine_cannot_hold():
+    from lbc_core.solver import check_memory, estimate_memory
+
+    assert estimate_memory(26, 3000, 2) == pytest.approx(132 * 26 * (2 * 3000 + 0.53 * 3000), rel=1e-6)
+    check_memory(26, 3000, 2)  # the paper's 2D problems fit anywhere
+    with pytest.raises(lbc_core.CageError, match="GiB"):
+        check_memory(2000, 10**8, 3)
