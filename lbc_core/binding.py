@@ -274,8 +274,7 @@ def bind(
     clock = time.perf_counter()
     # Entries far below the threshold cannot survive interpolation and reduction: drop them first to stay sparse.
     domain_sparse = sp.csr_matrix(np.where(result.weights >= 1e-3 * threshold, result.weights, 0.0))
-    bound_positions = located @ domain.vertices
-    weights = reduce_weights(located @ domain_sparse, cage.vertices, bound_positions, threshold,
+    weights = reduce_weights(located @ domain_sparse, cage.vertices, located @ domain.vertices, threshold,
                              tolerance=1e-9 * cage.bbox_diagonal)
     timings["reduction"] = time.perf_counter() - clock
     if progress is not None:

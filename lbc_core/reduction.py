@@ -83,7 +83,8 @@ def reduce_weights(weights, controls, positions, threshold, tolerance):
     """Drop weights below ``threshold`` and restore the constraints on what remains.
 
     A point whose reduced support cannot meet the constraints (it lies outside the hull of its remaining control
-    points) tries again with the threshold divided by 10, then 100, and last keeps its full support.
+    points, e.g. just off a cage face) gets its largest dropped weights back, one, two, four, ... at a time, until it
+    can.
 
     Parameters
     ----------
@@ -104,23 +105,24 @@ def reduce_weights(weights, controls, positions, threshold, tolerance):
     full = sp.csr_matrix(weights)
     full.sum_duplicates()
     n = controls.shape[0]
+    values, columns = _padded(full)
+    order = np.argsort(-values, axis=1)  # each row's weights, largest first
+    values = np.take_along_axis(values, order, axis=1)
+    columns = np.take_along_axis(columns, order, axis=1)
+    keep = np.count_nonzero(values >= threshold, axis=1)
     reduced = sp.csr_matrix(full.shape)
     pending = np.arange(full.shape[0])
-    for level in (threshold, threshold / 10, threshold / 100, 0.0):
-        kept = full[pending]
-        kept.data[kept.data < level] = 0.0
-        kept.eliminate_zeros()
-        slots, columns = _padded(kept)
-        corrected = restore_constraints(slots, controls, positions[pending], columns)
-        unity, reproduction = constraint_residuals(corrected, controls, positions[pending], columns)
+    extra = 0
+    while len(pending):
+        size = np.minimum(keep[pending] + extra, values.shape[1])
+        slots = np.where(np.arange(values.shape[1]) < size[:, None], values[pending], 0.0)
+        corrected = restore_constraints(slots, controls, positions[pending], columns[pending])
+        unity, reproduction = constraint_residuals(corrected, controls, positions[pending], columns[pending])
         done = (unity <= 1e-9) & (reproduction <= tolerance) & (corrected >= 0).all(axis=1)
-        if level == 0.0:
-            done[:] = True
-        rows = _from_padded(corrected[done], columns[done], n)
-        reduced = _scatter_rows(reduced, pending[done], rows)
+        done |= size >= values.shape[1]  # the full support: nothing more to add
+        reduced = _scatter_rows(reduced, pending[done], _from_padded(corrected[done], columns[pending][done], n))
         pending = pending[~done]
-        if not len(pending):
-            break
+        extra = 2 * extra or 1
     return reduced
 
 
