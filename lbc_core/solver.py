@@ -350,12 +350,9 @@ class _DouglasRachford:
         self.size_x = p.n_cells * p.d * n
         self.shape_x, self.shape_w = (p.n_cells * p.d, n), (p.n_interior, n)
         self.tv_weights = tv_weights
-        self.set_penalty(rho)
-
-    def set_penalty(self, rho):
         # In scaled variables the shrink threshold of cell c is √|c| ω / ρ; the clip bound of vertex v is √(β m_v).
-        self.rho = rho
-        self.thresholds = (self.p.sqrt_cell * self.tv_weights / rho).astype(self.p.G.dtype)
+        self.thresholds = (p.sqrt_cell * tv_weights / rho).astype(p.G.dtype)
+        self.chunks = _cell_chunks(p, self.size_x)
 
     def split(self, state):
         return state[:self.size_x].reshape(self.shape_x), state[self.size_x:].reshape(self.shape_w)
@@ -367,27 +364,42 @@ class _DouglasRachford:
         return np.concatenate([(p.G @ Z + p.E).ravel(), (p.sqrt_mass * np.clip(Z, 0.0, 1.0)).ravel()])
 
     def __call__(self, state):
-        """Return the next state, and X̃, W̃, Z and the scaled gradient g̃ of this step (for residuals)."""
+        """Return the next state, and X̃, W̃, Z and the scaled gradient g̃ of this step (for residuals).
+
+        The per-cell work runs on chunks of cells in threads (numpy and scipy release the GIL) around the one
+        factorised solve.
+        """
         p, alpha = self.p, self.alpha
         v_x, v_w = self.split(state)
-        X = _shrink(v_x, self.thresholds, self.epsilon, p.n_cells, p.d)
+        new_state = np.empty_like(state)
+        new_x, new_w = self.split(new_state)
+        X = np.empty_like(v_x)
+        gradient = np.empty_like(v_x)
+
+        def shrink_and_reflect(chunk):
+            rows, cells = chunk.rows, chunk.cells
+            X[rows] = _shrink(v_x[rows], self.thresholds[cells], self.epsilon, cells.stop - cells.start, p.d)
+            reflected = 2.0 * X[rows]
+            reflected -= v_x[rows]
+            reflected -= p.E[rows]
+            return chunk.GT @ reflected
+
+        def update(chunk):
+            rows = chunk.rows
+            gradient[rows] = chunk.G @ Z
+            gradient[rows] += p.E[rows]
+            np.subtract(gradient[rows], X[rows], out=new_x[rows])
+            new_x[rows] *= alpha
+            new_x[rows] += v_x[rows]
+
         W = np.clip(v_w, 0.0, p.sqrt_mass)
-        reflected_x = 2.0 * X
-        reflected_x -= v_x
-        reflected_x -= p.E
         reflected_w = 2.0 * W
         reflected_w -= v_w
-        rhs = p.GT @ reflected_x
+        rhs = sum(_map(shrink_and_reflect, self.chunks))
         rhs += p.sqrt_mass * reflected_w
         Z = p.factor.solve(rhs @ p.MT) @ p.M
         Z += p.H
-        gradient = p.G @ Z
-        gradient += p.E
-        new_state = np.empty_like(state)
-        new_x, new_w = self.split(new_state)
-        np.subtract(gradient, X, out=new_x)
-        new_x *= alpha
-        new_x += v_x
+        list(_map(update, self.chunks))
         np.multiply(p.sqrt_mass, Z, out=new_w)
         new_w -= W
         new_w *= alpha
@@ -399,6 +411,45 @@ class _DouglasRachford:
         p = self.p
         norms = _group_norms(gradient, p.n_cells, p.d)
         return float(np.sum(self.tv_weights * p.sqrt_cell * norms))
+
+
+@dataclass
+class _Chunk:
+    """A range of cells, with its rows of the gradient operator, processed by one thread."""
+
+    cells: slice
+    rows: slice
+    G: sp.csr_matrix
+    GT: sp.csr_matrix
+
+
+# Below this many entries in the X block, threads cost more than they save (2D problems of the paper's size).
+PARALLEL_MIN_ENTRIES = 500_000
+_POOL = None
+
+
+def _cell_chunks(problem, size_x):
+    """Split the cells into one chunk per core when the problem is large enough to gain from threads."""
+    count = min(os.cpu_count() or 1, 8) if size_x >= PARALLEL_MIN_ENTRIES else 1
+    bounds = np.linspace(0, problem.n_cells, count + 1).astype(int)
+    chunks = []
+    for start, stop in zip(bounds[:-1], bounds[1:]):
+        rows = slice(start * problem.d, stop * problem.d)
+        G = problem.G[rows]
+        chunks.append(_Chunk(slice(start, stop), rows, G, G.T.tocsr()))
+    return chunks
+
+
+def _map(function, chunks):
+    """``function`` over the chunks, in a shared thread pool when there are several."""
+    global _POOL
+    if len(chunks) == 1:
+        return [function(chunks[0])]
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL = ThreadPoolExecutor(max_workers=min(os.cpu_count() or 1, 8), thread_name_prefix="lbc")
+    return list(_POOL.map(function, chunks))
 
 
 class _Anderson:
