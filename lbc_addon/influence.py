@@ -4,8 +4,8 @@ The colors live in a visible color attribute that :func:`hide` removes again, to
 :func:`show` changed, so showing and hiding leaves the mesh as it was.
 """
 
+import bpy  # noqa: I001  (first: importing bpy makes bmesh importable from the bpy module)
 import bmesh
-import bpy
 import numpy as np
 
 from . import storage

@@ -1,0 +1,172 @@
+"""The Geometry Nodes deformer: exact rest pose, affine maps reproduced, locality against Mesh Deform, and the
+checks that stop it (changed cage, deleted cage), also in a Blender without the add-on."""
+
+import subprocess
+import sys
+import textwrap
+
+import bpy  # noqa: I001  (first: importing bpy makes bmesh and mathutils importable)
+import bmesh
+import numpy as np
+from mathutils import Matrix
+
+from lbc_addon import deformer, storage
+from test_addon_scenes import (  # noqa: F401  (fixtures)
+    bound_gargoyle,
+    bound_gargoyle_file,
+    diagonal,
+    exit_past_blender_teardown,
+    evaluated_positions,
+    positions,
+)
+
+
+def test_rest_pose_is_the_mesh_itself(bound_gargoyle):
+    mesh, _ = bound_gargoyle
+    # Displacement form: at rest only float32 rounding of Σ w c − rest remains, far below the 1e-5 tolerance.
+    error = np.abs(evaluated_positions(mesh) - positions(mesh.data)).max()
+    assert error < 1e-6 * diagonal(mesh)
+
+
+def test_modifier_is_first_and_weights_are_hidden_attributes(bound_gargoyle):
+    mesh, _ = bound_gargoyle
+    assert mesh.modifiers[0].name == deformer.MODIFIER_NAME
+    names = [a.name for a in mesh.data.attributes if a.name.startswith(".lbc")]
+    assert storage.REST_NAME in names
+    assert len(names) == 2 * mesh.lbc.slots + 1
+
+
+def test_translated_cage_moves_the_mesh_by_the_same_translation(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    rest = positions(mesh.data)
+    shift = np.array([0.3, -0.7, 0.25])
+    cage.matrix_world = Matrix.Translation(shift) @ cage.matrix_world
+    expected = rest + np.array(mesh.matrix_world.inverted().to_3x3()) @ shift
+    assert np.abs(evaluated_positions(mesh) - expected).max() < 1e-5 * diagonal(mesh)
+
+
+def test_affinely_mapped_cage_moves_the_mesh_by_the_same_map(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    rest = positions(mesh.data)
+    affine = Matrix(((1.2, 0.3, -0.1, 0.4), (0.05, 0.8, 0.2, -0.3), (-0.2, 0.1, 1.1, 0.2), (0, 0, 0, 1)))
+    # Map the cage's vertices (not its object) so that the weights, not only the transform, are exercised.
+    cage_affine = cage.matrix_world.inverted() @ affine @ cage.matrix_world
+    cage.data.transform(cage_affine)
+    cage.data.update()
+    mesh_affine = np.array(mesh.matrix_world.inverted() @ affine @ mesh.matrix_world)
+    expected = rest @ mesh_affine[:3, :3].T + mesh_affine[:3, 3]
+    assert np.abs(evaluated_positions(mesh) - expected).max() < 1e-5 * diagonal(mesh)
+
+
+def _moved(before, after, mesh):
+    return int(np.count_nonzero(np.linalg.norm(after - before, axis=1) > 1e-6 * diagonal(mesh)))
+
+
+def test_one_cage_vertex_moves_far_fewer_vertices_than_mesh_deform(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    rest = positions(mesh.data)
+    mesh_deform = mesh.modifiers.new("MeshDeform", "MESH_DEFORM")
+    mesh_deform.object = cage
+    mesh_deform.precision = 4
+    with bpy.context.temp_override(object=mesh, active_object=mesh):
+        assert bpy.ops.object.meshdeform_bind(modifier=mesh_deform.name) == {"FINISHED"}
+    lbc_modifier = mesh.modifiers[deformer.MODIFIER_NAME]
+    counts = {"LBC": [], "Mesh Deform": []}
+    for vertex in range(0, len(cage.data.vertices), 13):
+        original = cage.data.vertices[vertex].co.copy()
+        cage.data.vertices[vertex].co += cage.data.vertices[vertex].normal * 0.1
+        cage.data.update()
+        # Each deformer alone on the same rest mesh and the same posed cage.
+        mesh_deform.show_viewport, lbc_modifier.show_viewport = False, True
+        counts["LBC"].append(_moved(rest, evaluated_positions(mesh), mesh))
+        mesh_deform.show_viewport, lbc_modifier.show_viewport = True, False
+        counts["Mesh Deform"].append(_moved(rest, evaluated_positions(mesh), mesh))
+        cage.data.vertices[vertex].co = original
+        cage.data.update()
+    print(f"mesh vertices moved by one cage vertex (of {len(rest)}): {counts}")
+    assert all(0 < lbc < md for lbc, md in zip(counts["LBC"], counts["Mesh Deform"]))
+    assert np.mean(counts["LBC"]) < 0.5 * np.mean(counts["Mesh Deform"])
+
+
+def _delete_cage_vertex(cage, index):
+    edit = bmesh.new()
+    edit.from_mesh(cage.data)
+    edit.verts.ensure_lookup_table()
+    bmesh.ops.delete(edit, geom=[edit.verts[index]], context="VERTS")
+    edit.to_mesh(cage.data)
+    edit.free()
+    cage.data.update()
+
+
+def test_cage_with_another_vertex_count_leaves_the_mesh_undeformed_with_a_modifier_error(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    _delete_cage_vertex(cage, 3)
+    assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
+    messages = [warning.message for warning in mesh.modifiers[deformer.MODIFIER_NAME].node_warnings]
+    assert any("vertex count changed" in message for message in messages)
+    assert "66 vertices" in mesh.lbc.status and "67" in mesh.lbc.status
+
+
+def test_cage_topology_change_with_the_same_vertex_count_stops_the_deformer(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    edit = bmesh.new()
+    edit.from_mesh(cage.data)
+    edit.edges.ensure_lookup_table()
+    interior = next(e for e in edit.edges if len(e.link_faces) == 2)
+    assert bmesh.utils.edge_rotate(interior, True) is not None
+    edit.to_mesh(cage.data)
+    edit.free()
+    cage.data.update()
+    cage.location.x += 0.5  # a pose that would move the mesh if the deformer still ran
+    evaluated_positions(mesh)  # the depsgraph update runs the check, which switches the deformer off
+    assert "topology" in mesh.lbc.status
+    assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
+    messages = [warning.message for warning in mesh.modifiers[deformer.MODIFIER_NAME].node_warnings]
+    assert any("topology changed" in message for message in messages)
+
+
+def test_deleted_cage_is_reported_and_nothing_crashes(bound_gargoyle, capsys):
+    mesh, cage = bound_gargoyle
+    bpy.data.objects.remove(cage)
+    assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
+    assert "deleted" in mesh.lbc.status
+    assert "was deleted" in capsys.readouterr().out
+    ok, message = deformer.status(mesh, bpy.context.evaluated_depsgraph_get())
+    assert not ok and "deleted" in message
+
+
+def test_renamed_cage_keeps_deforming(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    cage.name = "Renamed Cage"
+    cage.location.z += 0.4
+    moved = evaluated_positions(mesh) - positions(mesh.data)
+    assert np.abs(moved).max() > 0.1
+    ok, message = deformer.status(mesh, bpy.context.evaluated_depsgraph_get())
+    assert ok and "Renamed Cage" in message
+
+
+def test_blend_opened_without_the_add_on_still_deforms(bound_gargoyle, tmp_path):
+    mesh, cage = bound_gargoyle
+    cage.data.vertices[2].co.z += 0.2
+    cage.data.update()
+    expected = evaluated_positions(mesh)
+    assert np.abs(expected - positions(mesh.data)).max() > 1e-3
+    path = tmp_path / "posed.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    out = tmp_path / "positions.npy"
+    script = textwrap.dedent(f"""
+        import bpy, numpy as np, sys
+        assert "lbc_addon" not in sys.modules
+        bpy.ops.wm.open_mainfile(filepath={str(path)!r})
+        obj = bpy.data.objects["Gargoyle"]
+        evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+        mesh = evaluated.to_mesh()
+        values = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+        mesh.vertices.foreach_get("co", values)
+        np.save({str(out)!r}, values.reshape(-1, 3))
+        sys.stdout.flush()
+        import os
+        os._exit(0)  # bpy 4.5.4 can deadlock in its teardown at exit (see test_addon_scenes)
+    """)
+    subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, timeout=300)
+    assert np.array_equal(np.load(out).astype(np.float64), expected)
