@@ -6,6 +6,7 @@
 import json
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -18,8 +19,11 @@ from .interpolation import interpolation_matrix
 from .meshing import DomainMesh, mesh_domain
 from .reduction import reduce_weights
 from .meshing import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D
+from .parallel import thread_map, worker_count
 from .solver import check_memory, solve_on_mesh
 
+# Deforming fewer points than this is faster on one thread.
+PARALLEL_MIN_POINTS = 50_000
 # Share of the progress bar each stage gets (the solve dominates).
 _STAGES = {"meshing": (0.0, 0.08), "solve": (0.08, 0.92), "interpolation": (0.92, 1.0)}
 
@@ -102,8 +106,23 @@ class Binding:
         -------
         (m, d) float array
         """
-        controls = self.cage.control_points_from_input(new_cage_vertices)
-        return self.points + self.weights @ (controls - self.rest_cage_vertices)
+        displacement = self.cage.control_points_from_input(new_cage_vertices) - self.rest_cage_vertices
+        moved = self.points.copy()
+
+        def move(block):
+            rows, weights = block
+            moved[rows] += weights @ displacement
+
+        thread_map(move, self._row_blocks)
+        return moved
+
+    @cached_property
+    def _row_blocks(self):
+        """The weights split into row blocks, one per thread for large meshes (CSR row slices copy: done once)."""
+        m = self.weights.shape[0]
+        count = worker_count() if m >= PARALLEL_MIN_POINTS else 1
+        bounds = np.linspace(0, m, count + 1).astype(int)
+        return [(slice(a, b), self.weights[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
 
     def save(self, path):
         """Write the binding to a compressed .npz file (with the cage's fingerprint, the options and the version)."""

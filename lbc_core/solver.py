@@ -32,6 +32,7 @@ import scipy.sparse.linalg as spla
 
 from . import fem
 from .objective import tv_objective
+from .parallel import thread_map, worker_count
 from .errors import Cancelled, CageError
 from .reduction import restore_constraints
 
@@ -395,11 +396,11 @@ class _DouglasRachford:
         W = np.clip(v_w, 0.0, p.sqrt_mass)
         reflected_w = 2.0 * W
         reflected_w -= v_w
-        rhs = sum(_map(shrink_and_reflect, self.chunks))
+        rhs = sum(thread_map(shrink_and_reflect, self.chunks))
         rhs += p.sqrt_mass * reflected_w
         Z = p.factor.solve(rhs @ p.MT) @ p.M
         Z += p.H
-        list(_map(update, self.chunks))
+        thread_map(update, self.chunks)
         np.multiply(p.sqrt_mass, Z, out=new_w)
         new_w -= W
         new_w *= alpha
@@ -425,12 +426,11 @@ class _Chunk:
 
 # Below this many entries in the X block, threads cost more than they save (2D problems of the paper's size).
 PARALLEL_MIN_ENTRIES = 500_000
-_POOL = None
 
 
 def _cell_chunks(problem, size_x):
     """Split the cells into one chunk per core when the problem is large enough to gain from threads."""
-    count = min(os.cpu_count() or 1, 8) if size_x >= PARALLEL_MIN_ENTRIES else 1
+    count = worker_count() if size_x >= PARALLEL_MIN_ENTRIES else 1
     bounds = np.linspace(0, problem.n_cells, count + 1).astype(int)
     chunks = []
     for start, stop in zip(bounds[:-1], bounds[1:]):
@@ -438,18 +438,6 @@ def _cell_chunks(problem, size_x):
         G = problem.G[rows]
         chunks.append(_Chunk(slice(start, stop), rows, G, G.T.tocsr()))
     return chunks
-
-
-def _map(function, chunks):
-    """``function`` over the chunks, in a shared thread pool when there are several."""
-    global _POOL
-    if len(chunks) == 1:
-        return [function(chunks[0])]
-    if _POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _POOL = ThreadPoolExecutor(max_workers=min(os.cpu_count() or 1, 8), thread_name_prefix="lbc")
-    return list(_POOL.map(function, chunks))
 
 
 class _Anderson:

@@ -1,0 +1,21 @@
+"""One shared thread pool for the work that numpy and scipy run without the GIL (ufuncs, sparse products)."""
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+_POOL = None
+
+
+def worker_count():
+    """Threads worth using: the machine's cores, at most 8."""
+    return min(os.cpu_count() or 1, 8)
+
+
+def thread_map(function, items):
+    """``[function(item) for item in items]``, in the shared thread pool when there is more than one item."""
+    global _POOL
+    if len(items) == 1:
+        return [function(items[0])]
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=worker_count(), thread_name_prefix="lbc")
+    return list(_POOL.map(function, items))
