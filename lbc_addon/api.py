@@ -12,6 +12,7 @@ Example::
 import bpy
 
 from . import deformer, jobs
+from .properties import is_bound
 
 
 def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, threshold=0.0,
@@ -52,7 +53,7 @@ def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0
 
 def unbind(mesh_obj):
     """Remove the binding; the mesh is exactly as before it was bound. Does nothing for an unbound mesh."""
-    if mesh_obj.lbc.is_bound:
+    if is_bound(mesh_obj):
         jobs.remove(mesh_obj)
 
 

@@ -15,6 +15,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from . import geometry, storage
+from .properties import is_bound
 
 MODIFIER_NAME = "LBC Deform"
 GROUP_NAME = "LBC Deform"
@@ -261,7 +262,7 @@ def check_bindings(depsgraph, changed=None):
     (or whose cage is gone) are checked.
     """
     for obj in depsgraph.scene.objects:
-        if obj.type != "MESH" or not obj.lbc.is_bound:
+        if not is_bound(obj):
             continue
         cage = obj.lbc.cage
         if changed is not None and cage is not None and not {obj.name_full, cage.name_full} & changed:

@@ -18,6 +18,7 @@ import lbc_core
 from lbc_core import CageError
 
 from . import deformer, geometry, influence, storage
+from .properties import is_bound
 
 
 @dataclass
@@ -162,7 +163,7 @@ def apply(request, result):
         raise CageError(f"'{request.mesh_name}' or its cage was deleted during the bind: nothing was bound")
     if geometry.topology_fingerprint(mesh_obj.data) != request.mesh_topology:
         raise CageError(f"'{mesh_obj.name}' was edited during the bind: bind again")
-    if mesh_obj.lbc.is_bound:
+    if is_bound(mesh_obj):
         remove(mesh_obj)
     settings = mesh_obj.lbc
     active = mesh_obj.modifiers.active

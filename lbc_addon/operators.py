@@ -10,7 +10,7 @@ import bpy
 from lbc_core import CageError, Cancelled
 
 from . import influence, jobs
-from .properties import BindOptions
+from .properties import BindOptions, is_bound
 
 _running = []  # the Worker of the bind in progress: one at a time, so two binds never write the same mesh
 
@@ -20,7 +20,7 @@ def _bound_selection(context):
     objects = list(context.selected_objects)
     if context.active_object is not None and context.active_object not in objects:
         objects.append(context.active_object)
-    return [obj for obj in objects if obj.type == "MESH" and obj.lbc.is_bound]
+    return [obj for obj in objects if is_bound(obj)]
 
 
 def _report_result(operator, mesh_obj):
@@ -234,9 +234,9 @@ def _influence_targets(context):
     active = context.active_object
     if active is None:
         return []
-    if active.type == "MESH" and active.lbc.is_bound:
+    if is_bound(active):
         return [active]
-    return [obj for obj in context.scene.objects if obj.type == "MESH" and obj.lbc.is_bound and obj.lbc.cage == active]
+    return [obj for obj in context.scene.objects if is_bound(obj) and obj.lbc.cage == active]
 
 
 class OBJECT_OT_lbc_show_influence(bpy.types.Operator):

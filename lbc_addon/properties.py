@@ -100,6 +100,16 @@ class LBC_PG_binding(BindOptions, bpy.types.PropertyGroup):
     previous_color_type: StringProperty(description="The 3D views' Solid color type before showing the influence")
 
 
+def is_bound(obj):
+    """Whether ``obj`` holds a binding.
+
+    Reading ``obj.lbc`` creates the property group on the object, so checks that look at every object read the raw
+    ID property instead: objects never bound stay exactly as they are.
+    """
+    group = obj.get("lbc")
+    return obj.type == "MESH" and group is not None and bool(group.get("is_bound", False))
+
+
 def register():
     bpy.utils.register_class(LBC_PG_binding)
     bpy.types.Object.lbc = PointerProperty(type=LBC_PG_binding)

@@ -3,11 +3,12 @@
 import bpy
 
 from . import storage
+from .properties import is_bound
 
 
 def _bound_to(cage, scene):
     """Meshes of the scene bound to ``cage``."""
-    return [obj for obj in scene.objects if obj.type == "MESH" and obj.lbc.is_bound and obj.lbc.cage == cage]
+    return [obj for obj in scene.objects if is_bound(obj) and obj.lbc.cage == cage]
 
 
 def _format_bytes(count):
@@ -55,7 +56,7 @@ def draw(layout, context):
     if obj is None:
         layout.label(text="Select the mesh(es), then the cage (active)")
         return
-    if obj.type == "MESH" and obj.lbc.is_bound:
+    if is_bound(obj):
         draw_binding(layout, obj)
         return
     meshes = _bound_to(obj, context.scene)

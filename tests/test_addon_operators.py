@@ -1,0 +1,175 @@
+"""Bind, Unbind, Rebind through bpy.ops with context overrides: poll messages, reports, a scene left exactly as
+before on unbind, undo, failure; 2D binds of a flat cage and an image plane."""
+
+import bpy  # noqa: I001  (first: importing bpy makes bmesh and mathutils importable)
+import bmesh
+import numpy as np
+import pytest
+from mathutils import Matrix
+
+from lbc_addon.properties import is_bound
+from test_addon_scenes import (  # noqa: F401  (fixtures)
+    bind,
+    diagonal,
+    evaluated_positions,
+    exit_past_blender_teardown,
+    mesh_object,
+    mesh_state,
+    positions,
+    reset,
+    sphere_in_box_scene,
+)
+
+CELLS = 1000
+
+
+def test_bind_through_the_operator_adds_the_deformer_and_reports(capfd):
+    mesh, cage = sphere_in_box_scene()
+    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert "Bound 1 mesh(es)" in capfd.readouterr().out
+    settings = mesh.lbc
+    assert settings.is_bound and settings.cage == cage and settings.dimension == 3
+    assert settings.control_points == 8 and settings.cage_vertex_count == 8
+    assert settings.resolution == CELLS
+    assert settings.status == "Following 'Box'"
+
+
+def test_poll_explains_what_to_select():
+    mesh, cage = sphere_in_box_scene()
+    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[cage]):
+        with pytest.raises(RuntimeError, match="Select the mesh"):
+            bpy.ops.object.lbc_bind()
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        with pytest.raises(RuntimeError, match="Select a bound mesh"):
+            bpy.ops.object.lbc_unbind()
+
+
+def _decorate(mesh):
+    """Give a mesh things of its own that binding and unbinding must leave alone."""
+    mesh.data.attributes.new("temperature", "FLOAT", "POINT").data.foreach_set(
+        "value", np.linspace(0, 1, len(mesh.data.vertices), dtype=np.float32)
+    )
+    mesh.data.color_attributes.new("paint", "BYTE_COLOR", "CORNER")
+    mesh.vertex_groups.new(name="top").add([0, 1, 2], 0.5, "REPLACE")
+    mesh.modifiers.new("Smooth", "SMOOTH")
+    mesh.modifiers.new("Displace", "DISPLACE")
+    mesh.modifiers.active = mesh.modifiers["Smooth"]
+
+
+def test_unbind_restores_the_mesh_bit_for_bit():
+    mesh, cage = sphere_in_box_scene()
+    _decorate(mesh)
+    before = mesh_state(mesh)
+    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert mesh_state(mesh) != before
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_unbind() == {"FINISHED"}
+    assert mesh_state(mesh) == before
+    assert not is_bound(mesh)
+
+
+def _undo_context():
+    window = bpy.context.window_manager.windows[0]
+    area = next(area for area in window.screen.areas if area.type == "VIEW_3D")
+    return bpy.context.temp_override(window=window, screen=window.screen, area=area)
+
+
+def test_undo_after_bind_restores_the_unbound_scene():
+    mesh, cage = sphere_in_box_scene()
+    _decorate(mesh)
+    before = mesh_state(mesh)
+    with _undo_context():
+        bpy.ops.ed.undo_push(message="before bind")
+        # The UI pushes an undo step after an operator with the UNDO flag. Scripts can ask for it with
+        # bpy.ops...("EXEC_DEFAULT", True), but in the headless bpy 4.5.4 module that crashes for any operator
+        # (object.modifier_add too), so the step is pushed here the way the UI does it.
+        assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+        bpy.ops.ed.undo_push(message=bpy.types.OBJECT_OT_lbc_bind.bl_label)
+        assert bpy.data.objects["Sphere"].lbc.is_bound
+        assert bpy.ops.ed.undo() == {"FINISHED"}
+    mesh = bpy.data.objects["Sphere"]  # undo reloads the data: old references are gone
+    assert not is_bound(mesh)
+    assert mesh_state(mesh) == before
+
+
+def test_bind_with_an_open_cage_fails_and_leaves_the_scene_unchanged():
+    mesh, cage = sphere_in_box_scene()
+    edit = bmesh.new()
+    edit.from_mesh(cage.data)
+    edit.faces.ensure_lookup_table()
+    bmesh.ops.delete(edit, geom=[edit.faces[0]], context="FACES_ONLY")
+    edit.to_mesh(cage.data)
+    edit.free()
+    cage.data.update()
+    before = mesh_state(mesh), mesh_state(cage), sorted(bpy.data.node_groups.keys())
+    # An operator that reports an error raises it in the calling script, with lbc_core's message.
+    with pytest.raises(RuntimeError, match="the cage is not closed"):
+        bind(mesh, cage, resolution=CELLS)
+    assert (mesh_state(mesh), mesh_state(cage), sorted(bpy.data.node_groups.keys())) == before
+
+
+def test_vertices_outside_the_cage_are_counted_and_reported(capfd):
+    mesh, cage = sphere_in_box_scene()
+    mesh.data.vertices[0].co = (0.0, 0.0, 3.0)  # pulled out through the top of the box
+    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert mesh.lbc.outside == 1
+    assert "1 vertices lie outside the cage" in capfd.readouterr().out
+
+
+def test_rebind_after_a_topology_change_deforms_again():
+    mesh, cage = sphere_in_box_scene()
+    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    edit = bmesh.new()
+    edit.from_mesh(cage.data)
+    bmesh.ops.subdivide_edges(edit, edges=edit.edges[:1], cuts=1)
+    edit.to_mesh(cage.data)
+    edit.free()
+    cage.data.update()
+    evaluated_positions(mesh)
+    assert "vertices" in mesh.lbc.status  # 9 vertices where 8 were bound
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
+    assert mesh.lbc.cage_vertex_count == 9 and mesh.lbc.resolution == CELLS
+    assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() < 1e-6 * diagonal(mesh)
+    cage.location.y += 0.5
+    expected = positions(mesh.data) + np.array(mesh.matrix_world.inverted().to_3x3()) @ np.array([0.0, 0.5, 0.0])
+    assert np.abs(evaluated_positions(mesh) - expected).max() < 1e-5 * diagonal(mesh)
+
+
+def _flat_scene(tilt):
+    """A 12-gon cage and an image-plane-like grid inside it, both in one plane tilted by ``tilt`` (world)."""
+    reset()
+    angles = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    outline = np.c_[2 * np.cos(angles), 1.6 * np.sin(angles), np.zeros(12)]
+    grid = np.linspace(-1, 1, 11)
+    plane = np.array([[x, y, 0.0] for y in grid for x in grid])
+    quads = [[r * 11 + c, r * 11 + c + 1, (r + 1) * 11 + c + 1, (r + 1) * 11 + c] for r in range(10) for c in range(10)]
+    to_world = np.array(tilt)[:3, :3]
+    cage = mesh_object("Outline", outline @ to_world.T, [list(range(12))])
+    mesh = mesh_object("Image", plane @ to_world.T, quads, Matrix.Translation((0.1, 0.0, 0.0)) @ tilt)
+    return mesh, cage
+
+
+def test_flat_cage_and_image_plane_bind_in_2d_and_follow_the_cage():
+    tilt = Matrix.Rotation(0.5, 4, "X") @ Matrix.Rotation(0.3, 4, "Y")
+    mesh, cage = _flat_scene(tilt)
+    assert bind(mesh, cage) == {"FINISHED"}
+    assert mesh.lbc.dimension == 2 and mesh.lbc.control_points == 12
+    rest = positions(mesh.data)
+    assert np.abs(evaluated_positions(mesh) - rest).max() < 1e-6 * diagonal(mesh)
+    # An in-plane affine map of the outline maps the image the same way.
+    affine = tilt @ Matrix(((1.3, 0.2, 0, 0.1), (-0.1, 0.9, 0, 0.3), (0, 0, 1, 0), (0, 0, 0, 1))) @ tilt.inverted()
+    cage.data.transform(affine)
+    cage.data.update()
+    mesh_affine = np.array(mesh.matrix_world.inverted() @ affine @ mesh.matrix_world)
+    expected = rest @ mesh_affine[:3, :3].T + mesh_affine[:3, 3]
+    assert np.abs(evaluated_positions(mesh) - expected).max() < 1e-5 * diagonal(mesh)
+
+
+def test_mesh_off_the_flat_cages_plane_is_refused_in_2d():
+    mesh, cage = _flat_scene(Matrix.Identity(4))
+    mesh.data.vertices[0].co.z = 0.5
+    before = mesh_state(mesh)
+    with pytest.raises(RuntimeError, match="2D binding needs a flat cage"):
+        bind(mesh, cage, mode="2D")
+    assert mesh_state(mesh) == before
