@@ -486,6 +486,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     history = []
     converged = False
     iteration = 1
+    fraction, first_distance = 0.0, None
     while iteration < max_iterations:
         candidate = anderson.extrapolate(value, residual) if anderson else None
         if candidate is None:
@@ -515,7 +516,12 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             converged = True
             break
         if progress is not None:
-            progress(iteration / max_iterations, f"ADMM iteration {iteration}")
+            distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
+            first_distance = first_distance or max(distance, 1.0 + 1e-9)
+            # Residuals fall roughly geometrically: show the share of the way, in log scale, to the tolerance.
+            fraction = max(fraction, iteration / max_iterations,
+                           min(0.99, np.log(first_distance / distance) / np.log(first_distance)))
+            progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance")
         if cancel is not None and cancel():
             raise Cancelled("cancelled during the LBC solve")
     return Z.astype(np.float64), iteration, converged, history
