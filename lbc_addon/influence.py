@@ -79,9 +79,10 @@ def show(mesh_obj, cage_vertex):
     attribute.data.foreach_set("color", colors.astype(np.float32).ravel())
     mesh.color_attributes.active_color = attribute
     for space in _view_spaces():
-        if space.shading.color_type != "ATTRIBUTE":
+        # "VERTEX" is Solid shading's "Attribute" color: the active color attribute.
+        if space.shading.color_type != "VERTEX":
             settings.previous_color_type = space.shading.color_type
-            space.shading.color_type = "ATTRIBUTE"
+            space.shading.color_type = "VERTEX"
     settings.show_influence = True
     settings.influence_vertex = cage_vertex
     mesh.update()
@@ -102,7 +103,7 @@ def hide(mesh_obj):
         mesh.color_attributes.active_color = previous
     if settings.previous_color_type:
         for space in _view_spaces():
-            if space.shading.color_type == "ATTRIBUTE":
+            if space.shading.color_type == "VERTEX":
                 space.shading.color_type = settings.previous_color_type
     settings.show_influence = False
     settings.previous_color = ""

@@ -1,0 +1,63 @@
+"""The script API, and a saved .blend reopened: the same deformation without any recompute."""
+
+import bpy
+import numpy as np
+import pytest
+
+import lbc_core
+from lbc_addon import api, jobs
+from lbc_addon.properties import is_bound
+from test_addon_scenes import (  # noqa: F401  (fixtures)
+    bound_gargoyle,
+    bound_gargoyle_file,
+    evaluated_positions,
+    exit_past_blender_teardown,
+    mesh_state,
+    sphere_in_box_scene,
+)
+
+
+def test_api_bind_returns_the_figures_and_unbind_restores_the_mesh():
+    mesh, cage = sphere_in_box_scene()
+    before = mesh_state(mesh)
+    fractions = []
+    summary = api.bind(mesh, cage, resolution=1000, progress=lambda fraction, message: fractions.append(fraction))
+    assert summary["dimension"] == 3 and summary["control_points"] == 8
+    assert 1 <= summary["mean_influences"] <= summary["slots"] <= 8
+    assert summary["outside"] == 0 and summary["seconds"] > 0
+    assert fractions and fractions[-1] == pytest.approx(1.0)
+    assert api.status(mesh) == (True, "Following 'Box'")
+    api.unbind(mesh)
+    assert mesh_state(mesh) == before and not is_bound(mesh)
+
+
+def test_api_bind_raises_lbc_cores_error_and_changes_nothing():
+    mesh, cage = sphere_in_box_scene()
+    cage.data.vertices[0].co = cage.data.vertices[7].co  # two vertices on top of each other, faces folded
+    cage.data.vertices[1].co = cage.data.vertices[7].co
+    cage.data.vertices[2].co = cage.data.vertices[7].co
+    cage.data.vertices[3].co = cage.data.vertices[7].co
+    before = mesh_state(mesh)
+    with pytest.raises(lbc_core.CageError):
+        api.bind(mesh, cage, resolution=1000)
+    assert mesh_state(mesh) == before
+
+
+def test_reopened_blend_deforms_the_same_without_recomputing(bound_gargoyle, tmp_path, monkeypatch):
+    mesh, cage = bound_gargoyle
+    cage.data.vertices[20].co.x += 0.15
+    cage.rotation_euler.z += 0.2
+    cage.data.update()
+    expected = evaluated_positions(mesh)
+    path = tmp_path / "posed.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("the weights were recomputed")
+
+    monkeypatch.setattr(lbc_core, "bind", no_solve)
+    monkeypatch.setattr(jobs, "solve", no_solve)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    mesh = bpy.data.objects["Gargoyle"]
+    assert np.array_equal(evaluated_positions(mesh), expected)
+    assert api.status(mesh)[0]

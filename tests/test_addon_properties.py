@@ -1,0 +1,37 @@
+"""What Object.lbc remembers: the options a rebind reuses, nothing on objects never bound."""
+
+import bpy
+
+from lbc_addon.properties import WEIGHTING_ITEMS, is_bound
+from lbc_core.geodesics import WEIGHTINGS
+from test_addon_scenes import bind, exit_past_blender_teardown, sphere_in_box_scene  # noqa: F401
+
+
+def test_weighting_choices_are_lbc_cores():
+    assert {identifier for identifier, _, _ in WEIGHTING_ITEMS} == set(WEIGHTINGS)
+
+
+def test_bind_options_are_stored_and_reused_by_rebind(monkeypatch):
+    mesh, cage = sphere_in_box_scene()
+    options = {"resolution": 800, "weighting": "linear", "epsilon": 0.01, "tolerance": 1e-3, "threshold": 2e-3,
+               "mode": "3D"}
+    assert bind(mesh, cage, **options) == {"FINISHED"}
+    stored = mesh.lbc.bind_options()
+    assert stored["resolution"] == 800 and stored["weighting"] == "linear" and stored["mode"] == "3D"
+    assert abs(stored["epsilon"] - 0.01) < 1e-7 and abs(stored["threshold"] - 2e-3) < 1e-9
+    from lbc_addon import jobs
+
+    seen = []
+    original = jobs.snapshot
+    monkeypatch.setattr(jobs, "snapshot", lambda *args, **kwargs: seen.append(kwargs) or original(*args, **kwargs))
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
+    assert seen == [stored]
+
+
+def test_objects_never_bound_get_no_property_group():
+    mesh, cage = sphere_in_box_scene()
+    assert not is_bound(mesh) and not is_bound(cage)
+    assert "lbc" not in mesh.keys() and "lbc" not in cage.keys()
+    bpy.context.evaluated_depsgraph_get()  # the add-on's depsgraph check looks at every object
+    assert "lbc" not in mesh.keys() and "lbc" not in cage.keys()

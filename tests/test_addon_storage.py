@@ -1,0 +1,43 @@
+"""The K-slot weight cache in mesh attributes."""
+
+import numpy as np
+import scipy.sparse as sp
+
+from lbc_addon import storage
+from test_addon_scenes import exit_past_blender_teardown, mesh_state, sphere_in_box_scene  # noqa: F401
+
+
+def test_slot_arrays_pad_rows_and_map_columns_to_cage_vertices():
+    weights = sp.csr_matrix(np.array([[0.5, 0.0, 0.5], [0.2, 0.3, 0.5], [0.0, 1.0, 0.0]]))
+    index, weight = storage.slot_arrays(weights, np.array([7, 3, 9]))
+    assert index.shape == weight.shape == (3, 3)
+    assert index.dtype == np.int32 and weight.dtype == np.float32
+    assert index[0].tolist() == [7, 9, 0] and weight[0].tolist() == [0.5, 0.5, 0.0]
+    assert index[2, 0] == 3 and weight[2].tolist() == [1.0, 0.0, 0.0]
+
+
+def test_rest_offsets_are_the_weighted_cage_positions():
+    cage = np.array([[0.0, 0, 0], [1, 0, 0], [0, 2, 0]])
+    index = np.array([[0, 1], [1, 2]], dtype=np.int32)
+    weight = np.array([[0.25, 0.75], [0.5, 0.5]], dtype=np.float32)
+    assert np.allclose(storage.rest_offsets(index, weight, cage), [[0.75, 0, 0], [0.5, 1.0, 0]])
+
+
+def test_write_read_remove_round_trip_leaves_the_mesh_as_it_was():
+    mesh, _ = sphere_in_box_scene()
+    before = mesh_state(mesh)
+    count = len(mesh.data.vertices)
+    rng = np.random.default_rng(0)
+    index = rng.integers(0, 8, size=(count, 4)).astype(np.int32)
+    weight = rng.random((count, 4)).astype(np.float32)
+    storage.write(mesh.data, index, weight, rng.random((count, 3)))
+    assert storage.slot_count(mesh.data) == 4
+    read_index, read_weight = storage.read(mesh.data)
+    assert np.array_equal(read_index, index) and np.array_equal(read_weight, weight)
+    assert all(a.name.startswith(".") for a in mesh.data.attributes if "lbc" in a.name)
+    storage.remove(mesh.data)
+    assert mesh_state(mesh) == before
+
+
+def test_memory_is_eight_bytes_per_slot_and_twelve_for_the_rest_offset():
+    assert storage.memory_bytes(1000, 16) == 1000 * (16 * 8 + 12)

@@ -1,0 +1,90 @@
+"""The panels: what they show for a bound mesh, a broken binding, a cage, and a selection ready to bind.
+
+Panels need a UILayout, which only exists while Blender draws; the draw code is run here on a stand-in layout that
+records the labels and operators it is given.
+"""
+
+import bpy
+
+from lbc_addon import ui
+from test_addon_scenes import (  # noqa: F401  (fixtures)
+    bound_gargoyle,
+    bound_gargoyle_file,
+    exit_past_blender_teardown,
+    register_addon,
+    sphere_in_box_scene,
+)
+
+
+class Layout:
+    """Records what a panel draws: label texts and operator ids, through nested boxes, rows and columns."""
+
+    def __init__(self, record=None):
+        self.record = record if record is not None else []
+        self.use_property_split = False
+
+    def label(self, text="", icon="NONE"):
+        self.record.append(("label", text))
+
+    def operator(self, idname, icon="NONE", text=None):
+        self.record.append(("operator", idname))
+
+    def prop(self, data, name, **kwargs):
+        self.record.append(("prop", name))
+
+    def box(self):
+        return Layout(self.record)
+
+    def row(self, align=False):
+        return Layout(self.record)
+
+    def column(self, align=False):
+        return Layout(self.record)
+
+    def labels(self):
+        return "\n".join(text for kind, text in self.record if kind == "label")
+
+    def operators(self):
+        return [name for kind, name in self.record if kind == "operator"]
+
+
+def _draw(active, selected):
+    layout = Layout()
+    with bpy.context.temp_override(active_object=active, object=active, selected_objects=selected):
+        ui.draw(layout, bpy.context)
+    return layout
+
+
+def test_bound_mesh_shows_state_figures_and_actions(bound_gargoyle):
+    mesh, _ = bound_gargoyle
+    layout = _draw(mesh, [mesh])
+    text = layout.labels()
+    assert "Following 'Cage'" in text and "Cage: Cage" in text
+    assert "67 control points" in text and "2674 mesh vertices, 0 outside" in text
+    assert f"max {mesh.lbc.slots}" in text and "Cache in the .blend:" in text and "KB" in text
+    assert {"object.lbc_rebind", "object.lbc_unbind", "object.lbc_show_influence"} <= set(layout.operators())
+
+
+def test_deleted_cage_shows_why_and_offers_rebind(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    bpy.data.objects.remove(cage)
+    bpy.context.evaluated_depsgraph_get()
+    layout = _draw(mesh, [mesh])
+    assert "cage object was deleted" in layout.labels() and "(deleted)" in layout.labels()
+    assert layout.operators()[0] == "object.lbc_rebind"
+
+
+def test_cage_lists_its_meshes_and_a_selection_offers_bind(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    layout = _draw(cage, [cage])
+    assert "Cage of 1 mesh(es)" in layout.labels() and "Gargoyle: Following" in layout.labels()
+    mesh2, box = sphere_in_box_scene()
+    layout = _draw(box, [mesh2, box])
+    assert "Bind 1 selected mesh(es) to 'Box'" in layout.labels()
+    assert layout.operators() == ["object.lbc_bind"]
+
+
+def test_panels_are_in_the_properties_editor_and_the_sidebar():
+    register_addon()
+    assert bpy.types.OBJECT_PT_lbc.bl_space_type == "PROPERTIES" and bpy.types.OBJECT_PT_lbc.bl_context == "object"
+    assert bpy.types.VIEW3D_PT_lbc.bl_space_type == "VIEW_3D" and bpy.types.VIEW3D_PT_lbc.bl_region_type == "UI"
