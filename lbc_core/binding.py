@@ -17,7 +17,7 @@ from .cage import Cage, make_cage
 from .errors import CageError
 from .interpolation import interpolation_matrix
 from .meshing import DomainMesh, mesh_domain
-from .reduction import reduce_weights
+from .reduction import interpolate_and_reduce
 from .meshing import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D
 from .parallel import thread_map, worker_count
 from .solver import check_memory, solve_on_mesh
@@ -291,10 +291,8 @@ def bind(
     )
     timings["interpolation"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    # Entries far below the threshold cannot survive interpolation and reduction: drop them first to stay sparse.
-    domain_sparse = sp.csr_matrix(np.where(result.weights >= 1e-3 * threshold, result.weights, 0.0))
-    weights = reduce_weights(located @ domain_sparse, cage.vertices, located @ domain.vertices, threshold,
-                             tolerance=1e-9 * cage.bbox_diagonal)
+    weights = interpolate_and_reduce(located, result.weights, cage.vertices, domain.vertices, threshold,
+                                     tolerance=1e-9 * cage.bbox_diagonal)
     timings["reduction"] = time.perf_counter() - clock
     if progress is not None:
         progress(1.0, "bound")

@@ -41,13 +41,13 @@ def restore_constraints(weights, controls, positions, columns=None, rounds=20):
     support = weights > 0
     weights = np.where(support, weights, 0.0)
     for _ in range(rounds):
-        residual = target - np.einsum("mk,mkj->mj", weights, affine)
+        residual = target - (weights[:, None, :] @ affine)[:, 0]
         active = support[:, :, None] * affine
-        gram = np.einsum("mki,mkj->mij", active, affine)
+        gram = np.swapaxes(active, 1, 2) @ affine
         # A tiny ridge keeps supports that cannot span the affine constraints from blowing up.
         ridge = 1e-14 * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(d + 1)
         correction = np.linalg.solve(gram + ridge, residual[:, :, None])[:, :, 0]
-        weights += np.einsum("mkj,mj->mk", active, correction)
+        weights += (active @ correction[:, :, None])[:, :, 0]
         negative = weights < 0
         if not negative.any():
             break
@@ -75,8 +75,12 @@ def constraint_residuals(weights, controls, positions, columns=None):
     if columns is None:
         columns = np.broadcast_to(np.arange(K), (m, K))
     unity = np.abs(weights.sum(axis=1) - 1.0)
-    reproduction = np.linalg.norm(np.einsum("mk,mkd->md", weights, controls[columns]) - positions, axis=1)
+    reproduction = np.linalg.norm((weights[:, None, :] @ controls[columns])[:, 0] - positions, axis=1)
     return unity, reproduction
+
+
+# Rows reduced at a time: the padded (rows, K, d+1) work arrays of a million points would take gigabytes.
+ROWS_PER_CHUNK = 65_536
 
 
 def reduce_weights(weights, controls, positions, threshold, tolerance):
@@ -104,25 +108,87 @@ def reduce_weights(weights, controls, positions, threshold, tolerance):
     """
     full = sp.csr_matrix(weights)
     full.sum_duplicates()
+    chunks = [
+        _reduce_rows(full[start:start + ROWS_PER_CHUNK], controls, positions[start:start + ROWS_PER_CHUNK],
+                     threshold, tolerance)
+        for start in range(0, full.shape[0], ROWS_PER_CHUNK)
+    ]
+    return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(full.shape)
+
+
+def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance):
+    """Weights at points interpolated from a domain's vertices, reduced, one chunk of points at a time.
+
+    Parameters
+    ----------
+    located : (m, N) scipy.sparse.csr_matrix
+        Barycentric interpolation from the domain's N vertices to the points.
+    domain_weights : (N, n) float array
+        Coordinates at the domain's vertices.
+    controls : (n, d) float array
+    domain_vertices : (N, d) float array
+    threshold, tolerance : float
+        As in :func:`reduce_weights`.
+
+    Returns
+    -------
+    (m, n) scipy.sparse.csr_matrix; memory stays bounded by the chunk size, not by m.
+    """
+    # A weight below threshold / 10 at every corner of a cell cannot reach the threshold inside it; drop those
+    # entries (the solver's faint tails) before the product, keeping what a support may need to grow into.
+    sparse_domain = sp.csr_matrix(np.where(domain_weights >= threshold / 10, domain_weights, 0.0))
+    n = controls.shape[0]
+    chunks = []
+    for start in range(0, located.shape[0], ROWS_PER_CHUNK):
+        rows = located[start:start + ROWS_PER_CHUNK]
+        chunks.append(_reduce_rows(rows @ sparse_domain, controls, rows @ domain_vertices, threshold, tolerance))
+    return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix((0, n))
+
+
+def _reduce_rows(full, controls, positions, threshold, tolerance):
+    """:func:`reduce_weights` on one chunk of rows."""
+    n = controls.shape[0]
+    kept = full.copy()
+    kept.data[kept.data < threshold] = 0.0
+    kept.eliminate_zeros()
+    # Most rows reproduce on their kept support: correct them all at once on short padded rows.
+    values, columns = _padded(kept)
+    corrected, done = _restore_and_check(values, columns, controls, positions, tolerance)
+    reduced = _scatter_rows(sp.csr_matrix(full.shape), np.flatnonzero(done),
+                            _from_padded(corrected[done], columns[done], n))
+    pending = np.flatnonzero(~done)
+    if len(pending):
+        reduced = _scatter_rows(reduced, pending, _grow_support(full[pending], controls, positions[pending],
+                                                                threshold, tolerance))
+    return reduced
+
+
+def _restore_and_check(values, columns, controls, positions, tolerance):
+    """Corrected rows, and which of them meet the constraints."""
+    corrected = restore_constraints(values, controls, positions, columns)
+    unity, reproduction = constraint_residuals(corrected, controls, positions, columns)
+    return corrected, (unity <= 1e-9) & (reproduction <= tolerance) & (corrected >= 0).all(axis=1)
+
+
+def _grow_support(full, controls, positions, threshold, tolerance):
+    """Rows whose kept support cannot reproduce them: add dropped weights back, largest first, 1, 2, 4, ... at a time."""
     n = controls.shape[0]
     values, columns = _padded(full)
-    order = np.argsort(-values, axis=1)  # each row's weights, largest first
+    order = np.argsort(-values, axis=1)
     values = np.take_along_axis(values, order, axis=1)
     columns = np.take_along_axis(columns, order, axis=1)
     keep = np.count_nonzero(values >= threshold, axis=1)
     reduced = sp.csr_matrix(full.shape)
     pending = np.arange(full.shape[0])
-    extra = 0
+    extra = 1
     while len(pending):
         size = np.minimum(keep[pending] + extra, values.shape[1])
         slots = np.where(np.arange(values.shape[1]) < size[:, None], values[pending], 0.0)
-        corrected = restore_constraints(slots, controls, positions[pending], columns[pending])
-        unity, reproduction = constraint_residuals(corrected, controls, positions[pending], columns[pending])
-        done = (unity <= 1e-9) & (reproduction <= tolerance) & (corrected >= 0).all(axis=1)
+        corrected, done = _restore_and_check(slots, columns[pending], controls, positions[pending], tolerance)
         done |= size >= values.shape[1]  # the full support: nothing more to add
         reduced = _scatter_rows(reduced, pending[done], _from_padded(corrected[done], columns[pending][done], n))
         pending = pending[~done]
-        extra = 2 * extra or 1
+        extra *= 2
     return reduced
 
 
