@@ -173,3 +173,72 @@ def test_mesh_off_the_flat_cages_plane_is_refused_in_2d():
     with pytest.raises(RuntimeError, match="2D binding needs a flat cage"):
         bind(mesh, cage, mode="2D")
     assert mesh_state(mesh) == before
+
+
+class _Event:
+    def __init__(self, kind):
+        self.type, self.value = kind, "PRESS"
+
+
+class _ModalHarness:
+    """Drives the Bind operator's modal() the way Blender's event loop does in the UI, with a stand-in window
+    manager and status bar (the headless bpy module has no event loop to run a modal operator)."""
+
+    def __init__(self, requests):
+        from lbc_addon import jobs
+        from lbc_addon.operators import _running
+
+        self.reports, self.status = [], []
+        self._worker = jobs.Worker(requests)
+        self._timer = object()
+        _running.append(self._worker)
+        self._worker.start()
+        manager = type("WindowManager", (), {"event_timer_remove": lambda _self, timer: None})()
+        workspace = type("Workspace", (), {"status_text_set": lambda _self, text: self.status.append(text)})()
+        self.context = type("Context", (), {"window_manager": manager, "workspace": workspace})()
+
+    def report(self, kinds, message):
+        self.reports.append((set(kinds), message))
+
+    def run(self, cancel_after=None):
+        """Send timer events (and Esc after ``cancel_after`` of them) until modal() finishes; returns its result."""
+        from lbc_addon.operators import OBJECT_OT_lbc_bind
+
+        ticks = 0
+        while True:
+            if ticks == cancel_after:
+                assert OBJECT_OT_lbc_bind.modal(self, self.context, _Event("ESC")) == {"RUNNING_MODAL"}
+            result = OBJECT_OT_lbc_bind.modal(self, self.context, _Event("TIMER"))
+            if result != {"RUNNING_MODAL"}:
+                return result
+            ticks += 1
+            self._worker._thread.join(0.05)
+
+    def _finish(self, context):
+        from lbc_addon.operators import _Binder
+
+        _Binder._finish(self, context)
+
+
+def _requests(mesh, cage):
+    from lbc_addon import jobs
+
+    return [jobs.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), resolution=CELLS)]
+
+
+def test_modal_bind_shows_progress_and_applies_when_the_worker_is_done():
+    mesh, cage = sphere_in_box_scene()
+    harness = _ModalHarness(_requests(mesh, cage))
+    assert harness.run() == {"FINISHED"}
+    assert is_bound(mesh) and harness.status[-1] is None  # the status bar is given back
+    assert any("Bound 1 mesh(es)" in message for _, message in harness.reports)
+
+
+def test_esc_during_a_modal_bind_cancels_it_and_changes_nothing():
+    mesh, cage = sphere_in_box_scene()
+    before = mesh_state(mesh), sorted(bpy.data.node_groups.keys())
+    harness = _ModalHarness(_requests(mesh, cage))
+    assert harness.run(cancel_after=0) == {"CANCELLED"}
+    assert ({"WARNING"}, "Bind cancelled: nothing changed") in harness.reports
+    assert (mesh_state(mesh), sorted(bpy.data.node_groups.keys())) == before
+    assert not is_bound(mesh)
