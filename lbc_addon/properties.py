@@ -5,6 +5,8 @@ Stored as ID properties, so it is saved in the .blend; Unbind removes the whole 
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from lbc_core.meshing import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D
+from lbc_core.solver import DEFAULT_TOLERANCE
 
 # lbc_core's weighting functions ρ of the geodesic distance D in the TV weights ω = ρ(D).
 WEIGHTING_ITEMS = (
@@ -26,8 +28,8 @@ class BindOptions:
 
     resolution: IntProperty(
         name="Resolution",
-        description="Cells (triangles in 2D, tetrahedra in 3D) filling the cage; 0 uses lbc_core's default "
-        "(3000 in 2D, 20000 in 3D). More cells: finer weights, slower bind",
+        description=f"About how many cells (triangles in 2D, tetrahedra in 3D) fill the cage; 0 uses lbc's default "
+        f"({DEFAULT_CELLS_2D} in 2D, {DEFAULT_CELLS_3D} in 3D). More cells: finer weights, slower bind",
         default=0,
         min=0,
         soft_max=200000,
@@ -36,16 +38,17 @@ class BindOptions:
                             items=WEIGHTING_ITEMS, default="quadratic")
     epsilon: FloatProperty(
         name="Relaxation ε",
-        description="Relaxation of the interpolation constraint (0: exact); a little relaxation smooths the weights",
+        description="C¹ relaxation of the total variation: the gradient's length is smoothed below ε (on a cage "
+        "scaled to unit size). 0: the paper's plain LBC; a few units: smoother weights, slightly less local",
         default=0.0,
         min=0.0,
-        soft_max=0.1,
+        soft_max=10.0,
         precision=4,
     )
     tolerance: FloatProperty(
         name="Tolerance",
-        description="Stopping tolerance of the solver (ADMM residual); 0 uses lbc_core's default (1e-4). "
-        "Smaller: more accurate weights, slower bind",
+        description="Stopping tolerance of the solver (relative ADMM residual); 0 uses lbc's default "
+        f"({DEFAULT_TOLERANCE[2]:g} in 2D, {DEFAULT_TOLERANCE[3]:g} in 3D). Smaller: more accurate weights, slower bind",
         default=0.0,
         min=0.0,
         soft_max=0.01,

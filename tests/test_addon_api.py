@@ -11,7 +11,6 @@ from test_addon_scenes import (  # noqa: F401  (fixtures)
     bound_gargoyle,
     bound_gargoyle_file,
     evaluated_positions,
-    exit_past_blender_teardown,
     mesh_state,
     sphere_in_box_scene,
 )

@@ -15,7 +15,6 @@ from test_addon_scenes import (  # noqa: F401  (fixtures)
     bound_gargoyle,
     bound_gargoyle_file,
     diagonal,
-    exit_past_blender_teardown,
     evaluated_positions,
     positions,
 )

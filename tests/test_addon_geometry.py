@@ -6,7 +6,7 @@ import pytest
 
 from lbc_addon import geometry
 from lbc_core import CageError
-from test_addon_scenes import exit_past_blender_teardown, mesh_object, reset  # noqa: F401
+from test_addon_scenes import mesh_object, reset  # noqa: F401
 
 
 def _grid(name, size=3):

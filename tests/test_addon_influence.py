@@ -7,7 +7,6 @@ from lbc_addon import influence, storage
 from test_addon_scenes import (  # noqa: F401  (fixtures)
     bound_gargoyle,
     bound_gargoyle_file,
-    exit_past_blender_teardown,
     mesh_state,
 )
 

@@ -7,7 +7,7 @@ import pytest
 from lbc_addon import jobs
 from lbc_addon.properties import is_bound
 from lbc_core import CageError, Cancelled
-from test_addon_scenes import exit_past_blender_teardown, mesh_state, sphere_in_box_scene  # noqa: F401
+from test_addon_scenes import mesh_state, sphere_in_box_scene  # noqa: F401
 
 OPTIONS = {"resolution": 1000}
 

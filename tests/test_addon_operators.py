@@ -12,7 +12,6 @@ from test_addon_scenes import (  # noqa: F401  (fixtures)
     bind,
     diagonal,
     evaluated_positions,
-    exit_past_blender_teardown,
     mesh_object,
     mesh_state,
     positions,

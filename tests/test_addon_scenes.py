@@ -4,8 +4,6 @@ Other test_addon_* modules import from here. Binds are the slow part (seconds ea
 made once per session, saved, and opened again by each test that needs it.
 """
 
-import os
-import sys
 from pathlib import Path
 
 import bpy
@@ -24,34 +22,6 @@ CELLS = 2000  # small domain meshes keep each bind at a few seconds
 # the bind and the deformer must work in the mesh's local space (Object Info in relative mode).
 MESH_MATRIX = Matrix.LocRotScale((0.3, -0.2, 0.1), Matrix.Rotation(0.4, 3, "Z").to_quaternion(), (1.5, 1.5, 1.5))
 CAGE_MATRIX = Matrix.LocRotScale((-0.5, 0.25, 0.0), Matrix.Rotation(-0.3, 3, "X").to_quaternion(), (0.8, 1.0, 1.2))
-
-
-class _ExitPastBlenderTeardown:
-    """Ends the pytest process with its exit status once pytest is done, skipping C-level teardown.
-
-    The bpy 4.5.4 module can deadlock at process exit: a static destructor in its sound code destroys a condition
-    variable that its "delayed close" thread still waits on (gdb: ``GlobalState::~GlobalState`` in
-    ``pthread_cond_destroy`` against ``delayed_close_thread_run``). It happens now and then, after everything has
-    run and passed, and would leave the test run hanging. Registered by the autouse fixture below.
-    """
-
-    status = 0
-
-    def pytest_sessionfinish(self, session, exitstatus):
-        self.status = int(exitstatus)
-
-    @pytest.hookimpl(trylast=True)
-    def pytest_unconfigure(self, config):
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(self.status)
-
-
-@pytest.fixture(scope="session", autouse=True)
-def exit_past_blender_teardown(request):
-    """Every test module using bpy imports this fixture (autouse there too) so the exit workaround is in place."""
-    if not request.config.pluginmanager.has_plugin("lbc-exit-past-blender-teardown"):
-        request.config.pluginmanager.register(_ExitPastBlenderTeardown(), "lbc-exit-past-blender-teardown")
 
 
 def register_addon():

@@ -4,7 +4,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from lbc_addon import storage
-from test_addon_scenes import exit_past_blender_teardown, mesh_state, sphere_in_box_scene  # noqa: F401
+from test_addon_scenes import mesh_state, sphere_in_box_scene  # noqa: F401
 
 
 def test_slot_arrays_pad_rows_and_map_columns_to_cage_vertices():

@@ -10,7 +10,6 @@ from lbc_addon import ui
 from test_addon_scenes import (  # noqa: F401  (fixtures)
     bound_gargoyle,
     bound_gargoyle_file,
-    exit_past_blender_teardown,
     register_addon,
     sphere_in_box_scene,
 )
