@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test bench clean
+.PHONY: demo blender-demo test bench extension clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -13,12 +13,19 @@ $(BIN)/.installed: pyproject.toml
 
 demo: $(BIN)/.installed
 	$(BIN)/python demo.py
+	$(BIN)/python demo_blender.py
+
+blender-demo: $(BIN)/.installed
+	$(BIN)/python demo_blender.py
 
 test: $(BIN)/.installed
 	$(BIN)/python -m pytest -q
 
 bench: $(BIN)/.installed
 	$(BIN)/python bench/run.py
+
+extension: $(BIN)/.installed
+	$(BIN)/python tools/build_extension.py
 
 clean:
 	rm -rf $(VENV)

@@ -37,16 +37,15 @@ MANIFEST = ROOT / "blender_manifest.toml"
 
 # Versions with wheels for Python 3.11 and 3.13 on all four platforms that work with numpy 1.26 to 2.x (Blender 4.2
 # to 4.5 ship numpy 1.26): scipy 1.17.1 needs numpy >= 1.26.4, < 2.7 (scipy 1.18 needs numpy 2).
-PINS = {"scipy": "1.17.1", "potpourri3d": "1.4.0", "pytetwild": "0.2.3", "cholespy": "2.2.0"}
+PINS = {"scipy": "1.17.1", "potpourri3d": "1.4.0", "cholespy": "2.2.0"}
 SHIPPED_BY_BLENDER = {"numpy"}
 PYTHON_VERSIONS = ("3.11", "3.13")
-# pip platform tags per Blender platform. Linux: Blender needs glibc 2.28. macOS: pytetwild 0.2.3 has macOS 15
-# wheels only, so the macOS builds need macOS 15.
+# pip platform tags per Blender platform. Linux: Blender needs glibc 2.28. macOS: scipy 1.17's wheels need macOS 14.
 PLATFORM_TAGS = {
     "linux-x64": ("manylinux_2_28_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64"),
     "windows-x64": ("win_amd64",),
-    "macos-arm64": ("macosx_15_0_arm64",),
-    "macos-x64": ("macosx_15_0_x86_64",),
+    "macos-arm64": ("macosx_14_0_arm64",),
+    "macos-x64": ("macosx_14_0_x86_64",),
 }
 # Fixed zip timestamps make the lbc_core wheel byte-identical from one build to the next.
 _EPOCH = (1980, 1, 1, 0, 0, 0)
