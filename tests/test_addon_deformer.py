@@ -169,3 +169,58 @@ def test_blend_opened_without_the_add_on_still_deforms(bound_gargoyle, tmp_path)
     """)
     subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, timeout=300)
     assert np.array_equal(np.load(out).astype(np.float64), expected)
+
+
+def test_cage_driven_by_an_armature_moves_the_mesh(bound_gargoyle):
+    """The deformer reads the evaluated cage: a cage skinned to a rotating bone moves the mesh with it."""
+    mesh, cage = bound_gargoyle
+    rest = positions(mesh.data)
+    armature = bpy.data.objects.new("Rig", bpy.data.armatures.new("Rig"))
+    bpy.context.scene.collection.objects.link(armature)
+    bpy.context.view_layer.objects.active = armature
+    bpy.ops.object.mode_set(mode="EDIT")
+    bone = armature.data.edit_bones.new("Root")
+    bone.head, bone.tail = (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    group = cage.vertex_groups.new(name="Root")
+    group.add(range(len(cage.data.vertices)), 1.0, "REPLACE")
+    skin = cage.modifiers.new("Armature", "ARMATURE")
+    skin.object = armature
+    cage_rest = _world_positions(cage, evaluated=False)
+    armature.pose.bones["Root"].matrix_basis = Matrix.Rotation(0.5, 4, "X")
+    bpy.context.view_layer.update()
+    # The skinned cage moved rigidly; recover that map from Blender's own evaluated cage and expect it on the mesh.
+    cage_posed = _world_positions(cage, evaluated=True)
+    assert np.abs(cage_posed - cage_rest).max() > 0.05 * diagonal(mesh)
+    homogeneous = np.c_[cage_rest, np.ones(len(cage_rest))]
+    world_map = np.linalg.lstsq(homogeneous, cage_posed, rcond=None)[0].T  # (3, 4)
+    to_mesh = np.array(mesh.matrix_world.inverted())
+    from_mesh = np.array(mesh.matrix_world)
+    full = to_mesh @ np.vstack([world_map, [0, 0, 0, 1]]) @ from_mesh
+    expected = rest @ full[:3, :3].T + full[:3, 3]
+    assert np.abs(evaluated_positions(mesh) - expected).max() < 1e-5 * diagonal(mesh)
+
+
+def _world_positions(obj, evaluated):
+    """Vertex positions in world space, of the object's data or of its evaluated (modified) mesh."""
+    source = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()) if evaluated else obj
+    data = source.to_mesh() if evaluated else source.data
+    local = np.array([v.co for v in data.vertices])
+    if evaluated:
+        source.to_mesh_clear()
+    matrix = np.array(obj.matrix_world)
+    return local @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def test_animated_cage_moves_the_mesh_on_frame_change(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    rest = positions(mesh.data)
+    start = cage.location.copy()
+    cage.keyframe_insert("location", frame=1)
+    cage.location = start + type(start)((0.0, 0.5, 0.0))
+    cage.keyframe_insert("location", frame=10)
+    bpy.context.scene.frame_set(10)
+    shift = np.array(mesh.matrix_world.inverted().to_3x3()) @ np.array([0.0, 0.5, 0.0])
+    assert np.abs(evaluated_positions(mesh) - (rest + shift)).max() < 1e-5 * diagonal(mesh)
+    bpy.context.scene.frame_set(1)
+    assert np.abs(evaluated_positions(mesh) - rest).max() < 1e-5 * diagonal(mesh)
