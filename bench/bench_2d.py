@@ -3,7 +3,7 @@
 For each pack (tests/data/<case>.npz: the reference's own mesh, boundary values and TV weights) this runs the plain
 numpy re-implementation of the reference ADMM (bench/reference_admm.py, iteration-for-iteration faithful) and, when
 ``lbc_core.solve_on_mesh`` is importable, our solver on the same inputs, then prints one table row per case.
-Seconds are wall time of each whole call (setup, factorisation, iterations) on a shared machine: indicative only.
+Seconds are the best of two wall times of each whole call (setup, factorisation, iterations) on a shared machine.
 Objectives are recomputed for both with lbc_core.objective.tv_objective, in the cage's units. Usage:
 
     .venv/bin/python bench/bench_2d.py [case ...]
@@ -37,7 +37,7 @@ def our_solver():
     return solve_on_mesh
 
 
-def run_case(case, solve=None, **options):
+def run_case(case, solve=None, repeats=2, **options):
     """Run the baseline and (if ``solve`` is given) our solver on one pack.
 
     Parameters
@@ -46,6 +46,8 @@ def run_case(case, solve=None, **options):
         Pack name in tests/data.
     solve : callable, optional
         ``solve_on_mesh``; None runs the baseline only.
+    repeats : int
+        Each solver runs this many times and keeps its fastest time (the machine is shared: noise only adds).
     **options
         Passed to ``solve``.
 
@@ -58,15 +60,19 @@ def run_case(case, solve=None, **options):
     """
     pack = np.load(DATA / f"{case}.npz")
     vertices, triangles, tv_weights = pack["vertices"], pack["triangles"], pack["tv_weights"]
-    base = reference_admm(vertices, triangles, pack["boundary_vertex"], pack["boundary_weights"], tv_weights)
+    runs = [reference_admm(vertices, triangles, pack["boundary_vertex"], pack["boundary_weights"], tv_weights)
+            for _ in range(repeats)]
+    base = min(runs, key=lambda run: run["seconds"])
     row = dict(case=case, n=tv_weights.shape[1], N=len(vertices), reference_objective=float(pack["objective_default"]),
                baseline=dict(iterations=base["iterations"], seconds=base["seconds"], objective=base["objective"]),
                ours=None)
     if solve is not None:
-        start = time.perf_counter()
-        result = solve(vertices, triangles, pack["boundary_vertex"], pack["boundary_weights"],
-                       vertices[pack["control_vertex"]], tv_weights=tv_weights, **options)
-        seconds = time.perf_counter() - start
+        seconds = float("inf")
+        for _ in range(repeats):
+            start = time.perf_counter()
+            result = solve(vertices, triangles, pack["boundary_vertex"], pack["boundary_weights"],
+                           vertices[pack["control_vertex"]], tv_weights=tv_weights, **options)
+            seconds = min(seconds, time.perf_counter() - start)
         row["ours"] = dict(iterations=result.iterations, converged=result.converged, seconds=seconds,
                            objective=tv_objective(vertices, triangles, result.weights, tv_weights))
     return row

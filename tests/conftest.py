@@ -28,5 +28,31 @@ class _ExitPastBlenderTeardown:
             os._exit(self.status)
 
 
+# Binds are the slow part of the add-on tests (seconds each), so a bound gargoyle scene is made once per session,
+# saved, and opened again by each test that needs it. bpy is imported only when such a test runs.
+@pytest.fixture(scope="session")
+def bound_gargoyle_file(tmp_path_factory):
+    """A .blend with the gargoyle bound to its L10 cage (67 vertices) through the operator; returns its path."""
+    import bpy
+    from blender_scenes import CELLS, bind, gargoyle_scene
+
+    mesh, cage = gargoyle_scene("L10")
+    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    path = tmp_path_factory.mktemp("blend") / "bound_gargoyle.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return path
+
+
+@pytest.fixture
+def bound_gargoyle(bound_gargoyle_file):
+    """The bound gargoyle scene, freshly opened; returns (mesh, cage)."""
+    import bpy
+    from blender_scenes import register_addon
+
+    register_addon()
+    bpy.ops.wm.open_mainfile(filepath=str(bound_gargoyle_file))
+    return bpy.data.objects["Gargoyle"], bpy.data.objects["Cage"]
+
+
 def pytest_configure(config):
     config.pluginmanager.register(_ExitPastBlenderTeardown(), "lbc-exit-past-blender-teardown")

@@ -7,9 +7,7 @@ import pytest
 import lbc_core
 from lbc_addon import api, jobs
 from lbc_addon.properties import is_bound
-from test_addon_scenes import (  # noqa: F401  (fixtures)
-    bound_gargoyle,
-    bound_gargoyle_file,
+from blender_scenes import (
     evaluated_positions,
     mesh_state,
     sphere_in_box_scene,

@@ -11,9 +11,7 @@ import numpy as np
 from mathutils import Matrix
 
 from lbc_addon import deformer, storage
-from test_addon_scenes import (  # noqa: F401  (fixtures)
-    bound_gargoyle,
-    bound_gargoyle_file,
+from blender_scenes import (
     diagonal,
     evaluated_positions,
     positions,
@@ -165,7 +163,7 @@ def test_blend_opened_without_the_add_on_still_deforms(bound_gargoyle, tmp_path)
         np.save({str(out)!r}, values.reshape(-1, 3))
         sys.stdout.flush()
         import os
-        os._exit(0)  # bpy 4.5.4 can deadlock in its teardown at exit (see test_addon_scenes)
+        os._exit(0)  # bpy 4.5.4 can deadlock in its teardown at exit (see tests/conftest.py)
     """)
     subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, timeout=300)
     assert np.array_equal(np.load(out).astype(np.float64), expected)

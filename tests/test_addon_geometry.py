@@ -6,7 +6,7 @@ import pytest
 
 from lbc_addon import geometry
 from lbc_core import CageError
-from test_addon_scenes import mesh_object, reset  # noqa: F401
+from blender_scenes import mesh_object, reset
 
 
 def _grid(name, size=3):

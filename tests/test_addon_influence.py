@@ -4,9 +4,7 @@ import bpy
 import numpy as np
 
 from lbc_addon import influence, storage
-from test_addon_scenes import (  # noqa: F401  (fixtures)
-    bound_gargoyle,
-    bound_gargoyle_file,
+from blender_scenes import (
     mesh_state,
 )
 

@@ -11,7 +11,7 @@ import tomllib
 
 import pytest
 
-from test_addon_scenes import ROOT
+from blender_scenes import ROOT
 
 sys.path.insert(0, str(ROOT / "tools"))
 import build_extension  # noqa: E402
@@ -70,7 +70,7 @@ INSTALL_AND_BIND = textwrap.dedent("""
     with open({out!r}, "w") as handle:
         json.dump(result, handle)
     sys.stdout.flush()
-    os._exit(0)  # bpy 4.5.4 can deadlock in its teardown at exit (see test_addon_scenes)
+    os._exit(0)  # bpy 4.5.4 can deadlock in its teardown at exit (see tests/conftest.py)
 """)
 
 

@@ -7,7 +7,7 @@ import pytest
 from lbc_addon import jobs
 from lbc_addon.properties import is_bound
 from lbc_core import CageError, Cancelled
-from test_addon_scenes import mesh_state, sphere_in_box_scene  # noqa: F401
+from blender_scenes import mesh_state, sphere_in_box_scene
 
 OPTIONS = {"resolution": 1000}
 

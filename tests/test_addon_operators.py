@@ -8,7 +8,7 @@ import pytest
 from mathutils import Matrix
 
 from lbc_addon.properties import is_bound
-from test_addon_scenes import (  # noqa: F401  (fixtures)
+from blender_scenes import (
     bind,
     diagonal,
     evaluated_positions,

@@ -4,7 +4,7 @@ import bpy
 
 from lbc_addon.properties import WEIGHTING_ITEMS, is_bound
 from lbc_core.geodesics import WEIGHTINGS
-from test_addon_scenes import bind, sphere_in_box_scene  # noqa: F401
+from blender_scenes import bind, sphere_in_box_scene
 
 
 def test_weighting_choices_are_lbc_cores():

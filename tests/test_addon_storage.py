@@ -4,7 +4,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from lbc_addon import storage
-from test_addon_scenes import mesh_state, sphere_in_box_scene  # noqa: F401
+from blender_scenes import mesh_state, sphere_in_box_scene
 
 
 def test_slot_arrays_pad_rows_and_map_columns_to_cage_vertices():

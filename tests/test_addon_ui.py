@@ -7,9 +7,7 @@ records the labels and operators it is given.
 import bpy
 
 from lbc_addon import ui
-from test_addon_scenes import (  # noqa: F401  (fixtures)
-    bound_gargoyle,
-    bound_gargoyle_file,
+from blender_scenes import (
     register_addon,
     sphere_in_box_scene,
 )

@@ -1,14 +1,12 @@
-"""Scenes and helpers the Blender add-on tests share (headless, with the bpy module), and checks of the helpers.
+"""Scenes and helpers the Blender add-on tests share (headless, with the bpy module).
 
-Other test_addon_* modules import from here. Binds are the slow part (seconds each), so a bound gargoyle scene is
-made once per session, saved, and opened again by each test that needs it.
+The test_addon_* modules import from here; the bound gargoyle fixtures built from these are in conftest.py.
 """
 
 from pathlib import Path
 
 import bpy
 import numpy as np
-import pytest
 from mathutils import Matrix
 
 import lbc_addon
@@ -135,37 +133,3 @@ def mesh_state(obj):
         "mesh_properties": sorted(mesh.keys()),
         "node_groups": sorted(group.name for group in bpy.data.node_groups),
     }
-
-
-@pytest.fixture(scope="session")
-def bound_gargoyle_file(tmp_path_factory):
-    """A .blend with the gargoyle bound to its L10 cage (67 vertices) through the operator; returns its path."""
-    mesh, cage = gargoyle_scene("L10")
-    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
-    path = tmp_path_factory.mktemp("blend") / "bound_gargoyle.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    return path
-
-
-@pytest.fixture
-def bound_gargoyle(bound_gargoyle_file):
-    """The bound gargoyle scene, freshly opened; returns (mesh, cage)."""
-    register_addon()
-    bpy.ops.wm.open_mainfile(filepath=str(bound_gargoyle_file))
-    return bpy.data.objects["Gargoyle"], bpy.data.objects["Cage"]
-
-
-def test_gargoyle_scene_has_the_data_files_geometry_in_world_space():
-    mesh, cage = gargoyle_scene("L10")
-    vertices, _ = read_mesh(GARGOYLE / "mesh.off")
-    assert len(mesh.data.vertices) == len(vertices) == 2674
-    assert len(cage.data.vertices) == 67
-    world = positions(mesh.data) @ np.array(MESH_MATRIX)[:3, :3].T + np.array(MESH_MATRIX)[:3, 3]
-    assert np.abs(world - vertices).max() < 1e-5
-
-
-def test_mesh_state_sees_a_single_changed_value():
-    mesh, _ = sphere_in_box_scene()
-    before = mesh_state(mesh)
-    mesh.data.vertices[7].co.x += 1e-3
-    assert mesh_state(mesh) != before
