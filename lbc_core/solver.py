@@ -18,8 +18,10 @@ Where this differs from the authors' reference, and why:
 - The penalty is picked from the number of control points; the start is the harmonic coordinates (the reference
   computes them and throws them away).
 - The stopping rule is relative (Boyd et al. 2011, §3.3.1), so it behaves the same across mesh sizes.
-- The result is projected onto the non-negative set with the equality constraints kept, so the output satisfies all
-  constraints (the reference returns Z, which dips below zero).
+- The output is the clamped split variable W, with its exact zeros, projected back onto the equality constraints on
+  its own support. It meets every constraint (the reference returns Z, which dips below zero), is exactly sparse,
+  and is closer to optimal than Z at the same iteration: on the paper's cages it passes the reference's objective
+  after 50-400 iterations.
 """
 
 import os
@@ -34,13 +36,13 @@ from . import fem
 from .objective import tv_objective
 from .parallel import thread_map, worker_count
 from .errors import Cancelled, CageError
-from .reduction import restore_constraints
+from .reduction import constraint_residuals, restore_constraints
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
 BETA = {2: 20.0, 3: 20.0}
 PENALTY_SCALE = {2: 1.3, 3: 1.3}
-DEFAULT_TOLERANCE = {2: 1e-4, 3: 3e-5}
+DEFAULT_TOLERANCE = {2: 3e-4, 3: 1e-4}
 # The dual residual is allowed this many times the primal tolerance: it lags, and the objective settles first.
 DUAL_TOLERANCE_FACTOR = 10.0
 
@@ -116,8 +118,8 @@ def solve_on_mesh(
         0 is the paper's plain total variation.
     tolerance : float, optional
         Relative primal residual tolerance of the stopping rule (the dual one is 10 times larger). The defaults
-        (DEFAULT_TOLERANCE) stop within about 0.1 % of the optimal objective on the paper's 2D cages, and in 3D
-        where the solver's faint tails have died out (they would add influences to the points of a cell).
+        (DEFAULT_TOLERANCE) stop within 0.02 % of the optimal objective on the paper's 2D cages; 3D stops tighter,
+        where the influences per point have settled.
     max_iterations : int
     penalty : float, optional
         ADMM penalty ρ on the unit-diagonal cage; None picks c_d / n^(1/(d-1)).
@@ -176,9 +178,9 @@ def solve_on_mesh(
         timer.lap("factorisation")
         if problem.M.shape[0] == 0:
             # n = d + 1: a simplex cage. The constraints leave no freedom; Z = H are its barycentric coordinates.
-            Z = problem.H.astype(np.float64)
+            Z = W = problem.H.astype(np.float64)
         else:
-            Z, iterations, converged, history = _admm(
+            Z, W, iterations, converged, history = _admm(
                 problem, tv_weights, epsilon, tolerance, max_iterations,
                 _default_penalty(d, n) if penalty is None else penalty, relaxation, check_every, anderson_memory,
                 progress, cancel,
@@ -186,7 +188,7 @@ def solve_on_mesh(
             for record in history:  # objectives in the input's units
                 record["objective"] *= scale ** (d - 1)
         timer.lap("solve")
-        weights[interior] = restore_constraints(Z, unit_controls, unit_vertices[interior])
+        weights[interior] = _project(Z, W, unit_controls, unit_vertices[interior])
     objective = tv_objective(vertices, cells, weights, tv_weights)
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds)
 
@@ -243,6 +245,19 @@ def _available_memory():
         return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (AttributeError, ValueError, OSError):
         return None
+
+
+def _project(Z, W, controls, positions):
+    """The output: W's exact zeros kept, partition of unity and reproduction restored on W's support.
+
+    Rows whose support is too small to reproduce their vertex (rare, far from convergence) take Z's correction.
+    """
+    on_support = restore_constraints(W, controls, positions)
+    unity, reproduction = constraint_residuals(on_support, controls, positions)
+    failed = (unity > 1e-12) | (reproduction > 1e-12) | (on_support < 0).any(axis=1)
+    if failed.any():
+        on_support[failed] = restore_constraints(Z[failed], controls, positions[failed])
+    return on_support
 
 
 def _default_penalty(d, n):
@@ -524,7 +539,10 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance")
         if cancel is not None and cancel():
             raise Cancelled("cancelled during the LBC solve")
-    return Z.astype(np.float64), iteration, converged, history
+    # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries faint
+    # tails there until full convergence. Both go back unscaled.
+    W_unscaled = W.astype(np.float64) / problem.sqrt_mass.astype(np.float64)
+    return Z.astype(np.float64), W_unscaled, iteration, converged, history
 
 
 def _residuals(step, state, X, W, Z, gradient, X_old, W_old):
