@@ -100,11 +100,4 @@ class VIEW3D_PT_lbc(bpy.types.Panel):
 CLASSES = (OBJECT_PT_lbc, VIEW3D_PT_lbc)
 
 
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
