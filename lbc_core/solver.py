@@ -62,7 +62,8 @@ class SolveResult:
         Σ_cells Σ_i ω A |∇w_i| of ``weights``, in the input's units (length^(d-1)).
     tv_weights : (F, n) float array
     history : list of dict
-        Residuals and penalty at each convergence check.
+        At each convergence check: the iteration, the relative primal and dual residuals, and the objective of the
+        iterate Z in the input's units (the output, W projected, is lower).
     seconds : dict
         Time per stage.
     """
