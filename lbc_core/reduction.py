@@ -158,8 +158,9 @@ def _reduce_rows(full, controls, positions, threshold, tolerance):
                             _from_padded(corrected[done], columns[done], n))
     pending = np.flatnonzero(~done)
     if len(pending):
-        reduced = _scatter_rows(reduced, pending, _grow_support(full[pending], controls, positions[pending],
-                                                                threshold, tolerance))
+        kept_counts = np.diff(kept.indptr)[pending]
+        reduced = _scatter_rows(reduced, pending, grow_support(full[pending], controls, positions[pending],
+                                                               kept_counts, tolerance))
     return reduced
 
 
@@ -170,14 +171,30 @@ def _restore_and_check(values, columns, controls, positions, tolerance):
     return corrected, (unity <= 1e-9) & (reproduction <= tolerance) & (corrected >= 0).all(axis=1)
 
 
-def _grow_support(full, controls, positions, threshold, tolerance):
-    """Rows whose kept support cannot reproduce them: add dropped weights back, largest first, 1, 2, 4, ... at a time."""
+def grow_support(full, controls, positions, keep, tolerance):
+    """Weights on each row's ``keep`` largest entries, plus the next largest, 1, 2, 4, ... at a time, until the
+    constraints can be restored on them exactly.
+
+    Parameters
+    ----------
+    full : (m, n) scipy.sparse matrix
+        Non-negative candidate weights.
+    controls : (n, d) float array
+    positions : (m, d) float array
+    keep : (m,) int array
+        How many of each row's largest entries to start from.
+    tolerance : float
+        Largest reproduction error accepted, in the units of ``positions``.
+
+    Returns
+    -------
+    (m, n) scipy.sparse.csr_matrix
+    """
     n = controls.shape[0]
     values, columns = _padded(full)
     order = np.argsort(-values, axis=1)
     values = np.take_along_axis(values, order, axis=1)
     columns = np.take_along_axis(columns, order, axis=1)
-    keep = np.count_nonzero(values >= threshold, axis=1)
     reduced = sp.csr_matrix(full.shape)
     pending = np.arange(full.shape[0])
     extra = 1

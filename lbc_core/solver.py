@@ -36,7 +36,7 @@ from . import fem
 from .objective import tv_objective
 from .parallel import thread_map, worker_count
 from .errors import Cancelled, CageError
-from .reduction import constraint_residuals, restore_constraints
+from .reduction import constraint_residuals, grow_support, restore_constraints
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
@@ -251,13 +251,16 @@ def _available_memory():
 def _project(Z, W, controls, positions):
     """The output: W's exact zeros kept, partition of unity and reproduction restored on W's support.
 
-    Rows whose support is too small to reproduce their vertex (rare, far from convergence) take Z's correction.
+    A vertex whose W support is too small to reproduce it (three control points for a point off their plane) gets
+    Z's next largest weights added, largest first, until it is.
     """
     on_support = restore_constraints(W, controls, positions)
     unity, reproduction = constraint_residuals(on_support, controls, positions)
     failed = (unity > 1e-12) | (reproduction > 1e-12) | (on_support < 0).any(axis=1)
     if failed.any():
-        on_support[failed] = restore_constraints(Z[failed], controls, positions[failed])
+        grown = grow_support(sp.csr_matrix(np.maximum(Z[failed], 0.0)), controls, positions[failed],
+                             np.count_nonzero(W[failed] > 0, axis=1), tolerance=1e-12)
+        on_support[failed] = grown.toarray()
     return on_support
 
 
