@@ -64,6 +64,18 @@ def sphere_directions(n_points):
     return directions, np.where(inward[:, None], triangles[:, ::-1], triangles)
 
 
+def draw_dented_sphere(data, n_points, min_radius, max_push, shrink):
+    """A sphere triangulation with random radii whose drawn subset of vertices is scaled by ``shrink`` and pushed by
+    one random vector of components up to ``max_push``; returns (vertices (n, 3), triangles (T, 3))."""
+    directions, triangles = sphere_directions(n_points)
+    radii = np.array(data.draw(st.lists(st.floats(min_radius, 1.0), min_size=n_points, max_size=n_points)))
+    vertices = directions * radii[:, None]
+    dented = np.array(data.draw(st.lists(st.booleans(), min_size=n_points, max_size=n_points)))
+    push = np.array(data.draw(st.tuples(*[st.floats(-max_push, max_push)] * 3)))
+    vertices[dented] = vertices[dented] * shrink + push
+    return vertices, triangles
+
+
 # ------------------------------------------------------------------------------------------------------ 2D polygons
 
 
@@ -114,13 +126,8 @@ def test_star_shaped_polyhedra_are_accepted(n_points, data):
 @SMALL
 @given(st.integers(6, 120), st.data())
 def test_dented_polyhedra_give_a_cage_or_a_cage_error(n_points, data):
-    directions, triangles = sphere_directions(n_points)
-    radii = np.array(data.draw(st.lists(st.floats(0.3, 1.0), min_size=n_points, max_size=n_points)))
-    vertices = directions * radii[:, None]
     # Push some vertices along one direction, deep enough to dent the surface or push it through itself.
-    dented = np.array(data.draw(st.lists(st.booleans(), min_size=n_points, max_size=n_points)))
-    push = np.array(data.draw(st.tuples(*[st.floats(-1.5, 1.5)] * 3)))
-    vertices[dented] += push
+    vertices, triangles = draw_dented_sphere(data, n_points, min_radius=0.3, max_push=1.5, shrink=1.0)
     # Merge some neighbouring triangles into quads, as artists' cages have them.
     faces = [list(t) for t in triangles]
     if data.draw(st.booleans()):
@@ -283,13 +290,8 @@ def test_random_polygons_bind_within_the_quality_bounds(gaps, radii, roughness, 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(6, 24), st.data())
 def test_random_polyhedra_bind_within_the_quality_bounds(n_points, data):
-    directions, triangles = sphere_directions(n_points)
-    radii = np.array(data.draw(st.lists(st.floats(0.4, 1.0), min_size=n_points, max_size=n_points)))
-    vertices = directions * radii[:, None]
     # Dent some vertices: towards the centre (still star-shaped) or sideways (concave, maybe self-intersecting).
-    dented = np.array(data.draw(st.lists(st.booleans(), min_size=n_points, max_size=n_points)))
-    push = np.array(data.draw(st.tuples(*[st.floats(-0.4, 0.4)] * 3)))
-    vertices[dented] = vertices[dented] * 0.6 + push
+    vertices, triangles = draw_dented_sphere(data, n_points, min_radius=0.4, max_push=0.4, shrink=0.6)
     rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
     # Points near the centre (inside when the cage stays star-shaped around it) and anywhere around the cage.
     points = np.r_[rng.normal(scale=0.02, size=(50, 3)), rng.uniform(-1.2, 1.2, (50, 3))]
