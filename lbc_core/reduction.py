@@ -108,12 +108,8 @@ def reduce_weights(weights, controls, positions, threshold, tolerance):
     """
     full = sp.csr_matrix(weights)
     full.sum_duplicates()
-    chunks = [
-        _reduce_rows(full[start:start + ROWS_PER_CHUNK], controls, positions[start:start + ROWS_PER_CHUNK],
-                     threshold, tolerance)
-        for start in range(0, full.shape[0], ROWS_PER_CHUNK)
-    ]
-    return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(full.shape)
+    return _by_chunks(full.shape[0], controls.shape[0], lambda rows: _reduce_rows(
+        full[rows], controls, positions[rows], threshold, tolerance))
 
 
 def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance):
@@ -137,11 +133,13 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     # A weight below threshold / 10 at every corner of a cell cannot reach the threshold inside it; drop those
     # entries (the solver's faint tails) before the product, keeping what a support may need to grow into.
     sparse_domain = sp.csr_matrix(np.where(domain_weights >= threshold / 10, domain_weights, 0.0))
-    n = controls.shape[0]
-    chunks = []
-    for start in range(0, located.shape[0], ROWS_PER_CHUNK):
-        rows = located[start:start + ROWS_PER_CHUNK]
-        chunks.append(_reduce_rows(rows @ sparse_domain, controls, rows @ domain_vertices, threshold, tolerance))
+    return _by_chunks(located.shape[0], controls.shape[0], lambda rows: _reduce_rows(
+        located[rows] @ sparse_domain, controls, located[rows] @ domain_vertices, threshold, tolerance))
+
+
+def _by_chunks(m, n, reduce_chunk):
+    """``reduce_chunk(rows)`` over consecutive row slices of at most ROWS_PER_CHUNK, stacked into an (m, n) CSR."""
+    chunks = [reduce_chunk(slice(start, start + ROWS_PER_CHUNK)) for start in range(0, m, ROWS_PER_CHUNK)]
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix((0, n))
 
 
