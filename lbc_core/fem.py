@@ -83,14 +83,31 @@ def mass_matrix(vertices, cells, lumped=False):
     corners = cells.shape[1]
     _, measures = cell_gradients(vertices, cells)
     if lumped:
-        diagonal = np.bincount(cells.ravel(), np.repeat(measures / corners, corners), minlength=n_vertices)
-        return sp.diags(diagonal).tocsr()
+        return sp.diags(lumped_mass(cells, measures, n_vertices)).tocsr()
     # ∫ φ_i φ_j = |c| (1 + δ_ij) / ((d+1)(d+2)) on a simplex.
     local = (np.ones((corners, corners)) + np.eye(corners)) / (corners * (corners + 1))
     values = measures[:, None, None] * local[None]
     rows = np.broadcast_to(cells[:, :, None], values.shape)
     cols = np.broadcast_to(cells[:, None, :], values.shape)
     return sp.csr_matrix((values.ravel(), (rows.ravel(), cols.ravel())), shape=(n_vertices, n_vertices))
+
+
+def lumped_mass(cells, measures, n_vertices):
+    """Lumped P1 mass per vertex: each cell's measure shared equally among its corners.
+
+    Parameters
+    ----------
+    cells : (F, d+1) int array
+    measures : (F,) float array, from :func:`cell_gradients` or :func:`gradient_operator`
+    n_vertices : int
+
+    Returns
+    -------
+    (N,) float array, in length^d units
+    """
+    cells = np.asarray(cells)
+    corners = cells.shape[1]
+    return np.bincount(cells.ravel(), np.repeat(measures / corners, corners), minlength=n_vertices)
 
 
 def boundary_facets(cells):

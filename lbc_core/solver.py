@@ -314,7 +314,7 @@ class _Problem:
         self.G = G[:, interior].tocsr().astype(dtype)  # (d F, N_in)
         self.GT = self.G.T.tocsr()
         self.E = (G[:, boundary_vertices] @ boundary_weights).astype(dtype)  # (d F, n): the fixed boundary part
-        mass = fem.mass_matrix(vertices, cells, lumped=True).diagonal()[interior]
+        mass = fem.lumped_mass(cells, measures, len(vertices))[interior]
         self.sqrt_mass = np.sqrt(beta * mass)[:, None].astype(dtype)  # (N_in, 1)
         # Equality constraints z K = [x, 1] per vertex, K = [C, 1] (n, d+1): Z = Y M + H.
         K = np.c_[controls, np.ones(len(controls))]
