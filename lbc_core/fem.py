@@ -27,14 +27,23 @@ def cell_gradients(vertices, cells):
     d = vertices.shape[1]
     corners = vertices[cells]  # (F, d+1, d)
     edges = corners[:, 1:, :] - corners[:, :1, :]  # (F, d, d): rows are edge vectors from corner 0
-    det = np.linalg.det(edges)
+    # The gradients of basis functions 1..d are the rows of inv(edges)ᵀ, i.e. the adjugate's rows over the
+    # determinant, written out in closed form: numpy's batched inverse costs ~1 µs per cell.
+    if d == 2:
+        a, b = edges[:, 0], edges[:, 1]
+        det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        adjugate = np.stack([np.c_[b[:, 1], -b[:, 0]], np.c_[-a[:, 1], a[:, 0]]], axis=1)
+    else:
+        a, b, c = edges[:, 0], edges[:, 1], edges[:, 2]
+        adjugate = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=1)
+        det = np.einsum("fk,fk->f", a, adjugate[:, 0])
+    # Flat cells (a repeated corner leaves a round-off determinant, not an exact 0) get zero gradients and measure.
+    degenerate = np.abs(det) <= 1e-13 * np.prod(np.linalg.norm(edges, axis=2), axis=1)
+    det[degenerate] = 0.0
     measures = np.abs(det) / (2.0 if d == 2 else 6.0)
-    # The gradients of basis functions 1..d are the columns of inv(edges); basis 0 takes minus their sum.
-    safe = np.where(np.abs(det)[:, None, None] > 0, edges, np.eye(d))
-    inverse = np.linalg.inv(safe)  # (F, d, d)
-    grads_rest = np.transpose(inverse, (0, 2, 1))  # (F, d, d): row j = gradient of basis j+1
+    grads_rest = adjugate / np.where(degenerate, 1.0, det)[:, None, None]  # (F, d, d): row j = gradient of basis j+1
     gradients = np.concatenate([-grads_rest.sum(axis=1, keepdims=True), grads_rest], axis=1)
-    gradients[np.abs(det) == 0] = 0.0
+    gradients[degenerate] = 0.0
     return gradients, measures
 
 
