@@ -60,11 +60,11 @@ def gradient_operator(vertices, cells):
     n_cells, corners = cells.shape
     d = corners - 1
     gradients, measures = cell_gradients(vertices, cells)
-    rows = (np.arange(n_cells)[:, None, None] * d + np.arange(d)[None, None, :]).repeat(corners, axis=1)
-    cols = np.broadcast_to(cells[:, :, None], rows.shape)
-    G = sp.csr_matrix(
-        (gradients.ravel(), (rows.ravel(), cols.ravel())), shape=(n_cells * d, len(vertices))
-    )
+    # Every row holds exactly the d+1 corners of its cell, so the CSR arrays are written directly.
+    indices = np.repeat(cells, d, axis=0).ravel()  # row c d + k: the corners of cell c
+    data = np.transpose(gradients, (0, 2, 1)).ravel()  # (F, d, d+1): component k of each corner's gradient
+    indptr = np.arange(0, n_cells * d * corners + 1, corners)
+    G = sp.csr_matrix((data, indices, indptr), shape=(n_cells * d, len(vertices)))
     return G, measures
 
 
