@@ -190,7 +190,11 @@ def solve_on_mesh(
                 record["objective"] *= scale ** (d - 1)
         timer.lap("solve")
         weights[interior] = _project(Z, W, unit_controls, unit_vertices[interior])
-    objective = tv_objective(vertices, cells, weights, tv_weights)
+    if len(interior):
+        # From the operators at hand, in float64: TV scales with length^(d-1).
+        objective = problem.objective(weights[interior], tv_weights) * scale ** (d - 1)
+    else:
+        objective = tv_objective(vertices, cells, weights, tv_weights)
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds)
 
 
@@ -298,22 +302,28 @@ def _control_vertices(vertices, control_points):
 class _Problem:
     """The fixed data of one solve, on the unit-diagonal cage, in measure-scaled variables.
 
-    X̃ = √|c| ∇w per cell and W̃ = √(β m_v) w per vertex, so the penalty's weighted norms become Euclidean.
+    X̃ = √|c| ∇w per cell and W̃ = √(β m_v) w per vertex, so the penalty's weighted norms become Euclidean. Gradient
+    rows are component-major (row k F + c is component k on cell c): a (d F, n) array reshapes to (d, F, n), whose
+    (F, n) slabs the per-cell work reads contiguously.
     """
 
     def __init__(self, vertices, cells, boundary_vertices, boundary_weights, controls, interior, beta, dtype):
         d = vertices.shape[1]
-        G, measures = fem.gradient_operator(vertices, cells)
+        gradients, measures = fem.cell_gradients(vertices, cells)
         self.d = d
         self.n_cells = len(measures)
         self.n_interior = len(interior)
         self.measures = measures
         self.beta = beta
-        sqrt_measure = np.sqrt(np.repeat(measures, d))
-        G = (sp.diags(sqrt_measure) @ G).tocsc()
-        self.G = G[:, interior].tocsr().astype(dtype)  # (d F, N_in)
+        # Rows component-major, scaled by √|c|; columns split into the unknowns and the fixed boundary.
+        values = np.transpose(gradients * np.sqrt(measures)[:, None, None], (2, 0, 1))  # (d, F, d+1)
+        corners = np.broadcast_to(cells, values.shape)
+        G64 = _columns_subset(values, corners, interior, len(vertices))  # (d F, N_in)
+        self.E64 = _columns_subset(values, corners, boundary_vertices, len(vertices)) @ boundary_weights  # (d F, n)
+        self.G64 = G64
+        self.G = G64.astype(dtype)
         self.GT = self.G.T.tocsr()
-        self.E = (G[:, boundary_vertices] @ boundary_weights).astype(dtype)  # (d F, n): the fixed boundary part
+        self.E = self.E64.astype(dtype)
         mass = fem.lumped_mass(cells, measures, len(vertices))[interior]
         self.sqrt_mass = np.sqrt(beta * mass)[:, None].astype(dtype)  # (N_in, 1)
         # Equality constraints z K = [x, 1] per vertex, K = [C, 1] (n, d+1): Z = Y M + H.
@@ -325,10 +335,38 @@ class _Problem:
         self.M = vt[rank:].astype(dtype)  # (n - d - 1, n), orthonormal rows
         self.MT = np.ascontiguousarray(self.M.T)
         self.H = (np.c_[vertices[interior], np.ones(len(interior))] @ np.linalg.pinv(K)).astype(dtype)  # (N_in, n)
-        system = G[:, interior].T @ G[:, interior] + sp.diags(beta * mass)  # stiffness + β mass
+        system = self.GT @ self.G + sp.diags(beta * mass)  # stiffness + β mass
         self.factor = _Factor(system.tocsc(), dtype)
         # √|c| of each cell, to turn scaled gradients back into ω |c| |∇w|.
         self.sqrt_cell = np.sqrt(measures)[:, None]
+
+    def objective(self, interior_weights, tv_weights):
+        """Σ ω |c| |∇w| (float64, unit-diagonal cage) of interior weights (N_in, n) with the boundary values."""
+        gradient = (self.G64 @ interior_weights + self.E64).reshape(self.d, self.n_cells, -1)
+        return _scaled_tv(gradient, tv_weights, self.sqrt_cell)
+
+
+def _columns_subset(values, columns, subset, n_columns):
+    """The sparse matrix with one row per leading entry of ``values``, restricted to the columns in ``subset``.
+
+    Parameters
+    ----------
+    values, columns : (..., k) arrays
+        Each row's k entries and their column indices.
+    subset : (m,) int array
+        Columns kept, renumbered 0..m-1 in this order.
+    n_columns : int
+
+    Returns
+    -------
+    (prod(...), m) scipy.sparse.csr_matrix
+    """
+    renumber = np.full(n_columns, -1)
+    renumber[subset] = np.arange(len(subset))
+    local = renumber[columns].reshape(-1, columns.shape[-1])
+    kept = local >= 0
+    indptr = np.r_[0, np.cumsum(kept.sum(axis=1))]
+    return sp.csr_matrix((values.reshape(local.shape)[kept], local[kept], indptr), shape=(len(local), len(subset)))
 
 
 class _Factor:
@@ -368,13 +406,15 @@ class _DouglasRachford:
         self.p, self.epsilon, self.alpha = p, epsilon, alpha
         n = tv_weights.shape[1]
         self.size_x = p.n_cells * p.d * n
-        self.shape_x, self.shape_w = (p.n_cells * p.d, n), (p.n_interior, n)
+        self.shape_x, self.shape_w = (p.d, p.n_cells, n), (p.n_interior, n)
         self.tv_weights = tv_weights
         # In scaled variables the shrink threshold of cell c is √|c| ω / ρ; the clip bound of vertex v is √(β m_v).
         self.thresholds = (p.sqrt_cell * tv_weights / rho).astype(p.G.dtype)
+        self.boundary_part = p.E.reshape(self.shape_x)
         self.chunks = _cell_chunks(p, self.size_x)
 
     def split(self, state):
+        """Views of a state as v_X (d, F, n) and v_W (N_in, n)."""
         return state[:self.size_x].reshape(self.shape_x), state[self.size_x:].reshape(self.shape_w)
 
     def initial_state(self):
@@ -384,35 +424,36 @@ class _DouglasRachford:
         return np.concatenate([(p.G @ Z + p.E).ravel(), (p.sqrt_mass * np.clip(Z, 0.0, 1.0)).ravel()])
 
     def __call__(self, state):
-        """Return the next state, and X̃, W̃, Z and the scaled gradient g̃ of this step (for residuals).
+        """Return the next state and this step's :class:`_Step` (for residuals).
 
-        The per-cell work runs on chunks of cells in threads (numpy and scipy release the GIL) around the one
-        factorised solve.
+        X̃ is never formed: it is v_X times the per-cell shrink factor, which the reflection and the update fold into
+        their products. The per-cell work runs on chunks of cells in threads (numpy and scipy release the GIL)
+        around the one factorised solve.
         """
-        p, alpha = self.p, self.alpha
+        p, alpha, E = self.p, self.alpha, self.boundary_part
         v_x, v_w = self.split(state)
         new_state = np.empty_like(state)
         new_x, new_w = self.split(new_state)
-        X = np.empty_like(v_x)
+        shrink = np.empty(self.shape_x[1:], dtype=state.dtype)  # (F, n): X̃ = v_X · shrink
         gradient = np.empty_like(v_x)
 
         def shrink_and_reflect(chunk):
-            rows, cells = chunk.rows, chunk.cells
-            X[rows] = _shrink(v_x[rows], self.thresholds[cells], self.epsilon, cells.stop - cells.start, p.d)
-            reflected = 2.0 * X[rows]
-            reflected -= v_x[rows]
-            reflected -= p.E[rows]
-            return chunk.GT @ reflected
+            cells = chunk.cells
+            shrink[cells] = _shrink_factor(v_x[:, cells], self.thresholds[cells], self.epsilon)
+            reflected = v_x[:, cells] * (2.0 * shrink[cells] - 1.0)  # 2 X̃ - v_X
+            reflected -= E[:, cells]
+            return chunk.GT @ reflected.reshape(-1, reflected.shape[2])
 
         def update(chunk):
-            rows = chunk.rows
-            gradient[rows] = chunk.G @ Z
-            gradient[rows] += p.E[rows]
-            np.subtract(gradient[rows], X[rows], out=new_x[rows])
-            new_x[rows] *= alpha
-            new_x[rows] += v_x[rows]
+            cells = chunk.cells
+            g = gradient[:, cells]
+            np.add((chunk.G @ Z).reshape(g.shape), E[:, cells], out=g)
+            # v_X + α (g - X̃), with X̃ = v_X · shrink
+            np.multiply(v_x[:, cells], 1.0 - alpha * shrink[cells], out=new_x[:, cells])
+            new_x[:, cells] += alpha * g
 
-        W = np.clip(v_w, 0.0, p.sqrt_mass)
+        W = np.maximum(v_w, 0.0)  # clip to [0, √(β m_v)]; np.clip with a broadcast bound is several times slower
+        np.minimum(W, p.sqrt_mass, out=W)
         reflected_w = 2.0 * W
         reflected_w -= v_w
         rhs = sum(thread_map(shrink_and_reflect, self.chunks))
@@ -424,21 +465,35 @@ class _DouglasRachford:
         new_w -= W
         new_w *= alpha
         new_w += v_w
-        return new_state, X, W, Z, gradient
+        return new_state, _Step(v_x, v_w, shrink, W, Z, gradient)
 
     def objective(self, gradient):
-        """Σ ω |c| |∇w| on the unit-diagonal cage, from a scaled gradient."""
-        p = self.p
-        norms = _group_norms(gradient, p.n_cells, p.d)
-        return float(np.sum(self.tv_weights * p.sqrt_cell * norms))
+        """Σ ω |c| |∇w| on the unit-diagonal cage, from a scaled gradient (d, F, n)."""
+        return _scaled_tv(gradient, self.tv_weights, self.p.sqrt_cell)
+
+
+@dataclass
+class _Step:
+    """One Douglas-Rachford step: its input state (v_X, v_W), the split variables X̃ = v_X · shrink and W̃, the
+    iterate Z and its scaled gradient (d, F, n), boundary part included."""
+
+    v_x: np.ndarray
+    v_w: np.ndarray
+    shrink: np.ndarray
+    W: np.ndarray
+    Z: np.ndarray
+    gradient: np.ndarray
+
+    @property
+    def X(self):
+        return self.v_x * self.shrink
 
 
 @dataclass
 class _Chunk:
-    """A range of cells, with its rows of the gradient operator, processed by one thread."""
+    """A range of cells, with its rows of the gradient operator (component-major), processed by one thread."""
 
     cells: slice
-    rows: slice
     G: sp.csr_matrix
     GT: sp.csr_matrix
 
@@ -450,12 +505,14 @@ PARALLEL_MIN_ENTRIES = 500_000
 def _cell_chunks(problem, size_x):
     """Split the cells into one chunk per core when the problem is large enough to gain from threads."""
     count = worker_count() if size_x >= PARALLEL_MIN_ENTRIES else 1
+    if count == 1:
+        return [_Chunk(slice(0, problem.n_cells), problem.G, problem.GT)]
     bounds = np.linspace(0, problem.n_cells, count + 1).astype(int)
     chunks = []
     for start, stop in zip(bounds[:-1], bounds[1:]):
-        rows = slice(start * problem.d, stop * problem.d)
+        rows = (np.arange(problem.d)[:, None] * problem.n_cells + np.arange(start, stop)[None, :]).ravel()
         G = problem.G[rows]
-        chunks.append(_Chunk(slice(start, stop), rows, G, G.T.tocsr()))
+        chunks.append(_Chunk(slice(start, stop), G, G.T.tocsr()))
     return chunks
 
 
@@ -468,9 +525,11 @@ class _Anderson:
         self.dG = np.zeros((memory, size), dtype=dtype)  # map-value differences
         self.gram = np.zeros((memory, memory))
         self.count = 0
+        self._residual, self._products = None, None  # the last pushed residual r and ΔF · r
 
     def reset(self):
         self.count = 0
+        self._residual = None
 
     def push(self, value, residual, previous_value, previous_residual):
         slot = self.count % self.memory
@@ -479,9 +538,17 @@ class _Anderson:
         self.count += 1
         used = min(self.count, self.memory)
         # BLAS in the history's own precision: mixing in float64 would copy the whole history each call.
-        row = (self.dF[:used] @ self.dF[slot]).astype(np.float64)
+        products = (self.dF[:used] @ residual).astype(np.float64)
+        if previous_residual is self._residual:
+            # ΔF_j · ΔF_new = ΔF_j · r_new - ΔF_j · r_old: the history is read once per step, not twice.
+            row = products.copy()
+            row[:len(self._products)] -= self._products
+            row[slot] = float(self.dF[slot] @ self.dF[slot])
+        else:
+            row = (self.dF[:used] @ self.dF[slot]).astype(np.float64)
         self.gram[slot, :used] = row
         self.gram[:used, slot] = row
+        self._residual, self._products = residual, products
 
     def extrapolate(self, value, residual):
         """The extrapolated next state, or None without history."""
@@ -489,7 +556,11 @@ class _Anderson:
         if used == 0:
             return None
         gram = self.gram[:used, :used] + 1e-10 * np.trace(self.gram[:used, :used]) / used * np.eye(used)
-        theta = np.linalg.solve(gram, (self.dF[:used] @ residual).astype(np.float64))
+        if residual is self._residual:
+            products = self._products
+        else:
+            products = (self.dF[:used] @ residual).astype(np.float64)
+        theta = np.linalg.solve(gram, products)
         return value - (theta.astype(value.dtype) @ self.dG[:used])
 
 
@@ -499,19 +570,20 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     anderson = _Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype) if memory else None
 
     state = step.initial_state()
-    value, X, W, Z, gradient = step(state)
+    value, out = step(state)
     residual = value - state
     residual_norm = np.linalg.norm(residual)
     history = []
     converged = False
     iteration = 1
     fraction, first_distance = 0.0, None
+    primal_scale, early_check_done = None, False
     while iteration < max_iterations:
         candidate = anderson.extrapolate(value, residual) if anderson else None
         if candidate is None:
             candidate = value
-        X_old, W_old = X, W
-        next_value, X, W, Z, gradient = step(candidate)
+        previous = out
+        next_value, out = step(candidate)
         iteration += 1
         next_residual = next_value - candidate
         next_norm = np.linalg.norm(next_residual)
@@ -519,21 +591,29 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             # Safeguard: the extrapolation did not reduce the residual; take the plain step instead.
             anderson.reset()
             candidate = value
-            next_value, X, W, Z, gradient = step(candidate)
+            next_value, out = step(candidate)
             iteration += 1
             next_residual = next_value - candidate
             next_norm = np.linalg.norm(next_residual)
         elif anderson:
             anderson.push(next_value, next_residual, value, residual)
-        state, value, residual, residual_norm = candidate, next_value, next_residual, next_norm
-        if iteration % check_every and iteration < max_iterations:
+        value, residual, residual_norm = next_value, next_residual, next_norm
+        scheduled = iteration % check_every == 0 or iteration >= max_iterations
+        # The step's residual is α times the primal residual: between the scheduled checks it tells, for free, when
+        # the primal test would pass (against the last known scale), and one full check then decides.
+        early = (not early_check_done and primal_scale is not None
+                 and residual_norm <= alpha * tolerance * primal_scale)
+        if not (scheduled or early):
             continue
-        record = _residuals(step, state, X, W, Z, gradient, X_old, W_old)
+        record = _residuals(step, out, previous)
         record["iteration"] = iteration
+        primal_scale, early_check_done = record.pop("primal_scale"), early and not scheduled
         history.append(record)
         if record["primal"] <= tolerance and record["dual"] <= DUAL_TOLERANCE_FACTOR * tolerance:
             converged = True
             break
+        if not scheduled:
+            continue
         if progress is not None:
             distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
             first_distance = first_distance or max(distance, 1.0 + 1e-9)
@@ -545,54 +625,70 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             raise Cancelled("cancelled during the LBC solve")
     # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries faint
     # tails there until full convergence. Both go back unscaled.
-    W_unscaled = W.astype(np.float64) / problem.sqrt_mass.astype(np.float64)
-    return Z.astype(np.float64), W_unscaled, iteration, converged, history
+    W_unscaled = out.W.astype(np.float64) / problem.sqrt_mass.astype(np.float64)
+    return out.Z.astype(np.float64), W_unscaled, iteration, converged, history
 
 
-def _residuals(step, state, X, W, Z, gradient, X_old, W_old):
+def _residuals(step, out, previous):
     """Relative primal and dual residuals (Boyd et al. 2011, §3.3.1) and the objective of the current iterate.
 
-    The dual residual is measured in the (X, W) space against the scaled duals: the Y-block has no objective term,
-    so Aᵀy is itself the dual residual and cannot serve as its scale.
+    ``out`` and ``previous`` are the :class:`_Step` of this iteration and the one before. The dual residual is
+    measured in the (X, W) space against the scaled duals: the Y-block has no objective term, so Aᵀy is itself the
+    dual residual and cannot serve as its scale.
     """
     p = step.p
-    v_x, v_w = step.split(state)
-    Z_scaled = p.sqrt_mass * Z
-    primal = np.hypot(np.linalg.norm(gradient - X), np.linalg.norm(Z_scaled - W))
-    scale_primal = max(np.hypot(np.linalg.norm(gradient), np.linalg.norm(Z_scaled)), np.hypot(np.linalg.norm(X), np.linalg.norm(W)))
-    dual = np.hypot(np.linalg.norm(X - X_old), np.linalg.norm(W - W_old))
-    scale_dual = np.hypot(np.linalg.norm(v_x - X), np.linalg.norm(v_w - W))
+    X, W, Z_scaled = out.X, out.W, p.sqrt_mass * out.Z
+    primal = np.hypot(np.linalg.norm(out.gradient - X), np.linalg.norm(Z_scaled - W))
+    scale_primal = max(np.hypot(np.linalg.norm(out.gradient), np.linalg.norm(Z_scaled)),
+                       np.hypot(np.linalg.norm(X), np.linalg.norm(W)))
+    dual = np.hypot(np.linalg.norm(X - previous.X), np.linalg.norm(W - previous.W))
+    scale_dual = np.hypot(np.linalg.norm(out.v_x - X), np.linalg.norm(out.v_w - W))
     return {
+        "primal_scale": float(scale_primal),
         "primal": float(primal / max(scale_primal, 1e-300)),
         "dual": float(dual / max(scale_dual, 1e-300)),
-        "objective": step.objective(gradient),
+        "objective": step.objective(out.gradient),
     }
 
 
-def _shrink(values, thresholds, epsilon, n_cells, d):
-    """Group soft-thresholding of each cell's gradient vector (prox of ω|g|, or of its Huber smoothing)."""
-    grouped = values.reshape(n_cells, d, -1)
-    scale = _group_norms(values, n_cells, d)
-    np.maximum(scale, np.finfo(scale.dtype).tiny, out=scale)
+def _shrink_factor(values, thresholds, epsilon):
+    """Group soft-thresholding of each cell's gradient vector (prox of ω|g|, or of its Huber smoothing) as a factor.
+
+    Parameters
+    ----------
+    values : (d, F, n) float array
+        Gradient vectors, component-major.
+    thresholds : (F, n) float array
+    epsilon : float
+        Huber width (0: plain total variation).
+
+    Returns
+    -------
+    (F, n) float array s, with prox(values) = values · s.
+    """
+    norms = _group_norms(values)
+    np.maximum(norms, np.finfo(norms.dtype).tiny, out=norms)
+    factor = np.divide(thresholds, norms, out=norms)
+    np.subtract(1.0, factor, out=factor)
     if epsilon > 0:
         # prox of τ·huber_ε: shrink by τ beyond ε + τ, scale by ε / (ε + τ) inside.
-        inside = scale <= epsilon + thresholds
-        np.divide(thresholds, scale, out=scale)
-        np.subtract(1.0, scale, out=scale)
-        scale[inside] = (epsilon / (epsilon + thresholds))[inside]
+        inside = factor <= epsilon / (epsilon + thresholds)  # |g| <= ε + τ
+        factor[inside] = (epsilon / (epsilon + thresholds))[inside]
     else:
-        np.divide(thresholds, scale, out=scale)
-        np.subtract(1.0, scale, out=scale)
-        np.maximum(scale, 0.0, out=scale)
-    return (grouped * scale[:, None, :]).reshape(values.shape)
+        np.maximum(factor, 0.0, out=factor)
+    return factor
 
 
-def _group_norms(values, n_cells, d):
-    """|g| of each cell's d-vector in a cell-major (d F, n) array; returns (F, n)."""
-    grouped = values.reshape(n_cells, d, -1)
-    squared = np.square(grouped[:, 0])
-    for k in range(1, d):
-        squared += np.square(grouped[:, k])
+def _scaled_tv(gradient, tv_weights, sqrt_cell):
+    """Σ ω |c| |∇w| from gradients scaled by √|c| (d, F, n), TV weights (F, n) and √|c| (F, 1)."""
+    return float(np.sum(tv_weights * sqrt_cell * _group_norms(gradient)))
+
+
+def _group_norms(values):
+    """|g| of each cell's d-vector in a component-major (d, F, n) array; returns (F, n)."""
+    squared = np.square(values[0])
+    for component in values[1:]:
+        squared += np.square(component)
     return np.sqrt(squared, out=squared)
 
 
