@@ -62,7 +62,8 @@ class SolveResult:
         Σ_cells Σ_i ω A |∇w_i| of ``weights``, in the input's units (length^(d-1)).
     tv_weights : (F, n) float array
     history : list of dict
-        At each convergence check: the iteration, the relative primal and dual residuals, and the objective of the
+        At each scheduled check (every ``check_every`` iterations) the iteration and the relative primal residual;
+        where the primal test passed, a full check adds the relative dual residual and the objective of the
         iterate Z in the input's units (the output, W projected, is lower).
     seconds : dict
         Time per stage.
@@ -187,7 +188,8 @@ def solve_on_mesh(
                 progress, cancel,
             )
             for record in history:  # objectives in the input's units
-                record["objective"] *= scale ** (d - 1)
+                if "objective" in record:
+                    record["objective"] *= scale ** (d - 1)
         timer.lap("solve")
         weights[interior] = _project(Z, W, unit_controls, unit_vertices[interior])
     if len(interior):
@@ -317,11 +319,11 @@ class _Problem:
         self.beta = beta
         # Rows component-major, scaled by √|c|; columns split into the unknowns and the fixed boundary.
         values = np.transpose(gradients * np.sqrt(measures)[:, None, None], (2, 0, 1))  # (d, F, d+1)
-        corners = np.broadcast_to(cells, values.shape)
-        G64 = _columns_subset(values, corners, interior, len(vertices))  # (d F, N_in)
-        self.E64 = _columns_subset(values, corners, boundary_vertices, len(vertices)) @ boundary_weights  # (d F, n)
-        self.G64 = G64
-        self.G = G64.astype(dtype)
+        interior_index = _renumber(interior, len(vertices))[cells]  # (F, d+1), -1 on the boundary
+        boundary_index = _renumber(boundary_vertices, len(vertices))[cells]
+        self.G64 = _rows_on_columns(values, interior_index, len(interior))  # (d F, N_in)
+        self.E64 = _rows_on_columns(values, boundary_index, len(boundary_vertices)) @ boundary_weights  # (d F, n)
+        self.G = self.G64.astype(dtype)
         self.GT = self.G.T.tocsr()
         self.E = self.E64.astype(dtype)
         mass = fem.lumped_mass(cells, measures, len(vertices))[interior]
@@ -335,8 +337,21 @@ class _Problem:
         self.M = vt[rank:].astype(dtype)  # (n - d - 1, n), orthonormal rows
         self.MT = np.ascontiguousarray(self.M.T)
         self.H = (np.c_[vertices[interior], np.ones(len(interior))] @ np.linalg.pinv(K)).astype(dtype)  # (N_in, n)
-        system = self.GT @ self.G + sp.diags(beta * mass)  # stiffness + β mass
-        self.factor = _Factor(system.tocsc(), dtype)
+        # The Y-step matrix, stiffness + β mass, as lower-triangle triplets from each cell's Gᵀ G block, corner pair
+        # by corner pair on contiguous (F,) arrays.
+        by_corner = np.ascontiguousarray(np.transpose(values, (2, 0, 1)))  # (d+1, d, F)
+        corner_index = np.ascontiguousarray(interior_index.T)  # (d+1, F)
+        entries, rows, cols = [beta * mass], [np.arange(len(interior))], [np.arange(len(interior))]
+        for i in range(d + 1):
+            for j in range(i + 1):
+                kept = (corner_index[j] >= 0) & (corner_index[i] >= 0)
+                entries.append(np.einsum("kf,kf->f", by_corner[i], by_corner[j])[kept])
+                row, col = corner_index[i][kept], corner_index[j][kept]  # lower triangle: the larger is the row
+                rows.append(np.maximum(row, col))
+                cols.append(np.minimum(row, col))
+        system_lower = sp.coo_matrix((np.concatenate(entries), (np.concatenate(rows), np.concatenate(cols))),
+                                     shape=(len(interior), len(interior)))
+        self.factor = _Factor(system_lower, dtype)
         # √|c| of each cell, to turn scaled gradients back into ω |c| |∇w|.
         self.sqrt_cell = np.sqrt(measures)[:, None]
 
@@ -346,42 +361,50 @@ class _Problem:
         return _scaled_tv(gradient, tv_weights, self.sqrt_cell)
 
 
-def _columns_subset(values, columns, subset, n_columns):
-    """The sparse matrix with one row per leading entry of ``values``, restricted to the columns in ``subset``.
+def _renumber(subset, n):
+    """(n,) int array: position of each index in ``subset``, -1 for those not in it."""
+    positions = np.full(n, -1)
+    positions[subset] = np.arange(len(subset))
+    return positions
+
+
+def _rows_on_columns(values, columns, n_columns):
+    """A CSR matrix from per-cell row entries, keeping the entries whose column is not -1.
 
     Parameters
     ----------
-    values, columns : (..., k) arrays
-        Each row's k entries and their column indices.
-    subset : (m,) int array
-        Columns kept, renumbered 0..m-1 in this order.
+    values : (d, F, k) float array
+        Entries of row (component c, cell f): ``values[c, f]``.
+    columns : (F, k) int array
+        Their columns, shared by the d rows of a cell; -1 drops an entry.
     n_columns : int
 
     Returns
     -------
-    (prod(...), m) scipy.sparse.csr_matrix
+    (d F, n_columns) scipy.sparse.csr_matrix, rows component-major
     """
-    renumber = np.full(n_columns, -1)
-    renumber[subset] = np.arange(len(subset))
-    local = renumber[columns].reshape(-1, columns.shape[-1])
-    kept = local >= 0
-    indptr = np.r_[0, np.cumsum(kept.sum(axis=1))]
-    return sp.csr_matrix((values.reshape(local.shape)[kept], local[kept], indptr), shape=(len(local), len(subset)))
+    columns = np.broadcast_to(columns, values.shape).reshape(-1, values.shape[-1])
+    kept = columns >= 0
+    counts = sum(kept[:, corner].astype(np.int64) for corner in range(kept.shape[1]))  # a row sum over 3-4 entries
+    indptr = np.r_[0, np.cumsum(counts)]
+    return sp.csr_matrix((values.reshape(columns.shape)[kept], columns[kept], indptr),
+                         shape=(len(columns), n_columns))
 
 
 class _Factor:
     """A factorisation of the SPD Y-step matrix that solves for many right-hand sides in one call."""
 
-    def __init__(self, matrix, dtype):
+    def __init__(self, lower, dtype):
+        """``lower``: the matrix's lower triangle as a scipy COO matrix, duplicate entries summed."""
         try:
             import cholespy
 
-            coo = matrix.tocoo()
             solver_class = cholespy.CholeskySolverF if dtype == np.float32 else cholespy.CholeskySolverD
-            self._solver = solver_class(matrix.shape[0], coo.row, coo.col, coo.data, cholespy.MatrixType.COO)
+            self._solver = solver_class(lower.shape[0], lower.row, lower.col, lower.data, cholespy.MatrixType.COO)
             self._kind = "cholespy"
         except ImportError:
-            self._solver = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A")
+            lower = lower.tocsc()
+            self._solver = spla.splu((lower + sp.tril(lower, k=-1).T).tocsc(), permc_spec="MMD_AT_PLUS_A")
             self._kind = "splu"
         self.dtype = dtype
 
@@ -577,7 +600,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     converged = False
     iteration = 1
     fraction, first_distance = 0.0, None
-    primal_scale, early_check_done = None, False
+    primal_scale, early_check_done = None, False  # the last scheduled check's scale; one early check per window
     while iteration < max_iterations:
         candidate = anderson.extrapolate(value, residual) if anderson else None
         if candidate is None:
@@ -599,23 +622,31 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             anderson.push(next_value, next_residual, value, residual)
         value, residual, residual_norm = next_value, next_residual, next_norm
         scheduled = iteration % check_every == 0 or iteration >= max_iterations
-        # The step's residual is α times the primal residual: between the scheduled checks it tells, for free, when
-        # the primal test would pass (against the last known scale), and one full check then decides.
-        early = (not early_check_done and primal_scale is not None
-                 and residual_norm <= alpha * tolerance * primal_scale)
-        if not (scheduled or early):
+        if not scheduled and early_check_done:
             continue
-        record = _residuals(step, out, previous)
-        record["iteration"] = iteration
-        primal_scale, early_check_done = record.pop("primal_scale"), early and not scheduled
-        history.append(record)
-        if record["primal"] <= tolerance and record["dual"] <= DUAL_TOLERANCE_FACTOR * tolerance:
-            converged = True
-            break
+        # The step's residual is α times the primal residual: the primal test costs nothing. The full check (dual
+        # residual, objective) runs only once it passes, at most once between two scheduled checks.
+        if scheduled:
+            primal_scale = _primal_scale(step, out)
+        if primal_scale is None:
+            continue
+        primal = residual_norm / (alpha * primal_scale)
+        if primal <= tolerance:
+            record = dict(iteration=iteration, **_residuals(step, out, previous, primal_scale))
+            history.append(record)
+            if record["primal"] <= tolerance and record["dual"] <= DUAL_TOLERANCE_FACTOR * tolerance:
+                converged = True
+                break
+            early_check_done = not scheduled
+            distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
+        else:
+            if scheduled:
+                history.append(dict(iteration=iteration, primal=float(primal)))
+            distance = primal / tolerance
         if not scheduled:
             continue
+        early_check_done = False
         if progress is not None:
-            distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
             first_distance = first_distance or max(distance, 1.0 + 1e-9)
             # Residuals fall roughly geometrically: show the share of the way, in log scale, to the tolerance.
             fraction = max(fraction, iteration / max_iterations,
@@ -629,7 +660,14 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     return out.Z.astype(np.float64), W_unscaled, iteration, converged, history
 
 
-def _residuals(step, out, previous):
+def _primal_scale(step, out):
+    """The primal residual's scale (Boyd et al. 2011, §3.3.1): max(|(g̃, √(βm) Z)|, |(X̃, W̃)|) of one step."""
+    Z_scaled = step.p.sqrt_mass * out.Z
+    return float(max(np.hypot(np.linalg.norm(out.gradient), np.linalg.norm(Z_scaled)),
+                     np.hypot(np.linalg.norm(out.X), np.linalg.norm(out.W)), 1e-300))
+
+
+def _residuals(step, out, previous, primal_scale):
     """Relative primal and dual residuals (Boyd et al. 2011, §3.3.1) and the objective of the current iterate.
 
     ``out`` and ``previous`` are the :class:`_Step` of this iteration and the one before. The dual residual is
@@ -637,15 +675,12 @@ def _residuals(step, out, previous):
     dual residual and cannot serve as its scale.
     """
     p = step.p
-    X, W, Z_scaled = out.X, out.W, p.sqrt_mass * out.Z
-    primal = np.hypot(np.linalg.norm(out.gradient - X), np.linalg.norm(Z_scaled - W))
-    scale_primal = max(np.hypot(np.linalg.norm(out.gradient), np.linalg.norm(Z_scaled)),
-                       np.hypot(np.linalg.norm(X), np.linalg.norm(W)))
+    X, W = out.X, out.W
+    primal = np.hypot(np.linalg.norm(out.gradient - X), np.linalg.norm(p.sqrt_mass * out.Z - W))
     dual = np.hypot(np.linalg.norm(X - previous.X), np.linalg.norm(W - previous.W))
     scale_dual = np.hypot(np.linalg.norm(out.v_x - X), np.linalg.norm(out.v_w - W))
     return {
-        "primal_scale": float(scale_primal),
-        "primal": float(primal / max(scale_primal, 1e-300)),
+        "primal": float(primal / primal_scale),
         "dual": float(dual / max(scale_dual, 1e-300)),
         "objective": step.objective(out.gradient),
     }
