@@ -33,21 +33,31 @@ def restore_constraints(weights, controls, positions, columns=None, rounds=20):
     weights = np.array(weights, dtype=float)
     m, K = weights.shape
     d = controls.shape[1]
-    if columns is None:
-        columns = np.broadcast_to(np.arange(K), (m, K))
     # Affine rows a_j = [c_j, 1]; targets t = [x, 1].
-    affine = np.c_[controls, np.ones(len(controls))][columns]  # (m, K, d+1)
+    affine_rows = np.c_[controls, np.ones(len(controls))]  # (n, d+1)
+    if columns is None:
+        # Every point has the same slots: the batched products become plain matrix products.
+        outer_products = (affine_rows[:, :, None] * affine_rows[:, None, :]).reshape(K, -1)
+    else:
+        affine = affine_rows[columns]  # (m, K, d+1)
     target = np.c_[positions, np.ones(m)]
     support = weights > 0
     weights = np.where(support, weights, 0.0)
     for _ in range(rounds):
-        residual = target - (weights[:, None, :] @ affine)[:, 0]
-        active = support[:, :, None] * affine
-        gram = np.swapaxes(active, 1, 2) @ affine
+        if columns is None:
+            residual = target - weights @ affine_rows
+            gram = (support.astype(float) @ outer_products).reshape(m, d + 1, d + 1)
+        else:
+            residual = target - (weights[:, None, :] @ affine)[:, 0]
+            active = support[:, :, None] * affine
+            gram = np.swapaxes(active, 1, 2) @ affine
         # A tiny ridge keeps supports that cannot span the affine constraints from blowing up.
         ridge = 1e-14 * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(d + 1)
         correction = np.linalg.solve(gram + ridge, residual[:, :, None])[:, :, 0]
-        weights += (active @ correction[:, :, None])[:, :, 0]
+        if columns is None:
+            weights += support * (correction @ affine_rows.T)
+        else:
+            weights += (active @ correction[:, :, None])[:, :, 0]
         negative = weights < 0
         if not negative.any():
             break
@@ -71,11 +81,9 @@ def constraint_residuals(weights, controls, positions, columns=None):
     unity : (m,) float array, |Σ w - 1|
     reproduction : (m,) float array, |Σ w c - x| in the units of ``positions``
     """
-    m, K = weights.shape
-    if columns is None:
-        columns = np.broadcast_to(np.arange(K), (m, K))
     unity = np.abs(weights.sum(axis=1) - 1.0)
-    reproduction = np.linalg.norm((weights[:, None, :] @ controls[columns])[:, 0] - positions, axis=1)
+    reproduced = weights @ controls if columns is None else (weights[:, None, :] @ controls[columns])[:, 0]
+    reproduction = np.linalg.norm(reproduced - positions, axis=1)
     return unity, reproduction
 
 

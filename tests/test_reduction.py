@@ -33,6 +33,18 @@ def test_restore_clamps_negatives_and_keeps_constraints():
     assert unity.max() < 1e-14 and reproduction.max() < 1e-14
 
 
+def test_restore_gives_the_same_with_shared_and_per_point_slots():
+    rng = np.random.default_rng(2)
+    points = rng.uniform(0.05, 0.95, (100, 2))
+    weights = bilinear_weights(points) + rng.normal(0, 3e-2, (100, 4))  # large enough to clamp some
+    columns = np.broadcast_to(np.arange(4), weights.shape)
+    shared = restore_constraints(weights, SQUARE, points)
+    per_point = restore_constraints(weights, SQUARE, points, columns)
+    assert (weights < 0).any() and np.abs(shared - per_point).max() < 1e-12
+    assert np.allclose(constraint_residuals(shared, SQUARE, points), constraint_residuals(per_point, SQUARE, points,
+                                                                                          columns), atol=1e-14)
+
+
 def test_reduce_drops_small_weights_and_restores_linear_precision():
     # Eight control points on a circle; weights spread a little onto all of them.
     angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
