@@ -25,26 +25,38 @@ def cell_gradients(vertices, cells):
     vertices = np.asarray(vertices, dtype=float)
     cells = np.asarray(cells)
     d = vertices.shape[1]
-    corners = vertices[cells]  # (F, d+1, d)
-    edges = corners[:, 1:, :] - corners[:, :1, :]  # (F, d, d): rows are edge vectors from corner 0
+    # Coordinates as contiguous (F,) arrays: [k][j] is coordinate k of corner j (numpy is slow on 2-4 wide axes).
+    corners = np.ascontiguousarray(vertices.T)[:, np.ascontiguousarray(cells.T)]  # (d, d+1, F)
+    edges = corners[:, 1:] - corners[:, :1]  # (d, d, F): [k][j] is coordinate k of the edge from corner 0 to j+1
     # The gradients of basis functions 1..d are the rows of inv(edges)ᵀ, i.e. the adjugate's rows over the
-    # determinant, written out in closed form: numpy's batched inverse costs ~1 µs per cell.
+    # determinant, written out in closed form (numpy's batched inverse costs ~1 µs per cell).
     if d == 2:
-        a, b = edges[:, 0], edges[:, 1]
-        det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-        adjugate = np.stack([np.c_[b[:, 1], -b[:, 0]], np.c_[-a[:, 1], a[:, 0]]], axis=1)
+        (ax, bx), (ay, by) = edges
+        det = ax * by - ay * bx
+        adjugate = [[by, -bx], [-ay, ax]]
     else:
         a, b, c = edges[:, 0], edges[:, 1], edges[:, 2]
-        adjugate = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=1)
-        det = np.einsum("fk,fk->f", a, adjugate[:, 0])
+        adjugate = [_cross(b, c), _cross(c, a), _cross(a, b)]
+        det = a[0] * adjugate[0][0] + a[1] * adjugate[0][1] + a[2] * adjugate[0][2]
     # Flat cells (a repeated corner leaves a round-off determinant, not an exact 0) get zero gradients and measure.
-    degenerate = np.abs(det) <= 1e-13 * np.prod(np.linalg.norm(edges, axis=2), axis=1)
+    lengths = np.sqrt(np.sum(edges * edges, axis=0))  # (d, F)
+    degenerate = np.abs(det) <= 1e-13 * np.prod(lengths, axis=0)
     det[degenerate] = 0.0
     measures = np.abs(det) / (2.0 if d == 2 else 6.0)
-    grads_rest = adjugate / np.where(degenerate, 1.0, det)[:, None, None]  # (F, d, d): row j = gradient of basis j+1
-    gradients = np.concatenate([-grads_rest.sum(axis=1, keepdims=True), grads_rest], axis=1)
-    gradients[degenerate] = 0.0
+    inverse_det = 1.0 / np.where(degenerate, 1.0, det)
+    inverse_det[degenerate] = 0.0
+    gradients = np.empty((len(cells), d + 1, d))
+    for k in range(d):
+        gradients[:, 0, k] = 0.0
+        for j in range(d):
+            gradients[:, j + 1, k] = adjugate[j][k] * inverse_det
+            gradients[:, 0, k] -= gradients[:, j + 1, k]
     return gradients, measures
+
+
+def _cross(u, v):
+    """Cross products of (3, F) arrays of vectors."""
+    return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
 
 
 def gradient_operator(vertices, cells):
