@@ -200,9 +200,9 @@ def solve_on_mesh(
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds)
 
 
-# Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (float32 loop,
+# Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (97-102; float32 loop,
 # Anderson memory 5); and domain vertices per cell of the meshes lbc makes.
-BYTES_PER_STATE_ENTRY = 132
+BYTES_PER_STATE_ENTRY = 104
 VERTICES_PER_CELL = {2: 0.53, 3: 0.23}
 
 
