@@ -208,9 +208,9 @@ def solve_on_mesh(
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds)
 
 
-# Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (116-125; float32 loop,
+# Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (107-115; float32 loop,
 # Anderson memory 5); and domain vertices per cell of the meshes lbc makes.
-BYTES_PER_STATE_ENTRY = 128
+BYTES_PER_STATE_ENTRY = 120
 VERTICES_PER_CELL = {2: 0.53, 3: 0.23}
 
 
@@ -602,9 +602,11 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
 
     def advance(state, last, count):
         """``count`` steps from ``state``: the final state, the last two steps' :class:`_Step` and the norm of the
-        last step's own residual (α times its primal residual)."""
-        for _ in range(count):
-            previous, previous_state = last, state
+        last step's own residual (α times its primal residual). ``last`` is the step before, needed if count is 1.
+        Only what the final step's checks need is kept alive (each state is as large as the whole problem)."""
+        for k in range(count):
+            previous, previous_state = (last, state) if k == count - 1 else (None, None)
+            last = None
             state, last = step(state)
         return state, last, previous, float(np.linalg.norm(state - previous_state))
 
@@ -623,7 +625,8 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         if candidate is None:
             candidate = value
         count = min(period, max_iterations - iteration)
-        next_value, out, previous, last_norm = advance(candidate, out, count)
+        last, out = (out if count == 1 else None), None
+        next_value, out, previous, last_norm = advance(candidate, last, count)
         iteration += count
         next_residual = next_value - candidate
         next_norm = np.linalg.norm(next_residual)
@@ -631,7 +634,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             # Safeguard: the extrapolation did not reduce the residual; take the plain steps instead.
             anderson.reset()
             candidate = value
-            next_value, out, previous, last_norm = advance(candidate, out, count)
+            next_value, out, previous, last_norm = advance(candidate, last, count)
             iteration += count
             next_residual = next_value - candidate
             next_norm = np.linalg.norm(next_residual)

@@ -118,7 +118,7 @@ def test_bad_shapes_are_refused():
 def test_memory_estimate_refuses_what_the_machine_cannot_hold():
     from lbc_core.solver import check_memory, estimate_memory
 
-    assert estimate_memory(26, 3000, 2) == pytest.approx(128 * 26 * (2 * 3000 + 0.53 * 3000), rel=1e-6)
+    assert estimate_memory(26, 3000, 2) == pytest.approx(120 * 26 * (2 * 3000 + 0.53 * 3000), rel=1e-6)
     check_memory(26, 3000, 2)  # the paper's 2D problems fit anywhere
     with pytest.raises(lbc_core.CageError, match="GiB"):
         check_memory(2000, 10**8, 3)
