@@ -17,8 +17,8 @@ Where this differs from the authors' reference, and why:
   extrapolation with the safeguard of Zhang, Peng, Deng et al. (ACM TOG 2019) accelerates the map of three steps.
 - The penalty is picked from the number of control points; the start is the harmonic coordinates (the reference
   computes them and throws them away).
-- The stopping rule is relative (Boyd et al. 2011, §3.3.1), so it behaves the same across mesh sizes, and tested at
-  every iteration: the Douglas-Rachford residual is α times the primal residual.
+- The stopping rule is relative (Boyd et al. 2011, §3.3.1), so it behaves the same across mesh sizes, and tested
+  after every Anderson period: a Douglas-Rachford step's residual is α times its primal residual.
 - The output is the clamped split variable W, with its exact zeros, projected back onto the equality constraints on
   its own support. It meets every constraint (the reference returns Z, which dips below zero), is exactly sparse,
   and is closer to optimal than Z at the same iteration: on the paper's cages it passes the reference's objective
@@ -133,8 +133,8 @@ def solve_on_mesh(
     relaxation : float
         Over-relaxation α in (0, 2).
     check_every : int
-        Iterations between progress reports and cancel checks. The primal test runs at every iteration (it is free:
-        the step's residual is the primal residual); the dual test runs once the primal one passes.
+        Iterations between progress reports and cancel checks. The primal test runs after every Anderson period (it
+        costs one norm: a step's residual is α times its primal residual); the dual test once the primal one passes.
     anderson_memory : int
         Extrapolations remembered by Anderson acceleration (0: plain ADMM).
     anderson_period : int
@@ -403,7 +403,7 @@ class _Factor:
     """A factorisation of the SPD Y-step matrix that solves for many right-hand sides in one call."""
 
     def __init__(self, lower, dtype):
-        """``lower``: the matrix's lower triangle as a scipy COO matrix, duplicate entries summed."""
+        """``lower``: the matrix's lower triangle as a scipy COO matrix (duplicate entries are summed)."""
         try:
             import cholespy
 
