@@ -442,6 +442,7 @@ class _DouglasRachford:
         # In scaled variables the shrink threshold of cell c is √|c| ω / ρ; the clip bound of vertex v is √(β m_v).
         self.thresholds = (p.sqrt_cell * tv_weights / rho).astype(p.G.dtype)
         self.boundary_part = p.E.reshape(self.shape_x)
+        self.boundary_load = p.GT @ p.E  # (N_in, n): Gᵀ E, so that the reflection need not subtract E each step
         self.chunks = _cell_chunks(p, self.size_x)
 
     def split(self, state):
@@ -471,8 +472,7 @@ class _DouglasRachford:
         def shrink_and_reflect(chunk):
             cells = chunk.cells
             shrink[cells] = _shrink_factor(v_x[:, cells], self.thresholds[cells], self.epsilon)
-            reflected = v_x[:, cells] * (2.0 * shrink[cells] - 1.0)  # 2 X̃ - v_X
-            reflected -= E[:, cells]
+            reflected = v_x[:, cells] * (2.0 * shrink[cells] - 1.0)  # 2 X̃ - v_X (E is subtracted after Gᵀ)
             return chunk.GT @ reflected.reshape(-1, reflected.shape[2])
 
         def update(chunk):
@@ -488,6 +488,7 @@ class _DouglasRachford:
         reflected_w = 2.0 * W
         reflected_w -= v_w
         rhs = sum(thread_map(shrink_and_reflect, self.chunks))
+        rhs -= self.boundary_load
         rhs += p.sqrt_mass * reflected_w
         Z = p.factor.solve(rhs @ p.MT) @ p.M
         Z += p.H
