@@ -601,20 +601,22 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     step = _DouglasRachford(problem, tv_weights, epsilon, alpha, penalty)
     anderson = _Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype) if memory else None
 
-    def advance(state, last, count):
-        """``count`` steps from ``state``: the final state, the last two steps' :class:`_Step` and the norm of the
-        last step's own residual (α times its primal residual). ``last`` is the step before, needed if count is 1.
-        Only what the final step's checks need is kept alive (each state is as large as the whole problem)."""
+    def advance(start, last, count):
+        """``count`` steps from ``start``. Returns the final state, the last two steps' :class:`_Step`, the residual
+        final - start and its norm, and the norm of the last step's own residual (α times its primal residual).
+        ``last`` is the step before, needed if count is 1. Only what the final step's checks need is kept alive
+        (each state is as large as the whole problem)."""
+        state = start
         for k in range(count):
             previous, previous_state = (last, state) if k == count - 1 else (None, None)
             last = None
             state, last = step(state)
-        return state, last, previous, float(np.linalg.norm(state - previous_state))
+        residual = state - start
+        residual_norm = np.linalg.norm(residual)
+        last_norm = residual_norm if count == 1 else np.linalg.norm(state - previous_state)
+        return state, last, previous, residual, residual_norm, float(last_norm)
 
-    state = step.initial_state()
-    value, out, _, _ = advance(state, None, period)
-    residual = value - state
-    residual_norm = np.linalg.norm(residual)
+    value, out, _, residual, residual_norm, _ = advance(step.initial_state(), None, period)
     history = []
     converged = False
     iteration = period
@@ -627,18 +629,14 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             candidate = value
         count = min(period, max_iterations - iteration)
         last, out = (out if count == 1 else None), None
-        next_value, out, previous, last_norm = advance(candidate, last, count)
+        next_value, out, previous, next_residual, next_norm, last_norm = advance(candidate, last, count)
         iteration += count
-        next_residual = next_value - candidate
-        next_norm = np.linalg.norm(next_residual)
         if candidate is not value and next_norm > residual_norm:
             # Safeguard: the extrapolation did not reduce the residual; take the plain steps instead.
             anderson.reset()
             candidate = value
-            next_value, out, previous, last_norm = advance(candidate, last, count)
+            next_value, out, previous, next_residual, next_norm, last_norm = advance(candidate, last, count)
             iteration += count
-            next_residual = next_value - candidate
-            next_norm = np.linalg.norm(next_residual)
         elif anderson:
             anderson.push(next_value, next_residual, value, residual)
         value, residual, residual_norm = next_value, next_residual, next_norm
