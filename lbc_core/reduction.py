@@ -33,31 +33,41 @@ def restore_constraints(weights, controls, positions, columns=None, rounds=20):
     weights = np.array(weights, dtype=float)
     m, K = weights.shape
     d = controls.shape[1]
-    # Affine rows a_j = [c_j, 1]; targets t = [x, 1].
+    # Affine rows a_j = [c_j, 1]; targets t = [x, 1]. Per point: A (K, d+1) its slots' rows; the correction of
+    # w on its support S is A_S (A_Sᵀ A_S)⁻¹ (t - Aᵀw).
     affine_rows = np.c_[controls, np.ones(len(controls))]  # (n, d+1)
     if columns is None:
         # Every point has the same slots: the batched products become plain matrix products.
         outer_products = (affine_rows[:, :, None] * affine_rows[:, None, :]).reshape(K, -1)
+
+        def reproduced(w):
+            return w @ affine_rows
+
+        def gram_on(support):
+            return (support.astype(float) @ outer_products).reshape(m, d + 1, d + 1)
+
+        def spread(correction, support):
+            return support * (correction @ affine_rows.T)
     else:
         affine = affine_rows[columns]  # (m, K, d+1)
+
+        def reproduced(w):
+            return (w[:, None, :] @ affine)[:, 0]
+
+        def gram_on(support):
+            return np.swapaxes(support[:, :, None] * affine, 1, 2) @ affine
+
+        def spread(correction, support):
+            return support * (affine @ correction[:, :, None])[:, :, 0]
     target = np.c_[positions, np.ones(m)]
     support = weights > 0
     weights = np.where(support, weights, 0.0)
     for _ in range(rounds):
-        if columns is None:
-            residual = target - weights @ affine_rows
-            gram = (support.astype(float) @ outer_products).reshape(m, d + 1, d + 1)
-        else:
-            residual = target - (weights[:, None, :] @ affine)[:, 0]
-            active = support[:, :, None] * affine
-            gram = np.swapaxes(active, 1, 2) @ affine
+        residual = target - reproduced(weights)
+        gram = gram_on(support)
         # A tiny ridge keeps supports that cannot span the affine constraints from blowing up.
         ridge = 1e-14 * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(d + 1)
-        correction = np.linalg.solve(gram + ridge, residual[:, :, None])[:, :, 0]
-        if columns is None:
-            weights += support * (correction @ affine_rows.T)
-        else:
-            weights += (active @ correction[:, :, None])[:, :, 0]
+        weights += spread(np.linalg.solve(gram + ridge, residual[:, :, None])[:, :, 0], support)
         negative = weights < 0
         if not negative.any():
             break
