@@ -3,7 +3,8 @@
 For each pack (tests/data/<case>.npz: the reference's own mesh, boundary values and TV weights) this runs the plain
 numpy re-implementation of the reference ADMM (bench/reference_admm.py, iteration-for-iteration faithful) and, when
 ``lbc_core.solve_on_mesh`` is importable, our solver on the same inputs, then prints one table row per case.
-Seconds are the fastest of 2-7 wall times (short runs are repeated more) of each whole call (setup, factorisation, iterations) on a shared machine.
+Seconds are the fastest of 2-7 wall times (short runs are repeated more) of each whole call (setup, factorisation,
+iterations) on a shared machine.
 Objectives are recomputed for both with lbc_core.objective.tv_objective, in the cage's units. Usage:
 
     .venv/bin/python bench/bench_2d.py [case ...]
@@ -60,6 +61,7 @@ def run_case(case, solve=None, repeats=2, **options):
     """
     pack = np.load(DATA / f"{case}.npz")
     vertices, triangles, tv_weights = pack["vertices"], pack["triangles"], pack["tv_weights"]
+
     def baseline():  # timed by itself, without its final objective evaluation
         run = reference_admm(vertices, triangles, pack["boundary_vertex"], pack["boundary_weights"], tv_weights)
         return run, run["seconds"]
