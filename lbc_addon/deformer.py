@@ -45,7 +45,7 @@ def build_node_group(slots):
     cage = nodes.new("GeometryNodeObjectInfo")
     cage.transform_space = "RELATIVE"
     cage.location = (_COLUMN, 300)
-    links.new(group_in.outputs["Cage"], cage.inputs["Object"])
+    links.new(group_in.outputs["Cage"], _input(cage, "Object"))
     cage_geometry = cage.outputs["Geometry"]
 
     position = nodes.new("GeometryNodeInputPosition")
@@ -59,46 +59,63 @@ def build_node_group(slots):
         sample.data_type = "FLOAT_VECTOR"
         sample.domain = "POINT"
         sample.location = (_COLUMN * 3, y)
-        links.new(cage_geometry, sample.inputs["Geometry"])
-        links.new(position.outputs["Position"], sample.inputs["Value"])
-        links.new(index.outputs["Attribute"], sample.inputs["Index"])
+        links.new(cage_geometry, _input(sample, "Geometry"))
+        links.new(position.outputs["Position"], _input(sample, "Value"))
+        links.new(index.outputs["Attribute"], _input(sample, "Index"))
         scaled = _vector_math(nodes, "SCALE", (_COLUMN * 4, y))
-        links.new(sample.outputs["Value"], scaled.inputs[0])
-        links.new(weight.outputs["Attribute"], scaled.inputs["Scale"])
+        links.new(sample.outputs["Value"], _input(scaled, "Vector"))
+        links.new(weight.outputs["Attribute"], _input(scaled, "Scale"))
         if total is None:
             total = scaled.outputs["Vector"]
         else:
             add = _vector_math(nodes, "ADD", (_COLUMN * 5, y))
-            links.new(total, add.inputs[0])
-            links.new(scaled.outputs["Vector"], add.inputs[1])
+            links.new(total, _inputs(add, "Vector")[0])
+            links.new(scaled.outputs["Vector"], _inputs(add, "Vector")[1])
             total = add.outputs["Vector"]
 
     rest = _named_attribute(nodes, "FLOAT_VECTOR", storage.REST_NAME, (_COLUMN * 4, 150))
     displacement = _vector_math(nodes, "SUBTRACT", (_COLUMN * 5, 150))
-    links.new(total, displacement.inputs[0])
-    links.new(rest.outputs["Attribute"], displacement.inputs[1])
+    links.new(total, _inputs(displacement, "Vector")[0])
+    links.new(rest.outputs["Attribute"], _inputs(displacement, "Vector")[1])
     set_position = nodes.new("GeometryNodeSetPosition")
     set_position.location = (_COLUMN * 6, 150)
-    links.new(group_in.outputs["Geometry"], set_position.inputs["Geometry"])
-    links.new(displacement.outputs["Vector"], set_position.inputs["Offset"])
+    links.new(group_in.outputs["Geometry"], _input(set_position, "Geometry"))
+    links.new(displacement.outputs["Vector"], _input(set_position, "Offset"))
 
     stop = _stop_condition(group, group_in, cage_geometry)
     switch = nodes.new("GeometryNodeSwitch")
     switch.input_type = "GEOMETRY"
     switch.location = (_COLUMN * 6.5, 400)
-    links.new(stop, switch.inputs["Switch"])
-    links.new(set_position.outputs["Geometry"], switch.inputs["False"])
-    links.new(group_in.outputs["Geometry"], switch.inputs["True"])
-    links.new(switch.outputs["Output"], group_out.inputs["Geometry"])
+    links.new(stop, _input(switch, "Switch"))
+    links.new(set_position.outputs["Geometry"], _input(switch, "False"))
+    links.new(group_in.outputs["Geometry"], _input(switch, "True"))
+    links.new(switch.outputs["Output"], _input(group_out, "Geometry"))
     return group
 
 
 def _named_attribute(nodes, data_type, name, location):
     node = nodes.new("GeometryNodeInputNamedAttribute")
     node.data_type = data_type
-    node.inputs["Name"].default_value = name
+    _input(node, "Name").default_value = name
     node.location = location
     return node
+
+
+def _inputs(node, name):
+    """The node's enabled input sockets called ``name``, in order.
+
+    Sockets are found by name among those the node's current type enables, never by position: Blender versions
+    differ in how many hidden sockets a node carries (5.2's integer Compare has two inputs, 4.x's thirteen).
+    """
+    found = [socket for socket in node.inputs if socket.name == name and socket.enabled]
+    if not found:
+        raise KeyError(f"{node.bl_idname} has no enabled input {name!r}")
+    return found
+
+
+def _input(node, name):
+    """The node's first enabled input socket called ``name``."""
+    return _inputs(node, name)[0]
 
 
 def _vector_math(nodes, operation, location):
@@ -114,44 +131,44 @@ def _stop_condition(group, group_in, cage_geometry):
     size = nodes.new("GeometryNodeAttributeDomainSize")
     size.component = "MESH"
     size.location = (_COLUMN * 2, 500)
-    links.new(cage_geometry, size.inputs["Geometry"])
+    links.new(cage_geometry, _input(size, "Geometry"))
     same = nodes.new("FunctionNodeCompare")
     same.data_type = "INT"
     same.operation = "NOT_EQUAL"
     same.location = (_COLUMN * 3, 500)
-    links.new(size.outputs["Point Count"], same.inputs[2])
-    links.new(group_in.outputs["Cage Vertices"], same.inputs[3])
+    links.new(size.outputs["Point Count"], _input(same, "A"))
+    links.new(group_in.outputs["Cage Vertices"], _input(same, "B"))
     changed = _warning(
         nodes,
         "LBC: the cage is missing or its vertex count changed since binding; the mesh is left undeformed. "
         "Rebind, or restore the cage",
         (_COLUMN * 4, 500),
     )
-    links.new(same.outputs["Result"], changed.inputs["Show"])
+    links.new(same.outputs["Result"], _input(changed, "Show"))
 
     disabled = nodes.new("FunctionNodeBooleanMath")
     disabled.operation = "NOT"
     disabled.location = (_COLUMN * 3, 650)
-    links.new(group_in.outputs["Enabled"], disabled.inputs[0])
+    links.new(group_in.outputs["Enabled"], _inputs(disabled, "Boolean")[0])
     stopped = _warning(
         nodes,
         "LBC: the cage's topology changed since binding; the mesh is left undeformed. Rebind in the LBC panel",
         (_COLUMN * 4, 650),
     )
-    links.new(disabled.outputs["Boolean"], stopped.inputs["Show"])
+    links.new(disabled.outputs["Boolean"], _input(stopped, "Show"))
 
     either = nodes.new("FunctionNodeBooleanMath")
     either.operation = "OR"
     either.location = (_COLUMN * 5, 550)
-    links.new(changed.outputs["Show"], either.inputs[0])
-    links.new(stopped.outputs["Show"], either.inputs[1])
+    links.new(changed.outputs["Show"], _inputs(either, "Boolean")[0])
+    links.new(stopped.outputs["Show"], _inputs(either, "Boolean")[1])
     return either.outputs["Boolean"]
 
 
 def _warning(nodes, message, location):
     node = nodes.new("GeometryNodeWarning")
     node.warning_type = "ERROR"
-    node.inputs["Message"].default_value = message
+    _input(node, "Message").default_value = message
     node.location = location
     return node
 

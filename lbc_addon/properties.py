@@ -106,11 +106,11 @@ class LBC_PG_binding(BindOptions, bpy.types.PropertyGroup):
 def is_bound(obj):
     """Whether ``obj`` holds a binding.
 
-    Reading ``obj.lbc`` creates the property group on the object, so checks that look at every object read the raw
-    ID property instead: objects never bound stay exactly as they are.
+    Reading ``obj.lbc`` creates the property group on the object (Blender 4.x), so checks that look at every object
+    ask ``is_property_set`` first: objects never bound stay exactly as they are. Registered properties are read as
+    attributes, never as ID properties (``obj.get``), which Blender 5.0 keeps apart from them.
     """
-    group = obj.get("lbc")
-    return obj.type == "MESH" and group is not None and bool(group.get("is_bound", False))
+    return obj.type == "MESH" and obj.is_property_set("lbc") and obj.lbc.is_bound
 
 
 def register():
