@@ -1,0 +1,35 @@
+"""Progress: reports mapped onto sub-ranges, cancellation raised at reports and checks."""
+
+import pytest
+
+from lbc_core.errors import Cancelled
+from lbc_core.progress import Progress
+
+
+def test_parts_map_onto_the_parent_range():
+    seen = []
+    whole = Progress(lambda fraction, message: seen.append((round(fraction, 9), message)))
+    solve = whole.part(0.2, 0.6)
+    solve(0.5, "half")
+    solve.part(0.5, 1.0)(1.0, "end")
+    assert seen == [(0.4, "half"), (0.6, "end")]
+
+
+def test_cancel_raises_at_reports_and_checks():
+    flag = [False]
+    progress = Progress(None, lambda: flag[0]).part(0.1, 0.2)
+    progress(0.3, "fine")
+    progress.check()
+    flag[0] = True
+    with pytest.raises(Cancelled):
+        progress.check()
+    with pytest.raises(Cancelled):
+        progress(0.5, "too late")
+
+
+def test_of_keeps_a_progress_and_wraps_callbacks():
+    existing = Progress()
+    assert Progress.of(existing) is existing
+    seen = []
+    Progress.of(lambda f, m: seen.append(f), None)(1.0, "done")
+    assert seen == [1.0]
