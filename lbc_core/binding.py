@@ -13,14 +13,14 @@ import scipy.sparse as sp
 
 from . import __version__
 from .boundary import boundary_weights
-from .cage import Cage, make_cage
+from .cage import Cage, make_cage, real_array
 from .errors import CageError
 from .interpolation import interpolation_matrix
 from .meshing import DomainMesh, mesh_domain
+from .options import DEFAULT_CELLS, BindOptions
 from .reduction import interpolate_and_reduce
-from .meshing import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D
 from .parallel import thread_map, worker_count
-from .solver import check_memory, solve_on_mesh
+from .solver import check_memory, solve_forecast, solve_on_mesh
 
 # Deforming fewer points than this is faster on one thread.
 PARALLEL_MIN_POINTS = 50_000
@@ -223,12 +223,13 @@ def bind(
     points,
     *,
     cells=None,
-    weighting="quadratic",
-    epsilon=0.0,
+    weighting=None,
+    epsilon=None,
     threshold=None,
-    method="auto",
+    method=None,
     tolerance=None,
-    max_iterations=10000,
+    max_iterations=None,
+    options=None,
     progress=None,
     cancel=None,
 ):
@@ -241,20 +242,14 @@ def bind(
         None: a 2D polygon, vertices in boundary order. Else the faces of a closed 3D cage.
     points : (m, d) float array
         The points to bind (a mesh's vertices). 2D points may be given with a constant z.
-    cells : int, optional
-        About how many triangles / tetrahedra fill the cage (default: meshing.DEFAULT_CELLS_2D / _3D).
-        More cells give finer coordinates and a slower bind.
-    weighting : str or callable
-        ρ of the geodesic TV weights: "quadratic" (the paper's default), "linear", "sqrt", "constant", or a callable.
-    epsilon : float
-        C¹ relaxation width (0: plain total variation). See :func:`lbc_core.solve_on_mesh`.
-    threshold : float, optional
-        Weights below it are dropped from the stored coordinates (default 1e-3 / n).
-    method : str
-        Domain mesher: "auto", or see :func:`lbc_core.meshing.mesh_domain`.
-    tolerance : float, optional
-        ADMM stopping tolerance (default: the solver's).
-    max_iterations : int
+    cells, weighting, epsilon, threshold, method, tolerance, max_iterations : optional
+        The fields of :class:`lbc_core.options.BindOptions` (None: the default): about how many triangles /
+        tetrahedra fill the cage (3000 in 2D, 8000 in 3D; more is finer and slower), ρ of the geodesic TV weights
+        ("quadratic", the paper's default, "linear", "sqrt", "constant" or a function), the C¹ relaxation width
+        (0: plain total variation), the reduction threshold (1e-3 / n), the domain mesher ("auto"), the ADMM
+        stopping tolerance (the solver's) and its iteration limit (10000).
+    options : BindOptions, optional
+        The same options as one object; keywords given besides it override its fields.
     progress : callable(fraction, message), optional
     cancel : callable() -> bool, optional
         Returning True stops the bind with :class:`lbc_core.Cancelled`.
@@ -262,15 +257,20 @@ def bind(
     Returns
     -------
     Binding
+
+    Raises
+    ------
+    CageError
+        For any bad option, cage or points, before any meshing or solving.
     """
     timings = {}
     clock = time.perf_counter()
-    cage = make_cage(cage_vertices, cage_faces)
-    points = check_points(cage, points)
-    n = cage.n_control_points
-    threshold = 1e-3 / n if threshold is None else float(threshold)
-    # Refuse a resolution the machine cannot hold before meshing it, not after the OS kills the process.
-    check_memory(n, cells or (DEFAULT_CELLS_2D if cage.dim == 2 else DEFAULT_CELLS_3D), cage.dim)
+    request = BindOptions.of(options, cells=cells, weighting=weighting, epsilon=epsilon, threshold=threshold,
+                             method=method, tolerance=tolerance, max_iterations=max_iterations)
+    cage, points = check_request(cage_vertices, cage_faces, points, request, progress)
+    cells, weighting, epsilon, method = request.cells, request.weighting, request.epsilon, request.method
+    tolerance, max_iterations = request.tolerance, request.max_iterations
+    threshold = request.threshold_for(cage.n_control_points)
 
     domain = mesh_domain(cage, cells, method, progress=stage_progress(progress, *_STAGES["meshing"]), cancel=cancel)
     timings["meshing"] = time.perf_counter() - clock
@@ -314,22 +314,69 @@ def bind(
     )
 
 
-def check_points(cage, points):
-    """Points as an (m, d) float array for a d-dimensional cage.
+def check_request(cage_vertices, cage_faces, points, options, progress=None):
+    """Everything a bind is given, checked before any long work: options, cage, points and the memory it needs.
 
-    2D points may come as (m, 3) with a constant z (file data).
+    Parameters
+    ----------
+    cage_vertices, cage_faces, points
+        As for :func:`bind`.
+    options : BindOptions
+    progress : callable(fraction, message), optional
+        Told, at 0, how much memory and (roughly) time the solve will take.
+
+    Returns
+    -------
+    cage : Cage
+    points : (m, d) float array
 
     Raises
     ------
     CageError
-        Wrong shape, dimension mismatch, or NaN/inf coordinates.
     """
-    points = np.asarray(points, dtype=float)
+    cage = make_cage(cage_vertices, cage_faces)
+    options.check_for_cage(cage.n_control_points, cage.dim)
+    plane_z = None
+    if cage_faces is None and np.shape(cage_vertices)[1:] == (3,):
+        plane_z = float(np.asarray(cage_vertices, dtype=float)[0, 2])
+    points = check_points(cage, points, plane_z)
+    n_cells = options.cells or DEFAULT_CELLS[cage.dim]
+    # Refuse a resolution the machine cannot hold before meshing it, not after the OS kills the process.
+    check_memory(cage.n_control_points, n_cells, cage.dim)
+    if progress is not None:
+        progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim))
+    return cage, points
+
+
+def check_points(cage, points, plane_z=None):
+    """Points as an (m, d) float array for a d-dimensional cage.
+
+    2D points may come as (m, 3) with a constant z (file data).
+
+    Parameters
+    ----------
+    cage : Cage
+    points : (m, 2) or (m, 3) array-like
+    plane_z : float, optional
+        The z of a 2D cage given with a constant z: 2D points given with a z must lie in that plane.
+
+    Raises
+    ------
+    CageError
+        Wrong shape, dimension mismatch, another plane than the cage's, or NaN/inf coordinates.
+    """
+    points = real_array(points, "points", "(m, 2) or (m, 3)")
     if points.ndim != 2 or points.shape[1] not in (2, 3):
         raise CageError(f"points must be an (m, 2) or (m, 3) array, got shape {points.shape}")
     if cage.dim == 2 and points.shape[1] == 3:
-        if len(points) and np.ptp(points[:, 2]) > 1e-9 * cage.bbox_diagonal:
+        tolerance = 1e-9 * cage.bbox_diagonal
+        if len(points) and np.ptp(points[:, 2]) > tolerance:
             raise CageError("the cage is 2D but the points' z varies: bind 2D points (or a z = constant plane)")
+        if len(points) and plane_z is not None and abs(points[0, 2] - plane_z) > tolerance:
+            raise CageError(
+                f"the 2D cage lies in the plane z = {plane_z:g} but the points in z = {points[0, 2]:g}: move them "
+                "into the cage's plane (or give both as 2D arrays)"
+            )
         points = points[:, :2]
     if points.shape[1] != cage.dim:
         raise CageError(f"the cage is {cage.dim}D but the points are {points.shape[1]}D")

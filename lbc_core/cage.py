@@ -150,10 +150,7 @@ def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE, max_c
     CageError
         With a message that names the problem and what to do.
     """
-    try:
-        vertices = np.asarray(vertices, dtype=float)
-    except (TypeError, ValueError):
-        raise CageError("cage vertices must be numbers in an (n, 2) or (n, 3) array") from None
+    vertices = real_array(vertices, "cage vertices", "(n, 2) or (n, 3)")
     if vertices.ndim != 2 or vertices.shape[1] not in (2, 3):
         raise CageError(f"cage vertices must be an (n, 2) or (n, 3) array, got shape {vertices.shape}")
     if faces is not None and not hasattr(faces, "__len__"):
@@ -168,6 +165,26 @@ def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE, max_c
     if faces is None:
         return _make_polygon_cage(vertices, weld_tolerance, max_control_points)
     return _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points)
+
+
+def real_array(values, what, shape):
+    """``values`` as a float array; CageError when they are not real numbers (text, complex numbers, ragged rows).
+
+    Parameters
+    ----------
+    values : array-like
+    what : str
+        What the values are, for the message ("cage vertices").
+    shape : str
+        The expected shape, for the message ("(n, 2) or (n, 3)").
+    """
+    try:
+        array = np.asarray(values)
+        if array.dtype.kind in "cSUV" or (array.dtype.kind == "O" and any(isinstance(v, complex) for v in array.flat)):
+            raise TypeError(array.dtype)
+        return array.astype(float)
+    except (TypeError, ValueError):
+        raise CageError(f"{what} must be real numbers in an {shape} array") from None
 
 
 def _check_size(n_vertices, n_faces, max_control_points):

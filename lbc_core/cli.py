@@ -1,6 +1,7 @@
 """The ``lbc`` command line: bind, deform, inspect and compare coordinates from scripts and pipelines.
 
-    lbc bind CAGE MESH -o binding.npz [--scheme lbc|mvc|harmonic|bbw] [--cells N] [--weighting W] [--threshold T]
+    lbc bind CAGE MESH -o binding.npz [--scheme lbc|mvc|harmonic|bbw] [--cells N] [--weighting W] [--epsilon E]
+             [--threshold T] [--tolerance T]
     lbc deform binding.npz NEW_CAGE -o deformed.obj [--mesh MESH] [--plot before_after.png]
     lbc stats binding.npz [--plot pq.png] [--coordinate INDEX coordinate.png]
     lbc compare CAGE [MESH] --schemes lbc,mvc,harmonic [--plot pq.png]
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CageError, Cancelled
+from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
 
 SCHEMES = ("lbc", "mvc", "harmonic", "bbw")
 EXIT_BAD_INPUT = 2
@@ -32,6 +34,8 @@ def main(argv=None):
     parser = _parser()
     args = parser.parse_args(argv)
     try:
+        if hasattr(args, "cells"):  # a command that binds: its options are checked before any file is read
+            args.options = _options(args)
         return args.command(args) or 0
     except CageError as error:
         print(f"lbc: error: {error}", file=sys.stderr)
@@ -50,9 +54,12 @@ def _parser():
     common.add_argument("--json", action="store_true", help="print the figures as JSON on stdout")
 
     solving = argparse.ArgumentParser(add_help=False)
-    solving.add_argument("--cells", type=_cell_count, help="about how many domain triangles / tetrahedra")
-    solving.add_argument("--weighting", default="quadratic", choices=_weightings(), help="LBC's TV weighting")
-    solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default: the library's)")
+    solving.add_argument("--cells", type=int, help="about how many domain triangles / tetrahedra (default: "
+                         f"{DEFAULT_CELLS[2]} in 2D, {DEFAULT_CELLS[3]} in 3D)")
+    solving.add_argument("--weighting", choices=WEIGHTINGS, help=f"LBC's TV weighting (default {WEIGHTINGS[0]})")
+    solving.add_argument("--epsilon", type=float, help="LBC's C1 relaxation width (default 0: plain TV)")
+    solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default 1e-3/n)")
+    solving.add_argument("--tolerance", type=float, help="LBC's ADMM stopping tolerance (default: the solver's)")
 
     bind = commands.add_parser("bind", parents=[common, solving], help="bind a mesh to a cage, save the binding")
     bind.add_argument("cage", help="cage file (.obj/.off/.ply); a file without faces is a 2D polygon")
@@ -95,19 +102,6 @@ def _parser():
     table1.add_argument("--max-control", type=int, default=None, help="skip cages with more control points")
     table1.set_defaults(command=_run_table1)
     return parser
-
-
-def _cell_count(text):
-    value = int(text)
-    if value < 10:
-        raise argparse.ArgumentTypeError(f"must be at least 10, got {value}")
-    return value
-
-
-def _weightings():
-    from .geodesics import WEIGHTINGS
-
-    return sorted(WEIGHTINGS)
 
 
 def _scheme_list(text):
@@ -216,7 +210,7 @@ def _run_compare(args):
     if args.mesh:
         points, points_from = _read_points(args.mesh, cage_faces is None), str(args.mesh)
     else:
-        domain = mesh_domain(make_cage(cage_vertices, cage_faces), args.cells)
+        domain = mesh_domain(make_cage(cage_vertices, cage_faces), args.options.cells)
         points, points_from = domain.vertices, "the domain mesh's vertices"
     # LBC first: the baselines then share its domain mesh, so every scheme is measured on the same cells.
     for scheme in sorted(args.schemes, key=lambda s: s != "lbc"):
@@ -277,16 +271,19 @@ def _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=None
     if scheme == "lbc":
         from .binding import bind
 
-        options = {"weighting": args.weighting}
-        if args.threshold is not None:
-            options["threshold"] = args.threshold
-        return bind(cage_vertices, cage_faces, points, cells=args.cells, progress=progress, **options)
+        return bind(cage_vertices, cage_faces, points, options=args.options, progress=progress)
     from . import baselines
 
     if scheme == "bbw" and not baselines.bbw_available():
         raise CageError("bounded biharmonic weights need libigl: pip install libigl")
     function = {"mvc": baselines.bind_mvc, "harmonic": baselines.bind_harmonic, "bbw": baselines.bind_bbw}[scheme]
-    return function(cage_vertices, cage_faces, points, domain=domain, cells=args.cells, progress=progress)
+    return function(cage_vertices, cage_faces, points, domain=domain, cells=args.options.cells, progress=progress)
+
+
+def _options(args):
+    """The bind options of the command's flags, checked (a bad value exits 2 before any file is read)."""
+    return BindOptions(cells=args.cells, weighting=args.weighting, epsilon=args.epsilon, threshold=args.threshold,
+                       tolerance=args.tolerance)
 
 
 def _read_points(path, planar):

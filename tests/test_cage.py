@@ -60,7 +60,7 @@ def test_wrong_shape_is_refused():
 
 @pytest.mark.parametrize("vertices", [[[0, 0], [1, 0, 0], [1, 1]], [["a", "b"], ["c", "d"], ["e", "f"]]])
 def test_vertices_that_are_not_numbers(vertices):
-    assert_refused(vertices, None, "must be numbers")
+    assert_refused(vertices, None, "must be real numbers")
 
 
 def test_faces_from_a_generator():

@@ -1,0 +1,131 @@
+"""BindOptions: defaults, every bad value refused with one CageError naming all of them, and bind() refusing bad
+options before any meshing."""
+
+import math
+
+import numpy as np
+import pytest
+
+import lbc_core
+from lbc_core import geodesics, meshing, solver
+from lbc_core.errors import CageError
+from lbc_core.options import DEFAULT_CELLS, METHODS, WEIGHTINGS, BindOptions
+
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+
+
+def test_defaults():
+    options = BindOptions()
+    assert options.weighting == "quadratic" and options.epsilon == 0.0 and options.method == "auto"
+    assert options.max_iterations == 10000
+    assert options.cells is None and options.threshold is None and options.tolerance is None
+    assert options.threshold_for(4) == 1e-3 / 4
+    assert BindOptions(**{name: None for name in options.as_dict()}) == options
+
+
+def test_the_names_and_defaults_agree_with_the_stages_that_use_them():
+    assert set(WEIGHTINGS) == set(geodesics.WEIGHTINGS)
+    assert METHODS == meshing.METHODS
+    assert DEFAULT_CELLS == {2: meshing.DEFAULT_CELLS_2D, 3: meshing.DEFAULT_CELLS_3D}
+    assert set(solver.DEFAULT_TOLERANCE) == {2, 3}
+
+
+def test_numbers_are_normalised():
+    options = BindOptions(cells=np.int64(3000), epsilon=1, threshold=np.float32(0.0), max_iterations=50.0)
+    assert options.cells == 3000 and type(options.cells) is int
+    assert options.epsilon == 1.0 and type(options.epsilon) is float
+    assert options.max_iterations == 50 and type(options.max_iterations) is int
+
+
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("cells", "3000", "cells must be a number, got the string '3000'"),
+        ("cells", math.nan, "cells must be a finite number, got nan"),
+        ("cells", 0, "cells must be at least 10, got 0"),
+        ("cells", -5, "cells must be at least 10, got -5"),
+        ("cells", True, "cells must be a number, got True (a bool)"),
+        ("cells", 3000.5, "cells must be a whole number, got 3000.5"),
+        ("cells", 3 + 0j, "cells must be a real number"),
+        ("weighting", "cubic", "weighting 'cubic' is not one of quadratic, linear, sqrt, constant"),
+        ("weighting", 3, "weighting must be one of"),
+        ("weighting", lambda d: -d, "weighting function must return finite, non-negative weights"),
+        ("weighting", lambda d: d[0], "weighting function must return weights of its input's shape"),
+        ("weighting", lambda d: d.nope, "weighting function failed on an array of distances"),
+        ("epsilon", -0.1, "epsilon must be 0 or more, got -0.1"),
+        ("epsilon", math.nan, "epsilon must be a finite number"),
+        ("epsilon", math.inf, "epsilon must be a finite number"),
+        ("threshold", -1e-4, "threshold must be in [0, 1/n)"),
+        ("threshold", 1.0, "threshold must be in [0, 1/n)"),
+        ("tolerance", 0, "tolerance must be more than 0, got 0"),
+        ("tolerance", -1, "tolerance must be more than 0, got -1"),
+        ("max_iterations", -5, "max_iterations must be at least 1, got -5"),
+        ("max_iterations", 0, "max_iterations must be at least 1, got 0"),
+        ("method", "bogus", "method 'bogus' is not one of auto, delaunay, triangle"),
+    ],
+)
+def test_bad_values_are_refused(field, value, message):
+    with pytest.raises(CageError) as error:
+        BindOptions(**{field: value})
+    assert message in str(error.value)
+
+
+def test_every_bad_value_is_named_at_once():
+    with pytest.raises(CageError) as error:
+        BindOptions(cells=0, epsilon=-1, max_iterations=-5)
+    text = str(error.value)
+    assert text.startswith("bad bind options: ")
+    assert "cells must be" in text and "epsilon must be" in text and "max_iterations must be" in text
+
+
+def test_of_overrides_the_given_fields_and_checks_them():
+    base = BindOptions(cells=500, epsilon=0.1)
+    assert BindOptions.of(base, epsilon=0.2) == BindOptions(cells=500, epsilon=0.2)
+    assert BindOptions.of(None, cells=None) == BindOptions()
+    with pytest.raises(CageError, match="epsilon must be 0 or more"):
+        BindOptions.of(base, epsilon=-1)
+    with pytest.raises(CageError, match="options must be a BindOptions"):
+        BindOptions.of({"cells": 500})
+
+
+def test_checks_that_need_the_cage():
+    with pytest.raises(CageError, match=r"threshold 0.5 would drop every weight .* 1/n = 0.25"):
+        BindOptions(threshold=0.5).check_for_cage(4, 2)
+    BindOptions(threshold=0.2).check_for_cage(4, 2)
+    with pytest.raises(CageError, match="method 'triangle' does not mesh 3D cages: use one of auto, delaunay"):
+        BindOptions(method="triangle").check_for_cage(8, 3)
+
+
+def test_as_dict_names_a_callable_weighting():
+    def gentle(distance):
+        return distance**1.5
+
+    assert BindOptions(weighting=gentle).as_dict()["weighting"] == "gentle"
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"cells": "3000"}, "cells must be a number"),
+        ({"cells": 0}, "cells must be at least 10"),
+        ({"weighting": "cubic"}, "weighting 'cubic'"),
+        ({"method": "bogus"}, "method 'bogus'"),
+        ({"tolerance": 0}, "tolerance must be more than 0"),
+        ({"threshold": 0.5}, "threshold 0.5 would drop every weight"),
+        ({"epsilon": math.nan}, "epsilon must be a finite number"),
+    ],
+)
+def test_bind_refuses_bad_options_before_meshing(monkeypatch, options, message):
+    def no_meshing(*args, **kwargs):
+        raise AssertionError("meshing started with bad options")
+
+    monkeypatch.setattr("lbc_core.binding.mesh_domain", no_meshing)
+    with pytest.raises(CageError, match=message):
+        lbc_core.bind(SQUARE, None, [[0.5, 0.5]], **options)
+
+
+def test_bind_takes_an_options_object_and_records_it():
+    binding = lbc_core.bind(SQUARE, None, [[0.5, 0.5]], options=BindOptions(cells=200, epsilon=0.01),
+                            max_iterations=500)
+    assert binding.options["epsilon"] == 0.01 and binding.options["max_iterations"] == 500
+    assert binding.options["weighting"] == "quadratic" and binding.options["threshold"] == 1e-3 / 4
