@@ -5,8 +5,10 @@
 
 import json
 import time
+import zipfile
+from pathlib import Path
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 import scipy.sparse as sp
@@ -16,6 +18,7 @@ from .boundary import boundary_weights
 from .cage import Cage, make_cage, real_array
 from .errors import CageError
 from .interpolation import interpolation_matrix
+from .io import writing
 from .meshing import DomainMesh, mesh_domain
 from .options import DEFAULT_CELLS, BindOptions
 from .reduction import interpolate_and_reduce
@@ -125,11 +128,18 @@ class Binding:
         return [(slice(a, b), self.weights[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
 
     def save(self, path):
-        """Write the binding to a compressed .npz file (with the cage's fingerprint, the options and the version)."""
+        """Write the binding to ``path`` exactly (no suffix is added), as a compressed .npz archive with the cage's
+        fingerprint, the options and the version.
+
+        Raises
+        ------
+        CageError
+            When the file cannot be written (missing folder, no permission, full disk); a file this call created
+            is removed again.
+        """
         weights = self.weights.tocsr()
-        np.savez_compressed(
-            path,
-            format=np.array("lbc-binding-1"),
+        arrays = dict(
+            format=np.array(FORMAT),
             version=np.array(__version__),
             scheme=np.array(self.scheme),
             fingerprint=np.array(self.cage.fingerprint()),
@@ -157,10 +167,27 @@ class Binding:
             converged=np.array(self.converged),
             objective=np.array(self.objective),
         )
+        # np.savez_compressed's archive, written through a handle (numpy appends .npz to a name without it) and
+        # closed in a with block (numpy leaves it open when a write fails, and its finaliser then prints a traceback).
+        with writing(path) as handle, zipfile.ZipFile(handle, "w", zipfile.ZIP_DEFLATED) as archive:
+            for key, value in arrays.items():
+                with archive.open(key + ".npy", "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
+
+
+FORMAT = "lbc-binding-1"
+# What load_binding accepts: a stored binding's rows sum to 1 and reproduce its points (the bound position) within
+# 1e-9 of the cage's diagonal; edited or damaged weights miss by far more.
+LOAD_TOLERANCE = 1e-7
+# Schemes whose weights reproduce the points (bounded biharmonic weights have no linear precision).
+_REPRODUCING = ("lbc", "mvc", "harmonic")
 
 
 def load_binding(path, cage_vertices=None, cage_faces=None):
-    """Read a binding written by :meth:`Binding.save`.
+    """Read a binding written by :meth:`Binding.save`, checked as a whole before it is used.
+
+    Checked: the archive and its format, every array's presence, type and shape, every index against what it
+    indexes, finite numbers, weights whose rows sum to 1 and reproduce the stored points, and the cage's fingerprint.
 
     Parameters
     ----------
@@ -175,17 +202,13 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
     Raises
     ------
     CageError
-        If the file is not a binding, or the given cage differs from the bound one.
+        If the file is missing, not a binding, damaged or edited, or the given cage differs from the bound one.
     """
-    try:
-        data = np.load(path, allow_pickle=False)
-        if str(data["format"]) != "lbc-binding-1":
-            raise KeyError("format")
-    except (OSError, ValueError, KeyError) as error:
-        raise CageError(f"{path} is not an lbc binding file ({error}): bind again to make one") from None
-    cage = Cage(data["cage_vertices"], data["cage_facets"], data["cage_facet_face"], data["cage_vertex_map"])
-    if str(data["fingerprint"]) != cage.fingerprint():
-        raise CageError(f"{path} is damaged: its cage does not match its fingerprint; bind again")
+    arrays = _read_archive(path)
+    damaged = partial(_damaged, path)
+    cage, domain, weights = _checked_parts(arrays, damaged)
+    if str(arrays["fingerprint"]) != cage.fingerprint():
+        damaged("its cage does not match its fingerprint")
     if cage_vertices is not None:
         given = make_cage(cage_vertices, cage_faces)
         if given.fingerprint() != cage.fingerprint():
@@ -193,28 +216,145 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
                 f"{path} was bound to another cage ({len(cage.vertex_map)} vertices, {len(cage.facets)} facets; "
                 f"this one has {len(given.vertex_map)} vertices, {len(given.facets)} facets): bind this cage again"
             )
-    domain = DomainMesh(
-        data["domain_vertices"], data["domain_cells"], data["domain_boundary_vertices"],
-        data["domain_boundary_facet"], data["domain_boundary_bary"], data["domain_control_vertices"],
-    )
-    weights = sp.csr_matrix(
-        (data["weights_data"], data["weights_indices"], data["weights_indptr"]), shape=tuple(data["weights_shape"])
-    )
     return Binding(
         cage=cage,
-        rest_cage_vertices=data["rest_cage_vertices"],
+        rest_cage_vertices=arrays["rest_cage_vertices"],
         weights=weights,
         domain=domain,
-        domain_weights=data["domain_weights"],
-        outside=data["outside"],
-        points=data["points"],
-        scheme=str(data["scheme"]),
-        options=json.loads(str(data["options"])),
-        timings=json.loads(str(data["timings"])),
-        iterations=int(data["iterations"]),
-        converged=bool(data["converged"]),
-        objective=float(data["objective"]),
+        domain_weights=arrays["domain_weights"],
+        outside=arrays["outside"],
+        points=arrays["points"],
+        scheme=str(arrays["scheme"]),
+        options=_json_record(arrays, "options", damaged),
+        timings=_json_record(arrays, "timings", damaged),
+        iterations=int(arrays["iterations"]),
+        converged=bool(arrays["converged"]),
+        objective=float(arrays["objective"]),
     )
+
+
+# The arrays of a binding file: (dtype kinds accepted, number of dimensions).
+_ARRAYS = {
+    "format": ("U", 0), "version": ("U", 0), "scheme": ("U", 0), "fingerprint": ("U", 0),
+    "cage_vertices": ("f", 2), "cage_facets": ("iu", 2), "cage_facet_face": ("iu", 1), "cage_vertex_map": ("iu", 1),
+    "rest_cage_vertices": ("f", 2), "weights_data": ("f", 1), "weights_indices": ("iu", 1),
+    "weights_indptr": ("iu", 1), "weights_shape": ("iu", 1), "points": ("f", 2), "outside": ("b", 1),
+    "domain_vertices": ("f", 2), "domain_cells": ("iu", 2), "domain_boundary_vertices": ("iu", 1),
+    "domain_boundary_facet": ("iu", 1), "domain_boundary_bary": ("f", 2), "domain_control_vertices": ("iu", 1),
+    "domain_weights": ("f", 2), "options": ("U", 0), "timings": ("U", 0), "iterations": ("iu", 0),
+    "converged": ("b", 0), "objective": ("f", 0),
+}
+
+
+def _damaged(path, what):
+    """Raise the one message of a damaged binding file."""
+    raise CageError(f"{path} is damaged or was edited: {what}; bind again to make a new one")
+
+
+def _read_archive(path):
+    """Every array of a binding file, read in full; CageError for anything that is not a readable binding."""
+    if not Path(path).is_file():
+        raise CageError(f"{path}: no such file")
+    try:
+        data = np.load(path, allow_pickle=False)
+    except Exception as error:  # numpy and zipfile raise many types on foreign or damaged files
+        raise CageError(f"{path} is not an lbc binding file ({_reason(error)}): bind again to make one") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise CageError(f"{path} is not an lbc binding file (it holds a single array, not an .npz archive): bind "
+                        "again to make one")
+    with data:
+        try:
+            if "format" not in data.files or str(data["format"]) != FORMAT:
+                raise CageError(f"{path} is not an lbc binding file (it has no {FORMAT!r} format mark): bind again "
+                                "to make one")
+            missing = [key for key in _ARRAYS if key not in data.files]
+            if missing:
+                _damaged(path, f"it lacks {', '.join(missing)}")
+            arrays = {key: data[key] for key in _ARRAYS}
+        except CageError:
+            raise
+        except Exception as error:  # a damaged member: bad CRC, truncated stream, bad header
+            _damaged(path, f"it cannot be read ({_reason(error)})")
+    for key, (kinds, ndim) in _ARRAYS.items():
+        if arrays[key].dtype.kind not in kinds or arrays[key].ndim != ndim:
+            _damaged(path, f"{key} has type {arrays[key].dtype} and {arrays[key].ndim} dimensions")
+    return arrays
+
+
+def _reason(error):
+    return f"{type(error).__name__}: {error}" if str(error) else type(error).__name__
+
+
+def _checked_parts(arrays, damaged):
+    """The cage, domain mesh and weights of a binding file, after checking their shapes, indices and numbers."""
+    cage_vertices, facets = arrays["cage_vertices"], arrays["cage_facets"]
+    n, d = cage_vertices.shape
+    if d not in (2, 3) or n < d + 1 or facets.shape[1:] != (d,) or not len(facets):
+        damaged(f"its cage has {n} vertices in {d}D and facets of shape {facets.shape}")
+    m = len(arrays["points"])
+    domain_vertices, cells = arrays["domain_vertices"], arrays["domain_cells"]
+    n_domain = len(domain_vertices)
+    n_boundary = len(arrays["domain_boundary_vertices"])
+    shapes = {
+        "cage_facet_face": (len(facets),), "rest_cage_vertices": (n, d), "points": (m, d), "outside": (m,),
+        "weights_shape": (2,), "domain_vertices": (n_domain, d), "domain_cells": (len(cells), d + 1),
+        "domain_boundary_facet": (n_boundary,), "domain_boundary_bary": (n_boundary, d),
+        "domain_control_vertices": (n,), "domain_weights": (n_domain, n), "weights_indptr": (m + 1,),
+        "weights_indices": arrays["weights_data"].shape,
+    }
+    for key, shape in shapes.items():
+        if arrays[key].shape != shape:
+            damaged(f"{key} has shape {arrays[key].shape}, not {shape}")
+    if tuple(arrays["weights_shape"]) != (m, n):
+        damaged(f"its weights claim shape {tuple(arrays['weights_shape'])} for {m} points and {n} control points")
+    ranges = {
+        "cage_facets": n, "cage_vertex_map": n, "weights_indices": n, "domain_cells": n_domain,
+        "domain_boundary_vertices": n_domain, "domain_boundary_facet": len(facets),
+        "domain_control_vertices": n_domain,
+    }
+    for key, size in ranges.items():
+        if arrays[key].size and not (arrays[key].min() >= 0 and arrays[key].max() < size):
+            damaged(f"{key} holds indices outside 0 … {size - 1}")
+    for key in ("cage_vertices", "rest_cage_vertices", "weights_data", "points", "domain_vertices",
+                "domain_boundary_bary", "domain_weights"):
+        if not np.all(np.isfinite(arrays[key])):
+            damaged(f"{key} holds NaN or infinite numbers")
+    indptr = arrays["weights_indptr"]
+    if indptr[0] != 0 or indptr[-1] != len(arrays["weights_data"]) or np.any(np.diff(indptr.astype(np.int64)) < 0):
+        damaged("its weights' row pointers do not run from 0 to the number of weights")
+    weights = sp.csr_matrix((arrays["weights_data"], arrays["weights_indices"], indptr), shape=(m, n))
+    _check_weights(weights, arrays, damaged)
+    cage = Cage(cage_vertices, facets, arrays["cage_facet_face"], arrays["cage_vertex_map"])
+    domain = DomainMesh(domain_vertices, cells, arrays["domain_boundary_vertices"], arrays["domain_boundary_facet"],
+                        arrays["domain_boundary_bary"], arrays["domain_control_vertices"])
+    return cage, domain, weights
+
+
+def _check_weights(weights, arrays, damaged):
+    """Rows sum to 1 and, for schemes with linear precision, reproduce the stored points (bound position inside)."""
+    rest = arrays["rest_cage_vertices"]
+    diagonal = float(np.linalg.norm(np.ptp(rest, axis=0)))
+    sums = np.asarray(weights.sum(axis=1)).ravel()
+    if len(sums) and np.max(np.abs(sums - 1.0)) > LOAD_TOLERANCE:
+        row = int(np.argmax(np.abs(sums - 1.0)))
+        damaged(f"the weights of point {row} sum to {sums[row]:.9g}, not 1")
+    if str(arrays["scheme"]) in _REPRODUCING:
+        inside = ~arrays["outside"]
+        miss = np.linalg.norm(weights[inside] @ rest - arrays["points"][inside], axis=1)
+        if len(miss) and np.max(miss) > LOAD_TOLERANCE * diagonal:
+            row = int(np.flatnonzero(inside)[np.argmax(miss)])
+            damaged(f"the weights of point {row} place it {np.max(miss) / diagonal:.3g} of the cage's size away from "
+                    "where it is")
+
+
+def _json_record(arrays, key, damaged):
+    try:
+        record = json.loads(str(arrays[key]))
+    except ValueError as error:
+        damaged(f"its {key} record is not valid JSON ({error})")
+    if not isinstance(record, dict):
+        damaged(f"its {key} record is not a JSON object")
+    return record
 
 
 def bind(

@@ -47,6 +47,9 @@ _FACES_PER_CONTROL_POINT = 4
 # Unwelded triangle soups repeat each vertex about 6 times.
 _INPUT_VERTICES_PER_CONTROL_POINT = 8
 _LISTED = 5  # how many offending items a message names
+# Welded copies of a vertex posed farther apart than this fraction of the cage's size are refused in a deform: far
+# below anything visible, far above the round-off of transforming coincident points alike.
+POSED_APART = 1e-6
 
 
 @dataclass
@@ -107,23 +110,82 @@ class Cage:
     def control_points_from_input(self, input_vertices):
         """Map positions given per input vertex (e.g. a posed cage) to the welded control points.
 
+        Input vertices welded into one control point must stay together: each control point takes its first input
+        vertex's position, and copies posed apart (by more than :data:`POSED_APART` × the cage's size) are refused
+        with their numbers, never ignored.
+
         Parameters
         ----------
         input_vertices : (n_input, d) float array
+            A 2D cage's positions may also be (n_input, 3) with a constant z, as it was bound.
 
         Returns
         -------
         (n, d) float array
+
+        Raises
+        ------
+        CageError
+            Another vertex count or dimension, NaN/inf, or welded copies posed apart.
         """
-        input_vertices = np.asarray(input_vertices, dtype=float)
+        input_vertices = real_array(input_vertices, "cage positions", f"(n, {self.dim})")
+        if self.dim == 2 and input_vertices.shape[1:] == (3,) and np.ptp(input_vertices[:, 2], initial=0) == 0:
+            input_vertices = input_vertices[:, :2]
         if input_vertices.shape != (len(self.vertex_map), self.dim):
             raise CageError(
                 f"the cage has {len(self.vertex_map)} vertices in {self.dim}D, got positions of shape "
                 f"{input_vertices.shape}: deform with the cage the binding was made for, or bind again"
             )
-        points = np.zeros((self.n_control_points, self.dim))
-        points[self.vertex_map] = input_vertices
+        if not np.all(np.isfinite(input_vertices)):
+            bad = np.flatnonzero(~np.all(np.isfinite(input_vertices), axis=1))
+            raise CageError(f"NaN or infinite positions of cage vertex {_some(bad)}: fix or delete them")
+        first = _first_inputs(self.vertex_map)
+        points = input_vertices[first]
+        if len(first) < len(self.vertex_map):
+            offset = np.linalg.norm(input_vertices - points[self.vertex_map], axis=1)
+            size = np.linalg.norm(np.ptp(input_vertices, axis=0))
+            apart = np.flatnonzero(offset > POSED_APART * size)
+            if len(apart):
+                pairs = _listed([f"{first[self.vertex_map[k]]}/{k}" for k in apart])
+                raise CageError(
+                    f"cage vertices {pairs} coincided when bound and were welded into one control point, but are "
+                    "posed apart: move each such pair together (in Blender: Mesh > Clean Up > Merge by Distance on "
+                    "the cage), or separate them and bind again"
+                )
         return points
+
+    def check_faces(self, faces):
+        """Refuse faces that are not the ones this cage was made from (a posed copy must keep its faces).
+
+        Parameters
+        ----------
+        faces : None or sequence of index sequences
+            The posed cage's faces as read (None for a polygon).
+
+        Raises
+        ------
+        CageError
+        """
+        if self.dim == 2:
+            if faces is not None:
+                raise CageError("the binding is for a 2D polygon cage, but this cage has faces: pose the polygon "
+                                "that was bound (vertices only)")
+            return
+        if faces is None:
+            raise CageError("the binding is for a 3D cage, but this cage has no faces: pose the cage that was bound, "
+                            "with its faces")
+        faces = [np.asarray(face, dtype=np.int64) for face in faces]
+        if any(face.size and (face.min() < 0 or face.max() >= len(self.vertex_map)) for face in faces):
+            raise CageError(f"this cage has faces with corners that are not among its {len(self.vertex_map)} "
+                            "vertices: pose the cage that was bound")
+        corners = [set(self.vertex_map[faces[f]].tolist()) if f < len(faces) else set()
+                   for f in range(int(self.facet_face.max()) + 1)]
+        for facet, face in zip(self.facets.tolist(), self.facet_face.tolist()):
+            if not set(facet) <= corners[face]:
+                raise CageError(
+                    f"this cage's faces differ from the bound cage's (face {face} and on): same vertex count, other "
+                    "faces; pose the cage that was bound, or bind this one again"
+                )
 
 
 def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE, max_control_points=MAX_CONTROL_POINTS):

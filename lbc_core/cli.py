@@ -116,14 +116,16 @@ def _scheme_list(text):
 
 
 def _run_bind(args):
-    from .io import read_cage
+    from .cage import make_cage
+    from .io import check_output, read_cage
 
+    check_output(args.output)
     cage_vertices, cage_faces = read_cage(args.cage)
     points = _read_points(args.mesh, cage_faces is None)
+    _warn(make_cage(cage_vertices, cage_faces).warnings, args.quiet)  # repairs are told before the long work
     with _Progress(f"bind ({args.scheme})", args.quiet) as progress:
         binding = _bind(args.scheme, cage_vertices, cage_faces, points, args, progress)
     binding.save(args.output)
-    _warn(binding.cage.warnings, args.quiet)
     nonzeros = binding.weights.nnz / max(binding.weights.shape[0], 1)
     figures = {
         "output": str(args.output),
@@ -141,22 +143,37 @@ def _run_bind(args):
         _print_json(figures)
     else:
         total = sum(binding.timings.values())
+        outside = figures["outside"]
         print(
             f"bound {figures['points']} points to {figures['control_points']} control points with {binding.scheme}: "
-            f"{nonzeros:.2f} stored weights per point, {figures['outside']} points outside the cage, "
-            f"{total:.2f} s; wrote {args.output}"
+            f"{nonzeros:.2f} stored weights per point, {outside} points outside the cage"
+            f"{' (bound to the closest point inside)' if outside else ''}, {total:.2f} s; wrote {args.output}"
         )
+        if not binding.converged:
+            print(f"not converged: the solve stopped after {binding.iterations} iterations above its tolerance; the "
+                  "coordinates are usable but less local (a larger --tolerance stops sooner)")
     return 0
 
 
 def _run_deform(args):
-    from .io import read_cage, read_mesh, write_mesh
+    from .binding import load_binding
+    from .io import FORMATS, check_output, read_mesh, write_mesh
 
-    binding = _load(args.binding)
+    check_output(args.output, FORMATS)
+    if args.plot:
+        _check_figure(args.plot)
+    binding = load_binding(args.binding)
     _check_2d_figure(binding, args.plot, "--plot")
-    new_vertices, _ = read_cage(args.new_cage)
-    if binding.cage.dim == 3 and new_vertices.shape[1] == 2:
-        raise CageError(f"{args.new_cage}: the binding is for a 3D cage, this cage has no faces")
+    new_vertices, new_faces = read_mesh(args.new_cage)
+    if binding.cage.dim == 2:
+        from .io import planar
+
+        new_vertices = planar(new_vertices, args.new_cage)
+    try:
+        binding.cage.control_points_from_input(new_vertices)
+        binding.cage.check_faces(new_faces)
+    except CageError as error:
+        raise CageError(f"{args.new_cage}: {error}") from None
     faces = None
     if args.mesh:
         mesh_vertices, faces = read_mesh(args.mesh)
@@ -166,11 +183,11 @@ def _run_deform(args):
                 "points: give the mesh that was bound"
             )
     start = time.perf_counter()
-    deformed = binding.deform(new_vertices[:, : binding.cage.dim])
+    deformed = binding.deform(new_vertices)
     seconds = time.perf_counter() - start
     write_mesh(args.output, deformed, faces)
     if args.plot:
-        _plots().plot_deformation(binding, new_vertices[:, : binding.cage.dim], args.plot)
+        _plots().plot_deformation(binding, new_vertices, args.plot)
     figures = {"output": str(args.output), "points": int(len(deformed)), "deform_seconds": seconds}
     if args.json:
         _print_json(figures)
@@ -180,10 +197,15 @@ def _run_deform(args):
 
 
 def _run_stats(args):
+    from .binding import load_binding
     from .statistics import summary
 
-    binding = _load(args.binding)
+    for path in ([args.plot] if args.plot else []) + ([args.coordinate[1]] if args.coordinate else []):
+        _check_figure(path)
+    binding = load_binding(args.binding)
     _check_2d_figure(binding, args.coordinate, "--coordinate")
+    if args.coordinate:
+        _control_index(args.coordinate[0], binding.weights.shape[1])
     figures = summary(binding)
     if args.plot:
         plots = _plots()
@@ -204,7 +226,7 @@ def _run_compare(args):
     from .cage import make_cage
 
     if args.plot:
-        _plots()  # fail before binding when matplotlib is missing
+        _check_figure(args.plot)  # before binding: matplotlib missing, an unknown format, a missing folder
     cage_vertices, cage_faces = read_cage(args.cage)
     bindings, domain = {}, None
     if args.mesh:
@@ -293,14 +315,6 @@ def _read_points(path, planar):
     return io.planar(vertices, path) if planar else vertices
 
 
-def _load(path):
-    from .binding import load_binding
-
-    if not Path(path).is_file():
-        raise CageError(f"{path}: no such file")
-    return load_binding(path)
-
-
 def _plots():
     """The plots module; matplotlib is an optional dependency, so its absence is a one-line error."""
     try:
@@ -308,6 +322,16 @@ def _plots():
     except ImportError:
         raise CageError("figures need matplotlib: pip install matplotlib") from None
     return plots
+
+
+def _check_figure(path):
+    """Refuse a figure path matplotlib cannot write (format, folder) before any work is done."""
+    from .io import check_output
+
+    _plots()
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    check_output(path, sorted("." + suffix for suffix in FigureCanvasBase.get_supported_filetypes()))
 
 
 def _check_2d_figure(binding, wanted, option):

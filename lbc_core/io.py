@@ -17,6 +17,9 @@ Both formats are line-based text, and only ``v`` and ``f`` lines (OBJ), the head
 matter here.
 """
 
+import errno
+import os
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +61,19 @@ def read_mesh(path):
         raise CageError(f"{path}: cannot read it as {suffix[1:].upper()} ({error})") from error
     if len(vertices) == 0:
         raise CageError(f"{path}: the file has no vertices")
+    _check_faces(path, faces, len(vertices))
     return vertices, faces
+
+
+def _check_faces(path, faces, n_vertices):
+    """Refuse faces with fewer than 3 corners or corners that are not vertices of the file."""
+    for index, face in enumerate(faces or ()):
+        if len(face) < 3 or face.min() < 0 or face.max() >= n_vertices:
+            shown = " ".join(str(int(corner)) for corner in face[:8]) + (" ..." if len(face) > 8 else "")
+            raise CageError(
+                f"{path}: face {index} ({shown}) is invalid: a face needs 3 or more of the file's {n_vertices} "
+                "vertices (counted from 0 here); fix or delete it"
+            )
 
 
 def read_cage(path):
@@ -111,6 +126,12 @@ def write_mesh(path, vertices, faces=None):
         .obj, .off or .ply (PLY is written binary).
     vertices : (m, 2) or (m, 3) float array
     faces : sequence of index sequences, or None
+
+    Raises
+    ------
+    CageError
+        For an unknown format, faces with corners that are not among the vertices, or a file that cannot be
+        written (a file this call created is removed again).
     """
     path = Path(path)
     suffix = _suffix(path)
@@ -118,11 +139,62 @@ def write_mesh(path, vertices, faces=None):
     if vertices.shape[1] == 2:
         vertices = np.column_stack([vertices, np.zeros(len(vertices))])
     faces = [] if faces is None else [np.asarray(f, dtype=np.int64) for f in faces]
+    _check_faces(path, faces, len(vertices))
     if suffix != ".ply":
-        {".obj": _write_obj, ".off": _write_off}[suffix](path, vertices, faces)
+        with writing(path) as handle:
+            {".obj": _write_obj, ".off": _write_off}[suffix](handle, vertices, faces)
         return
     meshio = _meshio_ply()
-    meshio.ply.write(path, meshio.Mesh(vertices, _cell_blocks(faces)))
+    with writing(path) as handle:
+        meshio.ply.write(handle, meshio.Mesh(vertices, _cell_blocks(faces)))
+
+
+def check_output(path, formats=None):
+    """Refuse, before any long work, an output path that cannot be written.
+
+    Parameters
+    ----------
+    path : str or Path
+    formats : sequence of str, optional
+        Accepted suffixes (".obj"), checked when given.
+
+    Raises
+    ------
+    CageError
+        Naming the path and what to do: an unknown suffix, a missing folder, a folder in the way, no permission.
+    """
+    path = Path(path)
+    if formats is not None and path.suffix.lower() not in formats:
+        raise CageError(f"{path}: unknown output format {path.suffix or '(none)'!r}; use one of {', '.join(formats)}")
+    folder = path.parent
+    if not folder.is_dir():
+        raise CageError(f"{path}: the folder {folder} does not exist; create it first or write elsewhere")
+    if path.is_dir():
+        raise CageError(f"{path} is a folder: give a file name")
+    if not os.access(path if path.exists() else folder, os.W_OK):
+        raise CageError(f"{path}: no permission to write {'it' if path.exists() else 'in ' + str(folder)}; "
+                        "write elsewhere")
+
+
+@contextmanager
+def writing(path):
+    """An open binary handle to write exactly ``path``; failures become one CageError.
+
+    A file this call created is removed again when writing fails (a full disk leaves no truncated file behind).
+    """
+    path = Path(path)
+    existed = path.exists()
+    try:
+        with open(path, "wb") as handle:
+            yield handle
+    except OSError as error:
+        if not existed and path.is_file():
+            path.unlink()
+        if error.errno == errno.ENOSPC:
+            raise CageError(f"could not write {path}: the disk is full (no space left on the device); free some "
+                            "space or write elsewhere") from None
+        raise CageError(f"could not write {path}: {error.strerror or error}; check the folder and permissions, or "
+                        "write elsewhere") from None
 
 
 def _suffix(path):
@@ -180,15 +252,18 @@ def _read_obj(path):
                 vertices.append([float(w) for w in words[1:4]])  # colours after xyz are ignored
             elif words[0] == "f":
                 indices = np.array([int(w.split("/", 1)[0]) for w in words[1:]], dtype=np.int64)
+                if np.any(indices == 0):
+                    raise CageError(f"{path}: the face line {line.strip()!r} has the index 0; OBJ counts vertices "
+                                    "from 1 (or back from -1): fix the file")
                 # 1-based; negative counts back from the vertices read so far
                 faces.append(np.where(indices > 0, indices - 1, indices + len(vertices)))
     return np.array(vertices, dtype=float).reshape(-1, 3), (faces or None)
 
 
-def _write_obj(path, vertices, faces):
+def _write_obj(handle, vertices, faces):
     lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
     lines += ["f " + " ".join(str(int(i) + 1) for i in face) for face in faces]
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    handle.write(("\n".join(lines) + "\n").encode("utf-8"))
 
 
 def _read_off(path):
@@ -215,8 +290,8 @@ def _read_off(path):
     return vertices, (faces or None)
 
 
-def _write_off(path, vertices, faces):
+def _write_off(handle, vertices, faces):
     lines = ["OFF", f"{len(vertices)} {len(faces)} 0"]
     lines += [" ".join(repr(float(c)) for c in vertex) for vertex in vertices]
     lines += [" ".join(str(int(i)) for i in [len(face), *face]) for face in faces]
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    handle.write(("\n".join(lines) + "\n").encode("utf-8"))

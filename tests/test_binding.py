@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
 
 import lbc_core
 from lbc_core.io import read_cage, read_mesh
@@ -115,3 +117,182 @@ def test_simplex_cages_bind(cage, faces):
     )
     run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, f"bind on a simplex cage failed (exit code {run.returncode}): {run.stderr[-2000:]}"
+
+
+# Save and load: the path written is the path given; a damaged or edited file is refused as a whole, never used.
+
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+INSIDE = np.array([[0.5, 0.5], [0.2, 0.7], [0.9, 0.1], [0.4, 0.3]])
+FUZZ = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+@pytest.fixture(scope="module")
+def square_file(tmp_path_factory):
+    """A small binding (with one point outside the cage) saved to a file, and its bytes."""
+    path = tmp_path_factory.mktemp("square") / "square.npz"
+    lbc_core.bind(SQUARE, None, np.r_[INSIDE, [[1.5, 0.5]]], cells=200).save(path)
+    return path, path.read_bytes()
+
+
+def test_save_writes_exactly_the_path_given(tmp_path):
+    binding = lbc_core.bind(SQUARE, None, INSIDE, cells=200)
+    binding.save(tmp_path / "binding.dat")
+    assert [p.name for p in tmp_path.iterdir()] == ["binding.dat"]
+    np.testing.assert_array_equal(lbc_core.load_binding(tmp_path / "binding.dat").weights.toarray(),
+                                  binding.weights.toarray())
+
+
+def test_save_to_a_missing_folder_or_a_full_disk_is_a_cage_error(tmp_path):
+    binding = lbc_core.bind(SQUARE, None, INSIDE, cells=200)
+    with pytest.raises(lbc_core.CageError, match="could not write .*nowhere.*No such file"):
+        binding.save(tmp_path / "nowhere" / "b.npz")
+    if Path("/dev/full").exists():
+        with pytest.raises(lbc_core.CageError, match="the disk is full"):
+            binding.save("/dev/full")
+
+
+def _rewritten(source, target, edit):
+    """Copy a binding file, changing its arrays with ``edit(dict of arrays)``."""
+    with np.load(source) as data:
+        arrays = {key: data[key] for key in data.files}
+    edit(arrays)
+    with open(target, "wb") as handle:
+        np.savez(handle, **arrays)
+    return target
+
+
+def _times_five(arrays):
+    arrays["weights_data"] = arrays["weights_data"] * 5
+
+
+def _reversed(arrays):
+    arrays["weights_data"] = arrays["weights_data"][::-1].copy()
+
+
+def _index_out_of_range(arrays):
+    arrays["weights_indices"] = arrays["weights_indices"] + 1000
+
+
+def _missing_key(arrays):
+    del arrays["weights_indptr"]
+
+
+def _short_indptr(arrays):
+    arrays["weights_indptr"] = arrays["weights_indptr"][:-1]
+
+
+def _bad_options_json(arrays):
+    arrays["options"] = np.array("{cells: 3")
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (_times_five, "the weights of point 0 sum to 5, not 1"),
+        (_reversed, "the weights of point"),
+        (_index_out_of_range, "weights_indices holds indices outside 0 … 3"),
+        (_missing_key, "it lacks weights_indptr"),
+        (_short_indptr, "weights_indptr has shape (5,), not (6,)"),
+        (_bad_options_json, "its options record is not valid JSON"),
+    ],
+    ids=["times-five", "reversed", "index-out-of-range", "missing-key", "short-indptr", "bad-options-json"],
+)
+def test_edited_binding_files_are_refused(square_file, tmp_path, edit, message):
+    path = _rewritten(square_file[0], tmp_path / "edited.npz", edit)
+    with pytest.raises(lbc_core.CageError, match="is damaged or was edited") as error:
+        lbc_core.load_binding(path)
+    assert message in str(error.value)
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"", "is not an lbc binding file (EOFError"),
+        (b"PK\x03\x04 truncated", "is not an lbc binding file (BadZipFile"),
+        ("npy", "holds a single array, not an .npz archive"),
+        ("other", "has no 'lbc-binding-1' format mark"),
+        (None, "no such file"),
+    ],
+    ids=["empty", "bad-zip", "npy-renamed", "other-npz", "missing"],
+)
+def test_files_that_are_not_bindings_are_refused(tmp_path, content, message):
+    path = tmp_path / "file.npz"
+    if content == "npy":
+        with open(path, "wb") as handle:
+            np.save(handle, np.eye(3))
+    elif content == "other":
+        with open(path, "wb") as handle:
+            np.savez(handle, weights=np.eye(3))
+    elif content is not None:
+        path.write_bytes(content)
+    with pytest.raises(lbc_core.CageError) as error:
+        lbc_core.load_binding(path)
+    assert message in str(error.value)
+
+
+def _loads_to_a_sound_binding_or_is_refused(path):
+    """The property every fuzzed file must have: a CageError, or a binding whose weights keep their guarantees."""
+    try:
+        binding = lbc_core.load_binding(path)
+    except lbc_core.CageError as error:
+        event(f"refused: {str(error).split(': ', 1)[1].split(' (')[0].split(' holds')[0][:40]}")
+        return False
+    event("loaded")
+    weights = binding.weights
+    assert weights.indices.min(initial=0) >= 0 and weights.indices.max(initial=-1) < weights.shape[1]
+    np.testing.assert_allclose(np.asarray(weights.sum(axis=1)).ravel(), 1.0, atol=1e-7)
+    inside = ~binding.outside
+    np.testing.assert_allclose(weights[inside] @ binding.rest_cage_vertices, binding.points[inside], atol=1e-7)
+    rest = binding.rest_cage_vertices[binding.cage.vertex_map]
+    np.testing.assert_allclose(binding.deform(rest + [3.0, -1.0]), binding.points + [3.0, -1.0], atol=1e-6)
+    return True
+
+
+@FUZZ
+@given(cut=st.integers(0, 10**6))
+def test_fuzz_truncated_files(square_file, tmp_path, cut):
+    source, content = square_file
+    path = tmp_path / "cut.npz"
+    path.write_bytes(content[: cut % len(content)])
+    assert not _loads_to_a_sound_binding_or_is_refused(path)
+
+
+@FUZZ
+@given(bit=st.integers(0, 10**7))
+def test_fuzz_bit_flips(square_file, tmp_path, bit):
+    source, content = square_file
+    bit %= 8 * len(content)
+    flipped = bytearray(content)
+    flipped[bit // 8] ^= 1 << (bit % 8)
+    path = tmp_path / "flipped.npz"
+    path.write_bytes(bytes(flipped))
+    _loads_to_a_sound_binding_or_is_refused(path)
+
+
+_EDITS = {
+    "scale": lambda a, r: a * r.choice([-1.0, 0.5, 5.0]) if a.dtype.kind in "fiu" else a,
+    "shift": lambda a, r: a + r.choice([1, -1, 1000]) if a.dtype.kind in "fiu" else a,
+    "reverse": lambda a, r: a[::-1].copy() if a.ndim else a,
+    "shuffle": lambda a, r: r.permutation(a) if a.ndim else a,
+    "truncate": lambda a, r: a[: len(a) // 2] if a.ndim else a,
+    "empty": lambda a, r: a[:0] if a.ndim else a,
+    "transpose": lambda a, r: a.T.copy(),
+    "float": lambda a, r: a.astype(float) if a.dtype.kind != "U" else a,
+    "int": lambda a, r: a.astype(np.int64) if a.dtype.kind in "fb" else a,
+    "nan": lambda a, r: np.where(r.random(a.shape) < 0.3, np.nan, a) if a.dtype.kind == "f" else a,
+    "extra axis": lambda a, r: a[None],
+    "text": lambda a, r: np.array("nonsense"),
+}
+
+
+@FUZZ
+@given(key=st.sampled_from(sorted(lbc_core.binding._ARRAYS)), edit=st.sampled_from(sorted(_EDITS)),
+       seed=st.integers(0, 2**16))
+def test_fuzz_edited_arrays(square_file, tmp_path, key, edit, seed):
+    rng = np.random.default_rng(seed)
+
+    def change(arrays):
+        arrays[key] = _EDITS[edit](arrays[key], rng)
+
+    path = _rewritten(square_file[0], tmp_path / "edited.npz", change)
+    _loads_to_a_sound_binding_or_is_refused(path)
