@@ -129,7 +129,8 @@ class Cage:
             Another vertex count or dimension, NaN/inf, or welded copies posed apart.
         """
         input_vertices = real_array(input_vertices, "cage positions", f"(n, {self.dim})")
-        if self.dim == 2 and input_vertices.shape[1:] == (3,) and np.ptp(input_vertices[:, 2], initial=0) == 0:
+        given_with_z = self.dim == 2 and input_vertices.ndim == 2 and input_vertices.shape[1] == 3
+        if given_with_z and len(input_vertices) and np.all(input_vertices[:, 2] == input_vertices[0, 2]):
             input_vertices = input_vertices[:, :2]
         if input_vertices.shape != (len(self.vertex_map), self.dim):
             raise CageError(
@@ -431,27 +432,38 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
             "or bind in 2D with a polygon cage"
         )
     names = _first_inputs(vertex_map)
-    faces, collapsed = _collapse_welded(faces, vertex_map, names)
+    # Every defect below is collected and reported at once, so that fixing what the message lists gives a valid
+    # cage; each check runs on what the earlier ones leave (one copy of a duplicated face, non-degenerate triangles).
+    defects = []
+    faces, collapsed, excused = _collapse_welded(faces, vertex_map, names, defects)
     if collapsed:
         warnings.append(f"dropped {_count(collapsed, 'cage face')} that welding collapsed to an edge or a point")
-    triangles, triangle_face = _triangulate(welded, faces, zero)
-    _check_degenerate(welded, triangles, triangle_face, zero)
-    unused = np.setdiff1d(np.arange(len(welded)), triangles)
+    unused = np.setdiff1d(np.arange(len(welded)), [corner for _, face in faces for corner in face])
     if len(unused):
-        raise CageError(
+        defects.append(
             f"the cage has {_count(len(unused), 'loose vertex', 'loose vertices')}, in no face (vertex "
             f"{_some(names[unused])}): delete them from the cage (in Blender: Mesh > Clean Up > Delete Loose)"
         )
-    pairing = _check_closed_manifold(triangles, names)
-    triangles, flipped = _orient_outward(welded, triangles, pairing)
-    if np.all(flipped):
-        warnings.append("reversed all cage faces: they pointed inward")
-    elif np.any(flipped):
-        warnings.append(
-            f"flipped {_count(len(np.unique(triangle_face[flipped])), 'cage face')} to make the orientation consistent "
-            "and outward"
-        )
-    _check_self_intersection(welded, triangles, triangle_face, zero)
+    triangles, triangle_face, clean = _triangulate(welded, faces, zero, defects)
+    clean &= ~_report_degenerate(welded, triangles, triangle_face, zero, defects)
+    pairing = _check_closed_manifold(triangles, names, defects, excused)
+    if pairing is not None:
+        oriented = _orient_outward(welded, triangles, pairing, defects)
+        if oriented is not None:
+            triangles, flipped = oriented
+            if np.all(flipped):
+                warnings.append("reversed all cage faces: they pointed inward")
+            elif np.any(flipped):
+                warnings.append(
+                    f"flipped {_count(len(np.unique(triangle_face[flipped])), 'cage face')} to make the orientation "
+                    "consistent and outward"
+                )
+    _check_self_intersection(welded, triangles[clean], triangle_face[clean], zero, defects)
+    if defects:
+        raise CageError(defects[0] if len(defects) == 1 else (
+            f"the cage has {len(defects)} kinds of defect, all listed here: "
+            + "; ".join(f"({k}) {defect}" for k, defect in enumerate(defects, 1))
+        ))
     if _enclosed_measure(welded, triangles) <= ZERO_LENGTH * diagonal**3:
         raise CageError("the cage encloses zero volume: give it thickness, or bind in 2D with a polygon cage")
     return Cage(welded, triangles, triangle_face, vertex_map, warnings)
@@ -467,27 +479,32 @@ def _face_list(faces, n_vertices):
         raise CageError("cage faces must be sequences of integer vertex indices") from None
     if not faces:
         raise CageError("the 3D cage has no faces: pass its faces, or faces=None for a 2D polygon")
-    for index, face in enumerate(faces):
-        if len(face) < 3 or min(face) < 0 or max(face) >= n_vertices:
-            raise CageError(
-                f"cage face {index} ({face}) is invalid: a face needs 3 or more indices of the cage's {n_vertices} "
-                "vertices"
-            )
+    invalid = [index for index, face in enumerate(faces) if len(face) < 3 or min(face) < 0 or max(face) >= n_vertices]
+    if invalid:
+        listed = _listed([f"{index} ({faces[index]})" for index in invalid])
+        raise CageError(
+            f"cage face{'s' if len(invalid) > 1 else ''} {listed} {'are' if len(invalid) > 1 else 'is'} invalid: a "
+            f"face needs 3 or more indices of the cage's {n_vertices} vertices"
+        )
     return faces
 
 
-def _collapse_welded(faces, vertex_map, names):
-    """Faces in welded indices without the corners welding merged; faces reduced below 3 corners are dropped,
-    duplicated faces (the same corners, in any order) refused.
+def _collapse_welded(faces, vertex_map, names, defects):
+    """Faces in welded indices without the corners welding merged; faces reduced below 3 corners are dropped;
+    faces passing twice through a vertex and duplicated faces (the same corners, in any order) are reported in
+    ``defects`` and left out (duplicates: all copies but the first).
 
     Returns
     -------
     faces : list of (index, list of int)
         Input face index and corners of each kept face.
     dropped : int
+    excused : list of sets of int
+        The corners of each face passing twice through a vertex: edges between them, left open by leaving those
+        faces out, close when the faces are split as advised, so they are not reported as holes.
     """
     vertex_map = vertex_map.tolist()
-    kept, dropped, seen = [], 0, {}
+    kept, dropped, seen, twice, copies = [], 0, {}, [], []
     for index, face in enumerate(faces):
         face = [vertex_map[corner] for corner in face]
         face = [corner for k, corner in enumerate(face) if corner != face[k - 1]]
@@ -495,23 +512,35 @@ def _collapse_welded(faces, vertex_map, names):
             dropped += 1
             continue
         if len(set(face)) != len(face):
-            twice = sorted({corner for corner in face if face.count(corner) > 1})
-            raise CageError(
-                f"cage face {index} passes twice through vertex {_some(names[twice])}: split it into faces that each "
-                "visit a vertex once"
-            )
+            twice.append((index, sorted({corner for corner in face if face.count(corner) > 1})))
+            continue
         copy = seen.setdefault(tuple(sorted(face)), index)
         if copy != index:
-            raise CageError(
-                f"cage faces {copy} and {index} use the same vertices (a duplicated face): delete one of them "
-                "(in Blender: Select > Select All by Trait > Interior Faces, or Mesh > Clean Up)"
-            )
+            copies.append((copy, index))
+            continue
         kept.append((index, face))
-    return kept, dropped
+    if twice:
+        listed = _listed([f"face {index} twice through vertex {_some(names[corners])}" for index, corners in twice])
+        defects.append(
+            f"{_count(len(twice), 'cage face passes', 'cage faces pass')} through a vertex twice ({listed}): split "
+            "each into faces that visit a vertex once"
+        )
+    if copies:
+        listed = _listed([f"{a} and {b}" for a, b in copies])
+        defects.append(
+            f"the cage has {_count(len(copies), 'duplicated face')} (faces using the same vertices as another: "
+            f"{listed}): delete one face of each pair, not both (deleting both opens the cage; in Blender, Select "
+            "All by Trait > Interior Faces selects both)"
+        )
+    excused = [{vertex_map[corner] for corner in faces[index]} for index, _ in twice]
+    return kept, dropped, excused
 
 
-def _triangulate(vertices, faces, zero):
+def _triangulate(vertices, faces, zero, defects):
     """Triangles of all faces (see the module docstring for the choice).
+
+    An n-gon that cannot be triangulated is reported in ``defects`` and split as a fan, so that the checks of the
+    surface's topology still see it.
 
     Returns
     -------
@@ -519,18 +548,27 @@ def _triangulate(vertices, faces, zero):
         In the faces' own orientation, in input face order.
     triangle_face : (T,) int array
         Input face index of each triangle.
+    clean : (T,) bool array
+        False for the fans of the n-gons that could not be triangulated.
     """
-    if not faces:
+    if not faces and not defects:
         raise CageError("every face of the cage collapsed when welding its vertices: the cage has no faces left")
     triangles = [(index, [face]) for index, face in faces if len(face) == 3]
+    fans = set()
     for index, face in faces:
         if len(face) == 4:
             triangles.append((index, _split_quad(vertices, np.array(face), zero)))
         elif len(face) > 4:
-            triangles.append((index, _ear_clip(vertices, np.array(face), index, zero)))
+            try:
+                triangles.append((index, _ear_clip(vertices, np.array(face), index, zero)))
+            except CageError as error:
+                defects.append(str(error))
+                triangles.append((index, [[face[0], face[k], face[k + 1]] for k in range(1, len(face) - 1)]))
+                fans.add(index)
     triangles.sort(key=lambda item: item[0])
     triangle_face = np.array([index for index, pieces in triangles for _ in pieces], dtype=np.int64)
-    return np.array([list(t) for _, pieces in triangles for t in pieces], dtype=np.int64).reshape(-1, 3), triangle_face
+    triangles = np.array([list(t) for _, pieces in triangles for t in pieces], dtype=np.int64).reshape(-1, 3)
+    return triangles, triangle_face, ~np.isin(triangle_face, list(fans))
 
 
 def _split_quad(vertices, quad, zero):
@@ -585,14 +623,16 @@ def _ear_clip(vertices, face, index, zero):
     return np.array(triangles)
 
 
-def _check_degenerate(vertices, triangles, triangle_face, zero):
+def _report_degenerate(vertices, triangles, triangle_face, zero, defects):
+    """(T,) bool: the triangles of zero area; their input faces are reported in ``defects``."""
     bad = _degenerate(vertices[triangles], zero)
     if np.any(bad):
         faces = np.unique(triangle_face[bad])
-        raise CageError(
+        defects.append(
             f"the cage has {_count(len(faces), 'face')} of zero area (face {_some(faces)}): delete or dissolve them "
             "(in Blender: Mesh > Clean Up > Degenerate Dissolve)"
         )
+    return bad
 
 
 def _degenerate(corners, zero):
@@ -632,47 +672,57 @@ def _edge_pairing(triangles):
     return directed, order, counts
 
 
-def _check_closed_manifold(triangles, names):
-    """Raise CageError for open or non-manifold edges and vertices, and several parts.
+def _check_closed_manifold(triangles, names, defects, excused=()):
+    """Report open or non-manifold edges and vertices, and several parts, in ``defects``; open edges in
+    between corners of one set of ``excused`` are not reported.
 
     Returns
     -------
-    (first, second) : two (3T / 2,) int arrays
+    (first, second) : two (3T / 2,) int arrays, or None when the surface is not closed and manifold
         The two directed edges (rows of the ``directed`` array of :func:`_edge_pairing`) of each undirected edge.
     """
+    if not len(triangles):
+        return None
+    found = len(defects)
     directed, order, counts = _edge_pairing(triangles)
     edge_of = directed[order[np.cumsum(counts) - counts]]
-    if np.any(counts == 1):
-        where = _listed([f"{names[a]}-{names[b]}" for a, b in edge_of[counts == 1]])
-        open_edges = _count(np.count_nonzero(counts == 1), "boundary edge")
-        raise CageError(
+    holes = (counts == 1) & ~np.array([any(a in corners and b in corners for corners in excused)
+                                        for a, b in edge_of.tolist()], dtype=bool)
+    if np.any(holes):
+        where = _listed([f"{names[a]}-{names[b]}" for a, b in edge_of[holes]])
+        open_edges = _count(np.count_nonzero(holes), "boundary edge")
+        defects.append(
             f"the cage is not closed: it has {open_edges}, each in only one face (between vertices {where}); fill "
             "the holes (in Blender: select the boundary edges with Select > Select All by Trait > Non Manifold, and "
             "press F)"
         )
     if np.any(counts > 2):
         where = _listed([f"{names[a]}-{names[b]}" for a, b in edge_of[counts > 2]])
-        raise CageError(
+        defects.append(
             f"the cage has {_count(np.count_nonzero(counts > 2), 'non-manifold edge')} shared by more than two faces "
             f"(between vertices {where}): make every edge belong to exactly two faces "
             "(in Blender: Select > Select All by Trait > Non Manifold)"
         )
-    first, second = order[0::2], order[1::2]
     n_tri = len(triangles)
-    _check_manifold_vertices(triangles, directed, first, second, names)
-    adjacency = sp.coo_matrix((np.ones(len(first)), (first % n_tri, second % n_tri)), shape=(n_tri, n_tri))
+    # Triangles sharing an edge are connected, whatever the edge's number of faces.
+    group_head = order[np.repeat(np.cumsum(counts) - counts, counts)]
+    adjacency = sp.coo_matrix((np.ones(len(order)), (order % n_tri, group_head % n_tri)), shape=(n_tri, n_tri))
     parts, label = connected_components(adjacency, directed=False)
     if parts > 1:
         sizes = np.bincount(label)
-        raise CageError(
+        defects.append(
             f"the cage has {parts} separate parts ({', '.join(str(s) for s in sizes[:_LISTED])} triangles): LBC needs "
             "one closed surface around one region; join the parts or bind to each part with its own cage"
         )
-    return first, second
+    if np.any(counts != 2):
+        return None
+    first, second = order[0::2], order[1::2]
+    _check_manifold_vertices(triangles, directed, first, second, names, defects)
+    return (first, second) if len(defects) == found else None
 
 
-def _check_manifold_vertices(triangles, directed, first, second, names):
-    """Raise CageError where the faces around a vertex form more than one fan (surfaces touching at a point)."""
+def _check_manifold_vertices(triangles, directed, first, second, names, defects):
+    """Report in ``defects`` where the faces around a vertex form more than one fan (surfaces touching at a point)."""
     n_tri = len(triangles)
     # Corners are (triangle, vertex) pairs; two corners at one vertex are linked when their triangles share an edge
     # there. A manifold vertex has all its corners in one linked fan.
@@ -688,14 +738,14 @@ def _check_manifold_vertices(triangles, directed, first, second, names):
     fans_per_vertex = np.bincount(np.unique(np.c_[corner_vertex, fan], axis=0)[:, 0])
     pinched = np.flatnonzero(fans_per_vertex > 1)
     if len(pinched):
-        raise CageError(
+        defects.append(
             f"the cage has {_count(len(pinched), 'non-manifold vertex', 'non-manifold vertices')} where separate "
             f"sheets of the surface touch at a point (vertex {_some(names[pinched])}): pull the sheets apart or merge "
             "them along an edge"
         )
 
 
-def _orient_outward(vertices, triangles, pairing):
+def _orient_outward(vertices, triangles, pairing, defects):
     """Make neighbouring triangles agree in orientation, then point the surface outward.
 
     Parameters
@@ -708,9 +758,9 @@ def _orient_outward(vertices, triangles, pairing):
 
     Returns
     -------
-    triangles : (T, 3) int array
-    flipped : (T,) bool array
-        The triangles whose orientation changed.
+    (triangles (T, 3) int array, flipped (T,) bool array), or None
+        The oriented triangles and which of them changed orientation; None, reported in ``defects``, when the
+        surface is not orientable.
     """
     first, second = pairing
     n_tri = len(triangles)
@@ -727,19 +777,23 @@ def _orient_outward(vertices, triangles, pairing):
         parent = predecessors[node]
         flip[node] = flip[parent] ^ relation[(parent, node)]
     if np.any((flip[a] ^ flip[b]) != disagree):
-        raise CageError("the cage surface is not orientable (like a Möbius strip): it cannot enclose a volume")
+        defects.append("the cage surface is not orientable (like a Möbius strip): it cannot enclose a volume")
+        return None
     oriented = np.where(flip[:, None], triangles[:, ::-1], triangles)
     if _enclosed_measure(vertices, oriented) < 0:
         oriented, flip = oriented[:, ::-1], ~flip
     return oriented, flip
 
 
-def _check_self_intersection(vertices, triangles, triangle_face, zero):
+def _check_self_intersection(vertices, triangles, triangle_face, zero, defects):
+    """Report in ``defects`` the pairs of faces whose triangles cross or touch."""
+    if len(triangles) < 2:
+        return
     pairs = _intersecting_triangles(vertices, triangles, zero)
     if len(pairs):
         faces = np.unique(np.sort(triangle_face[pairs], axis=1), axis=0)
         listed = _listed([f"{a} and {b}" if a != b else f"{a} with itself" for a, b in faces])
-        raise CageError(
+        defects.append(
             f"the cage intersects itself at {_count(len(faces), 'pair')} of crossing or touching faces (faces "
             f"{listed}); move them apart so that the surface does not pass through itself (in Blender the 3D-Print "
             "Toolbox's Intersections check selects them)"

@@ -222,7 +222,31 @@ def test_several_parts():
 
 
 def test_duplicated_face():
-    assert_refused(CUBE, CUBE_QUADS + [CUBE_QUADS[2][::-1]], "duplicated", "faces 2 and 6")
+    message = assert_refused(CUBE, CUBE_QUADS + [CUBE_QUADS[2][::-1]], "1 duplicated face", "2 and 6",
+                             "delete one face of each pair, not both")
+    assert "kinds of defect" not in message  # one copy kept: the cage is otherwise closed
+
+
+def test_every_defect_is_reported_at_once():
+    # The case: 5 duplicated faces and a hole elsewhere were told one at a time (first one pair, then, after
+    # deleting, "open"); every kind, with its count, comes in one message now.
+    vertices, triangles = sphere(60)
+    top = int(np.argmax(vertices[:, 2]))
+    fan = np.flatnonzero(np.any(triangles == top, axis=1))  # the faces around the top vertex: a hole and a loose one
+    kept = [t for k, t in enumerate(triangles.tolist()) if k not in fan]
+    duplicates = [t[::-1] for t in kept[:5]]
+    message = assert_refused(vertices, kept + duplicates, "3 kinds of defect", "5 duplicated faces",
+                             f"1 loose vertex, in no face (vertex {top})",
+                             f"not closed: it has {len(fan)} boundary edges")
+    assert message.index("duplicated") < message.index("loose") < message.index("not closed")
+    # Following the advice (one copy of each pair deleted, the hole filled) gives a valid cage.
+    assert make_cage(vertices, triangles).n_control_points == len(vertices)
+
+
+def test_defects_of_topology_and_geometry_together():
+    vertices = np.r_[CUBE, [[3.0, 3.0, 3.0]]]
+    faces = CUBE_QUADS[:-1] + [[1, 3, 7, 5], [0, 2, 3, 1]]
+    assert_refused(vertices, faces, "2 kinds of defect", "1 duplicated face", "1 loose vertex")
 
 
 def test_loose_vertex():
@@ -230,7 +254,8 @@ def test_loose_vertex():
 
 
 def test_face_visiting_a_vertex_twice():
-    assert_refused(CUBE, CUBE_QUADS[:-1] + [[1, 3, 7, 3, 5]], "face 5", "twice through vertex 3")
+    message = assert_refused(CUBE, CUBE_QUADS[:-1] + [[1, 3, 7, 3, 5]], "face 5", "twice through vertex 3")
+    assert "not closed" not in message  # its edges close once it is split as advised
 
 
 def test_zero_area_face():
@@ -442,3 +467,51 @@ def test_broad_phase_finds_every_overlapping_box_pair():
     expected = {tuple(p) for p in np.argwhere(np.triu(overlap, k=1)).tolist()}
     for chunk in (7, 2_000_000):  # several chunks, and one
         assert {tuple(p) for p in _overlapping_boxes(low, high, chunk).tolist()} == expected
+
+
+def test_every_invalid_face_is_named():
+    assert_refused(CUBE, CUBE_QUADS + [[0, 1], [0, 1, 8]], "cage faces 6 ([0, 1]), 7 ([0, 1, 8]) are invalid")
+
+
+def test_complex_coordinates_are_refused():
+    assert_refused(CUBE + 1j, CUBE_QUADS, "must be real numbers")
+
+
+# ------------------------------------------------------------------------------------------ posing a checked cage
+
+
+def test_welded_copies_follow_their_first_copy_and_may_not_be_posed_apart():
+    # Vertices 8 and 9 repeat 6 and 7 (as in a real cage with a seam): one control point each.
+    vertices = np.r_[CUBE, CUBE[[6, 7]]]
+    faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 8, 9, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
+    cage = make_cage(vertices, faces)
+    assert cage.n_control_points == 8 and cage.warnings[0] == "welded 2 duplicate cage vertices"
+    moved = vertices * 2.0  # an affine pose keeps the copies together
+    np.testing.assert_array_equal(cage.control_points_from_input(moved), CUBE * 2.0)
+    alone = vertices.copy()
+    alone[6] += [0.0, 0.5, 0.0]  # one copy moved, the other left behind
+    with pytest.raises(CageError, match=r"cage vertices 6/8 coincided when bound .* are posed apart"):
+        cage.control_points_from_input(alone)
+
+
+def test_a_2d_cage_may_be_posed_with_its_constant_z():
+    cage = make_cage(np.c_[SQUARE, np.full(4, 5.0)])
+    np.testing.assert_array_equal(cage.control_points_from_input(np.c_[SQUARE * 2, np.full(4, 7.0)]), SQUARE * 2)
+    with pytest.raises(CageError, match=r"got positions of shape \(4, 3\)"):
+        cage.control_points_from_input(np.c_[SQUARE, [0.0, 0.0, 0.0, 1.0]])
+    with pytest.raises(CageError, match="NaN or infinite positions of cage vertex 2"):
+        cage.control_points_from_input(np.where([[0], [0], [1], [0]], np.nan, SQUARE))
+
+
+def test_a_posed_cage_must_keep_the_bound_faces():
+    cage = make_cage(CUBE, CUBE_QUADS)
+    cage.check_faces(CUBE_QUADS)
+    cage.check_faces([face[::-1] for face in CUBE_QUADS])  # orientation is the cage check's business
+    with pytest.raises(CageError, match="other faces"):
+        cage.check_faces(CUBE_QUADS[1:2] + CUBE_QUADS[:1] + CUBE_QUADS[2:])  # same faces, other numbers
+    with pytest.raises(CageError, match="this cage has no faces"):
+        cage.check_faces(None)
+    with pytest.raises(CageError, match="not among its 8 vertices"):
+        cage.check_faces(CUBE_QUADS[:-1] + [[1, 3, 7, 9]])
+    with pytest.raises(CageError, match="2D polygon cage, but this cage has faces"):
+        make_cage(SQUARE).check_faces([[0, 1, 2]])

@@ -1,6 +1,7 @@
 """Mesh and cage files: the repository's data read as expected, faces keep their order and polygons through every
 format, 2D cages read as polygons, and bad files fail with a CageError naming the file."""
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,7 @@ import pytest
 
 from lbc_core.cage import make_cage
 from lbc_core.errors import CageError
-from lbc_core.io import read_cage, read_mesh, write_mesh
+from lbc_core.io import FORMATS, check_output, read_cage, read_mesh, write_mesh
 
 DATA = Path(__file__).parent / "data"
 GARGOYLE = DATA / "cages-3d" / "gargoyle"
@@ -98,3 +99,55 @@ def test_bad_files(tmp_path, name, content, message):
     with pytest.raises(CageError, match=message) as error:
         read_cage(path)
     assert name in str(error.value)
+
+
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("zero.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "has the index 0; OBJ counts vertices from 1"),
+        ("far.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "face 0 (0 1 8) is invalid"),
+        ("far.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", "face 0 (0 1 7) is invalid"),
+        ("edge.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", "face 0 (0 1) is invalid"),
+    ],
+)
+def test_faces_that_are_not_among_the_vertices_are_refused(tmp_path, name, content, message):
+    path = tmp_path / name
+    path.write_text(content)
+    with pytest.raises(CageError, match="is invalid|index 0") as error:
+        read_mesh(path)
+    assert message in str(error.value) and name in str(error.value)
+
+
+def test_writing_faces_that_are_not_among_the_vertices_is_refused(tmp_path):
+    with pytest.raises(CageError, match=r"face 1 \(0 1 5\) is invalid"):
+        write_mesh(tmp_path / "out.obj", CUBE[:3], [[0, 1, 2], [0, 1, 5]])
+    assert not (tmp_path / "out.obj").exists()
+
+
+def test_output_paths_are_checked_before_any_work(tmp_path):
+    check_output(tmp_path / "fine.npz")
+    check_output(tmp_path / "fine.obj", FORMATS)
+    with pytest.raises(CageError, match="the folder .*nodir does not exist"):
+        check_output(tmp_path / "nodir" / "b.npz")
+    with pytest.raises(CageError, match="unknown output format '.txt'"):
+        check_output(tmp_path / "c.txt", FORMATS)
+    with pytest.raises(CageError, match="is a folder"):
+        check_output(tmp_path)
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if not os.access(locked, os.W_OK):  # root may write anywhere
+            with pytest.raises(CageError, match="no permission to write in"):
+                check_output(locked / "b.npz")
+    finally:
+        locked.chmod(0o700)
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+@pytest.mark.parametrize("suffix", [".obj", ".off", ".ply"])
+def test_a_full_disk_is_reported_as_such(tmp_path, suffix):
+    full = tmp_path / f"full{suffix}"
+    full.symlink_to("/dev/full")
+    with pytest.raises(CageError, match="the disk is full"):
+        write_mesh(full, CUBE, MIXED_FACES)
