@@ -1,7 +1,7 @@
 """The ``lbc`` command line: bind, deform, inspect and compare coordinates from scripts and pipelines.
 
     lbc bind CAGE MESH -o binding.npz [--scheme lbc|mvc|harmonic|bbw] [--cells N] [--weighting W] [--epsilon E]
-             [--threshold T] [--tolerance T]
+             [--threshold T] [--tolerance T] [--max-iterations N]
     lbc deform binding.npz NEW_CAGE -o deformed.obj [--mesh MESH] [--plot before_after.png]
     lbc stats binding.npz [--plot pq.png] [--coordinate INDEX coordinate.png]
     lbc compare CAGE [MESH] --schemes lbc,mvc,harmonic [--plot pq.png]
@@ -60,6 +60,7 @@ def _parser():
     solving.add_argument("--epsilon", type=float, help="LBC's C1 relaxation width (default 0: plain TV)")
     solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default 1e-3/n)")
     solving.add_argument("--tolerance", type=float, help="LBC's ADMM stopping tolerance (default: the solver's)")
+    solving.add_argument("--max-iterations", type=int, help="LBC's ADMM iteration limit (default 10000)")
 
     bind = commands.add_parser("bind", parents=[common, solving], help="bind a mesh to a cage, save the binding")
     bind.add_argument("cage", help="cage file (.obj/.off/.ply); a file without faces is a 2D polygon")
@@ -117,11 +118,10 @@ def _scheme_list(text):
 
 def _run_bind(args):
     from .cage import make_cage
-    from .io import check_output, read_cage
+    from .io import check_output
 
     check_output(args.output)
-    cage_vertices, cage_faces = read_cage(args.cage)
-    points = _read_points(args.mesh, cage_faces is None)
+    cage_vertices, cage_faces, points = _read_inputs(args.cage, args.mesh)
     _warn(make_cage(cage_vertices, cage_faces).warnings, args.quiet)  # repairs are told before the long work
     with _Progress(f"bind ({args.scheme})", args.quiet) as progress:
         binding = _bind(args.scheme, cage_vertices, cage_faces, points, args, progress)
@@ -151,13 +151,14 @@ def _run_bind(args):
         )
         if not binding.converged:
             print(f"not converged: the solve stopped after {binding.iterations} iterations above its tolerance; the "
-                  "coordinates are usable but less local (a larger --tolerance stops sooner)")
+                  "coordinates are usable but less local (raise --max-iterations, or a larger --tolerance stops "
+                  "sooner)")
     return 0
 
 
 def _run_deform(args):
     from .binding import load_binding
-    from .io import FORMATS, check_output, read_mesh, write_mesh
+    from .io import FORMATS, check_output, planar, read_mesh, write_mesh
 
     check_output(args.output, FORMATS)
     if args.plot:
@@ -165,15 +166,13 @@ def _run_deform(args):
     binding = load_binding(args.binding)
     _check_2d_figure(binding, args.plot, "--plot")
     new_vertices, new_faces = read_mesh(args.new_cage)
-    if binding.cage.dim == 2:
-        from .io import planar
-
-        new_vertices = planar(new_vertices, args.new_cage)
     try:
-        binding.cage.control_points_from_input(new_vertices)
         binding.cage.check_faces(new_faces)
+        binding.cage.control_points_from_input(new_vertices)
     except CageError as error:
         raise CageError(f"{args.new_cage}: {error}") from None
+    if binding.cage.dim == 2:
+        new_vertices = planar(new_vertices, args.new_cage)
     faces = None
     if args.mesh:
         mesh_vertices, faces = read_mesh(args.mesh)
@@ -221,16 +220,15 @@ def _run_stats(args):
 
 
 def _run_compare(args):
-    from .io import read_cage
     from .meshing import mesh_domain
     from .cage import make_cage
 
     if args.plot:
         _check_figure(args.plot)  # before binding: matplotlib missing, an unknown format, a missing folder
-    cage_vertices, cage_faces = read_cage(args.cage)
+    cage_vertices, cage_faces, points = _read_inputs(args.cage, args.mesh)
     bindings, domain = {}, None
     if args.mesh:
-        points, points_from = _read_points(args.mesh, cage_faces is None), str(args.mesh)
+        points_from = str(args.mesh)
     else:
         domain = mesh_domain(make_cage(cage_vertices, cage_faces), args.options.cells)
         points, points_from = domain.vertices, "the domain mesh's vertices"
@@ -260,17 +258,16 @@ def _run_compare(args):
 def _run_table1(args):
     from .baselines import bind_mvc
     from .cage import make_cage
-    from .io import read_cage
     from .statistics import table1_row
 
     pairs = [(Path(c), Path(m)) for c, m in args.pair] + _find_pairs(args.data or ([] if args.pair else None))
     rows = []
     for cage_path, mesh_path in pairs:
-        cage_vertices, cage_faces = read_cage(cage_path)
+        cage_vertices, cage_faces, _ = _read_inputs(cage_path)
         n = make_cage(cage_vertices, cage_faces).n_control_points
         if n < args.min_control or (args.max_control is not None and n > args.max_control):
             continue
-        points = _read_points(mesh_path, cage_faces is None)
+        points = _read_inputs(cage_path, mesh_path)[2]
         name = f"{cage_path.parent.name}/{cage_path.stem}"
         with _Progress(f"{name} (lbc)", args.quiet) as progress:
             lbc = _bind("lbc", cage_vertices, cage_faces, points, args, progress)
@@ -305,14 +302,39 @@ def _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=None
 def _options(args):
     """The bind options of the command's flags, checked (a bad value exits 2 before any file is read)."""
     return BindOptions(cells=args.cells, weighting=args.weighting, epsilon=args.epsilon, threshold=args.threshold,
-                       tolerance=args.tolerance)
+                       tolerance=args.tolerance, max_iterations=args.max_iterations)
 
 
-def _read_points(path, planar):
+def _read_inputs(cage_path, mesh_path=None):
+    """A cage file and, if given, a mesh or point file, read for binding.
+
+    Returns
+    -------
+    cage_vertices : (n, 3) or, for a polygon (a file without faces), (n, 2) float array
+    cage_faces : list of int arrays, or None
+    points : (m, 3) or, for a polygon cage, (m, 2) float array; None without ``mesh_path``
+
+    Raises
+    ------
+    CageError
+        Besides the files' own errors: 2D points in another plane z = constant than the polygon cage's.
+    """
     from . import io
 
-    vertices, _ = io.read_mesh(path)
-    return io.planar(vertices, path) if planar else vertices
+    vertices, faces = io.read_mesh(cage_path)
+    cage = vertices if faces is not None else io.planar(vertices, cage_path)
+    if mesh_path is None:
+        return cage, faces, None
+    points, _ = io.read_mesh(mesh_path)
+    if faces is None:
+        flat = io.planar(points, mesh_path)
+        if abs(points[0, 2] - vertices[0, 2]) > 1e-9 * max(float(np.ptp(cage)), 1e-300):
+            raise CageError(
+                f"{mesh_path} lies in the plane z = {points[0, 2]:g} but the 2D cage {cage_path} in z = "
+                f"{vertices[0, 2]:g}: move one into the other's plane"
+            )
+        points = flat
+    return cage, faces, points
 
 
 def _plots():

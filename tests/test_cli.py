@@ -150,3 +150,155 @@ def test_bad_options_exit_2(capsys):
         main(["compare", str(LOGO), "--schemes", "lbc,nope"])
     assert exit_info.value.code == 2
     assert "unknown scheme" in capsys.readouterr().err
+
+
+# What lbc prints is what it did; every bad input is one line and exit 2, before the long work where it can be.
+
+
+def lbc(*argv):
+    """``lbc`` in a child process (a crash or a traceback fails the test): exit code, stdout, stderr."""
+    result = subprocess.run([sys.executable, "-m", "lbc_core", *map(str, argv)], capture_output=True, text=True,
+                            timeout=300)
+    return result.returncode, result.stdout, result.stderr
+
+
+def assert_one_line_error(code, err, message):
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("lbc: error:"), err
+    assert message in lines[0], lines[0]
+
+
+@pytest.fixture(scope="module")
+def logo_binding(tmp_path_factory, logo_mesh):
+    path = tmp_path_factory.mktemp("logo-binding") / "logo.npz"
+    assert main(["bind", str(LOGO), str(logo_mesh), "-o", str(path), "--cells", "400", "--quiet"]) == 0
+    return path
+
+
+def test_the_path_written_is_the_path_printed(tmp_path, capsys, logo_mesh):
+    output = tmp_path / "binding.dat"
+    code, out, err = run(capsys, "bind", LOGO, logo_mesh, "-o", output, "--cells", 400, "--quiet")
+    assert code == 0, err
+    assert out.strip().endswith(f"wrote {output}") and [p.name for p in tmp_path.iterdir()] == ["binding.dat"]
+    assert run(capsys, "stats", output, "--quiet")[0] == 0
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--cells", 0], "cells must be at least 10"),
+        (["--tolerance", 0], "tolerance must be more than 0"),
+        (["--epsilon", -1, "--max-iterations", -5], "epsilon must be 0 or more, got -1"),
+        (["--threshold", 0.5], "threshold 0.5 would drop every weight"),
+        (["-o", "{d}/nodir/b.npz"], "the folder {d}/nodir does not exist"),
+    ],
+)
+def test_bad_options_and_outputs_are_refused_before_the_bind(tmp_path, logo_mesh, argv, message):
+    argv = [str(a).format(d=tmp_path) for a in argv]
+    output = [] if "-o" in argv else ["-o", tmp_path / "b.npz"]
+    code, _, err = lbc("bind", LOGO, logo_mesh, *output, *argv)
+    assert_one_line_error(code, err, message.format(d=tmp_path))  # one line: no progress was printed
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_a_full_disk_is_reported(tmp_path, logo_mesh):
+    code, _, err = lbc("bind", LOGO, logo_mesh, "-o", "/dev/full", "--cells", 400, "--quiet")
+    assert_one_line_error(code, err, "could not write /dev/full: the disk is full")
+
+
+def test_non_convergence_and_outside_points_are_in_the_plain_output(tmp_path, capsys):
+    points = tmp_path / "points.obj"
+    cage, _ = read_cage(LOGO)
+    write_mesh(points, np.r_[cage.mean(axis=0, keepdims=True), cage.max(axis=0, keepdims=True) + 10.0])
+    code, out, err = run(capsys, "bind", LOGO, points, "-o", tmp_path / "b.npz", "--cells", 400,
+                         "--max-iterations", 5, "--quiet")
+    assert code == 0, err
+    assert "1 points outside the cage (bound to the closest point inside)" in out
+    assert "not converged: the solve stopped after 5 iterations" in out
+
+
+def test_warnings_and_the_forecast_come_before_the_long_work(tmp_path, logo_mesh):
+    cage, _ = read_cage(LOGO)
+    doubled = tmp_path / "doubled.obj"
+    write_mesh(doubled, np.r_[cage[:3], cage[2:3], cage[3:]])  # vertex 2 twice in a row: welded
+    code, out, err = lbc("bind", doubled, logo_mesh, "-o", tmp_path / "b.npz", "--cells", 400)
+    assert code == 0, err
+    lines = err.splitlines()
+    assert lines[0] == "lbc: warning: welded 1 duplicate cage vertex"
+    assert "solving 6 control points on about 400 cells: about" in lines[1]
+    assert "ADMM iteration" in err and "left" in err
+
+
+def test_figure_paths_are_checked_before_the_work(tmp_path, logo_binding):
+    code, _, err = lbc("stats", logo_binding, "--plot", tmp_path / "c.txt")
+    assert_one_line_error(code, err, "unknown output format '.txt'")
+    code, _, err = lbc("stats", logo_binding, "--coordinate", 99, tmp_path / "w.png")
+    assert_one_line_error(code, err, "the coordinate index must be in 0 … 5, got 99")
+
+
+def test_deform_checks_the_posed_cage_and_the_mesh(tmp_path, capsys, gargoyle_points):
+    binding = tmp_path / "mvc.npz"
+    cage = GARGOYLE / "cage_L16.obj"
+    assert run(capsys, "bind", cage, gargoyle_points, "-o", binding, "--scheme", "mvc", "--cells", 300,
+               "--quiet")[0] == 0
+    vertices, faces = read_cage(cage)
+    vertex_only = tmp_path / "vertex-only.obj"
+    write_mesh(vertex_only, vertices)
+    code, _, err = run(capsys, "deform", binding, vertex_only, "-o", tmp_path / "x.obj")
+    assert code == 2 and "this cage has no faces" in err
+    renumbered = tmp_path / "renumbered.obj"
+    write_mesh(renumbered, vertices, faces[1:] + faces[:1])
+    code, _, err = run(capsys, "deform", binding, renumbered, "-o", tmp_path / "x.obj")
+    assert code == 2 and "other faces" in err
+    code, _, err = run(capsys, "deform", binding, cage, "-o", tmp_path / "x.stl")
+    assert code == 2 and "unknown output format '.stl'" in err
+    bad_mesh = tmp_path / "bad-mesh.obj"
+    bad_mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
+    code, _, err = run(capsys, "deform", binding, cage, "-o", tmp_path / "x.obj", "--mesh", bad_mesh)
+    assert code == 2 and "face 0 (0 1 8) is invalid" in err
+
+
+def test_2d_points_in_another_plane_are_refused(tmp_path, capsys, logo_mesh):
+    lifted = tmp_path / "lifted.obj"
+    vertices, faces = read_mesh(logo_mesh)
+    write_mesh(lifted, vertices + [0.0, 0.0, 5.0], faces)
+    code, _, err = run(capsys, "bind", LOGO, lifted, "-o", tmp_path / "b.npz")
+    assert code == 2 and "lies in the plane z = 5 but the 2D cage" in err
+
+
+def _damage(source, target, how):
+    content = source.read_bytes()
+    if how == "truncated":
+        target.write_bytes(content[: len(content) // 2])
+    elif how == "bit-flip":
+        flipped = bytearray(content)
+        flipped[len(content) // 3] ^= 0x10
+        target.write_bytes(bytes(flipped))
+    elif how == "empty":
+        target.write_bytes(b"")
+    elif how == "npy":
+        with open(target, "wb") as handle:
+            np.save(handle, np.eye(3))
+    else:
+        with np.load(source) as data:
+            arrays = {key: data[key] for key in data.files}
+        if how == "indices":
+            arrays["weights_indices"] = arrays["weights_indices"] + 10**6
+        elif how == "times-five":
+            arrays["weights_data"] = arrays["weights_data"] * 5
+        elif how == "reversed":
+            arrays["weights_data"] = arrays["weights_data"][::-1].copy()
+        elif how == "missing-key":
+            del arrays["points"]
+        with open(target, "wb") as handle:
+            np.savez(handle, **arrays)
+
+
+@pytest.mark.parametrize("how", ["truncated", "bit-flip", "empty", "npy", "indices", "times-five", "reversed",
+                                 "missing-key"])
+def test_damaged_binding_files_exit_2_with_one_line(tmp_path, logo_binding, how):
+    damaged = tmp_path / "damaged.npz"
+    _damage(logo_binding, damaged, how)
+    code, out, err = lbc("deform", damaged, LOGO, "-o", tmp_path / "x.obj")
+    assert_one_line_error(code, err, str(damaged))
+    assert out == "" and not (tmp_path / "x.obj").exists()
