@@ -269,7 +269,9 @@ def _size(count):
 
 
 def _duration(seconds):
-    """'7 s', '3 min', '2.5 h': a duration for messages."""
+    """'under 1 s', '7 s', '3 min', '2.5 h': a duration for messages."""
+    if seconds < 1:
+        return "under 1 s"
     if seconds < 90:
         return f"{seconds:.0f} s"
     if seconds < 5400:

@@ -122,3 +122,14 @@ def test_memory_estimate_refuses_what_the_machine_cannot_hold():
     check_memory(26, 3000, 2)  # the paper's 2D problems fit anywhere
     with pytest.raises(lbc_core.CageError, match="GiB"):
         check_memory(2000, 10**8, 3)
+
+
+def test_the_forecast_tells_memory_and_time_before_a_solve():
+    from lbc_core.solver import estimate_memory, solve_forecast
+
+    small = solve_forecast(27, 8000, 3)
+    assert small.startswith("solving 27 control points on about 8000 cells: about ") and " MB of memory" in small
+    # The 1002-vertex cage: GiB and minutes, told up front.
+    large = solve_forecast(1002, 8000, 3)
+    assert f"{estimate_memory(1002, 8000, 3) / 2**30:.1f} GiB of memory and roughly" in large and " min" in large
+    assert "beyond an hour" in solve_forecast(2000, 64000, 3)
