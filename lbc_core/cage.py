@@ -286,6 +286,15 @@ def _listed(items):
     return ", ".join(items[:_LISTED]) + (", ..." if len(items) > _LISTED else "")
 
 
+def _raise_all(defects):
+    """Raise one CageError listing every defect message found (nothing when there is none)."""
+    if len(defects) == 1:
+        raise CageError(defects[0])
+    if defects:
+        raise CageError(f"the cage has {len(defects)} kinds of defect, all listed here: "
+                        + "; ".join(f"({k}) {defect}" for k, defect in enumerate(defects, 1)))
+
+
 def _welded_warning(count):
     return f"welded {_count(count, 'duplicate cage vertex', 'duplicate cage vertices')}"
 
@@ -368,7 +377,7 @@ def _make_polygon_cage(vertices, weld_tolerance, max_control_points):
 
 
 def _check_polygon_simple(vertices, zero, names):
-    """Raise CageError if the closed polygon doubles back at a vertex or two non-adjacent edges cross or touch.
+    """Raise one CageError if the closed polygon doubles back at vertices or non-adjacent edges cross or touch.
 
     Parameters
     ----------
@@ -386,9 +395,10 @@ def _check_polygon_simple(vertices, zero, names):
     spike = (np.abs(_cross2(incoming, outgoing)) <= zero * np.linalg.norm(incoming, axis=1)) & (
         np.einsum("ij,ij->i", incoming, outgoing) < 0
     )
+    defects = []
     if np.any(spike):
         corner = names[(np.flatnonzero(spike) + 1) % n]
-        raise CageError(
+        defects.append(
             f"the polygon cage doubles back on itself at vertex {_some(corner)} (a zero-width spike): delete that "
             "vertex or move it off the line of its neighbours"
         )
@@ -400,10 +410,11 @@ def _check_polygon_simple(vertices, zero, names):
     if np.any(crossing):
         i, j = i[crossing], j[crossing]
         pairs = _listed([f"{names[a]}-{names[(a + 1) % n]} with {names[b]}-{names[(b + 1) % n]}" for a, b in zip(i, j)])
-        raise CageError(
+        defects.append(
             f"the polygon cage intersects itself at {_count(len(i), 'pair')} of crossing or touching edges (between "
             f"input vertices {pairs}); move its vertices so that the outline does not cross itself"
         )
+    _raise_all(defects)
 
 
 # ------------------------------------------------------------------------------------------------------------ 3D mesh
@@ -459,11 +470,7 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
                     "consistent and outward"
                 )
     _check_self_intersection(welded, triangles[clean], triangle_face[clean], zero, defects)
-    if defects:
-        raise CageError(defects[0] if len(defects) == 1 else (
-            f"the cage has {len(defects)} kinds of defect, all listed here: "
-            + "; ".join(f"({k}) {defect}" for k, defect in enumerate(defects, 1))
-        ))
+    _raise_all(defects)
     if _enclosed_measure(welded, triangles) <= ZERO_LENGTH * diagonal**3:
         raise CageError("the cage encloses zero volume: give it thickness, or bind in 2D with a polygon cage")
     return Cage(welded, triangles, triangle_face, vertex_map, warnings)
@@ -686,8 +693,9 @@ def _check_closed_manifold(triangles, names, defects, excused=()):
     found = len(defects)
     directed, order, counts = _edge_pairing(triangles)
     edge_of = directed[order[np.cumsum(counts) - counts]]
-    holes = (counts == 1) & ~np.array([any(a in corners and b in corners for corners in excused)
-                                        for a, b in edge_of.tolist()], dtype=bool)
+    holes = counts == 1
+    if excused:
+        holes &= ~np.array([any(a in corners and b in corners for corners in excused) for a, b in edge_of.tolist()])
     if np.any(holes):
         where = _listed([f"{names[a]}-{names[b]}" for a, b in edge_of[holes]])
         open_edges = _count(np.count_nonzero(holes), "boundary edge")

@@ -95,6 +95,11 @@ def test_bad_points_are_refused():
         lbc_core.bind(square, None, np.array([[np.nan, 0.5]]))
     with pytest.raises(lbc_core.CageError, match="2D"):
         lbc_core.bind(square, None, np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.7]]))
+    with pytest.raises(lbc_core.CageError, match="points must be real numbers"):
+        lbc_core.bind(square, None, np.array([[0.5 + 1j, 0.5]]))
+    with pytest.raises(lbc_core.CageError, match="the 2D cage lies in the plane z = 0 but the points in z = 5"):
+        lbc_core.bind(np.c_[square, np.zeros(4)], None, np.array([[0.5, 0.5, 5.0]]))
+    lbc_core.bind(np.c_[square, np.full(4, 5.0)], None, np.array([[0.5, 0.5, 5.0]]), cells=100)
 
 
 @pytest.mark.parametrize(

@@ -515,3 +515,9 @@ def test_a_posed_cage_must_keep_the_bound_faces():
         cage.check_faces(CUBE_QUADS[:-1] + [[1, 3, 7, 9]])
     with pytest.raises(CageError, match="2D polygon cage, but this cage has faces"):
         make_cage(SQUARE).check_faces([[0, 1, 2]])
+
+
+def test_a_polygon_spike_and_a_crossing_are_reported_together():
+    # A spike at vertex 2 (3 lies behind it on the line 1-2) and edges 3-4 and 5-0 crossing.
+    polygon = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [2.0, 1.0], [0.5, 3.0], [1.0, 3.0]])
+    assert_refused(polygon, None, "2 kinds of defect", "doubles back on itself at vertex 2", "intersects itself")
