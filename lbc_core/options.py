@@ -141,16 +141,6 @@ def _number(value, whole):
     return float(value)
 
 
-def _cells(value):
-    if value is None:
-        return None
-    value = _number(value, whole=True)
-    if value < MIN_CELLS:
-        raise _Bad(f"must be at least {MIN_CELLS}, got {value}: e.g. {DEFAULT_CELLS[2]} in 2D or "
-                   f"{DEFAULT_CELLS[3]} in 3D (None: these defaults)")
-    return value
-
-
 def _weighting(value):
     if value is None:
         return WEIGHTINGS[0]
@@ -175,40 +165,19 @@ def _weighting(value):
     return value
 
 
-def _epsilon(value):
-    if value is None:
-        return DEFAULT_EPSILON
-    value = _number(value, whole=False)
-    if value < 0:
-        raise _Bad(f"must be 0 or more, got {value:g}: 0 is the paper's plain total variation, e.g. 0.01 smooths")
-    return value
+def _bounded(default, whole, accept, advice):
+    """A check of a number: None gives ``default``; else a finite real (whole when ``whole``) that ``accept`` takes,
+    or _Bad with ``advice`` formatted with the value."""
 
+    def check(value):
+        if value is None:
+            return default
+        value = _number(value, whole)
+        if not accept(value):
+            raise _Bad(advice.format(value=value))
+        return value
 
-def _threshold(value):
-    if value is None:
-        return None
-    value = _number(value, whole=False)
-    if not 0 <= value < 1:
-        raise _Bad(f"must be in [0, 1/n) for a cage of n control points, got {value:g}: None gives 1e-3/n")
-    return value
-
-
-def _tolerance(value):
-    if value is None:
-        return None
-    value = _number(value, whole=False)
-    if value <= 0:
-        raise _Bad(f"must be more than 0, got {value:g}: e.g. 1e-4 (None: the solver's default)")
-    return value
-
-
-def _max_iterations(value):
-    if value is None:
-        return DEFAULT_MAX_ITERATIONS
-    value = _number(value, whole=True)
-    if value < 1:
-        raise _Bad(f"must be at least 1, got {value} (None: {DEFAULT_MAX_ITERATIONS})")
-    return value
+    return check
 
 
 def _method(value):
@@ -221,6 +190,17 @@ def _method(value):
 
 
 _CHECKS = {
-    "cells": _cells, "weighting": _weighting, "epsilon": _epsilon, "threshold": _threshold, "tolerance": _tolerance,
-    "max_iterations": _max_iterations, "method": _method,
+    "cells": _bounded(None, True, lambda value: value >= MIN_CELLS,
+                      f"must be at least {MIN_CELLS}, got {{value}}: e.g. {DEFAULT_CELLS[2]} in 2D or {DEFAULT_CELLS[3]} "
+                      "in 3D (None: these defaults)"),
+    "weighting": _weighting,
+    "epsilon": _bounded(DEFAULT_EPSILON, False, lambda value: value >= 0,
+                        "must be 0 or more, got {value:g}: 0 is the paper's plain total variation, e.g. 0.01 smooths"),
+    "threshold": _bounded(None, False, lambda value: 0 <= value < 1,
+                          "must be in [0, 1/n) for a cage of n control points, got {value:g}: None gives 1e-3/n"),
+    "tolerance": _bounded(None, False, lambda value: value > 0,
+                          "must be more than 0, got {value:g}: e.g. 1e-4 (None: the solver's default)"),
+    "max_iterations": _bounded(DEFAULT_MAX_ITERATIONS, True, lambda value: value >= 1,
+                               f"must be at least 1, got {{value}} (None: {DEFAULT_MAX_ITERATIONS})"),
+    "method": _method,
 }
