@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from lbc_core.cli import main
 from lbc_core.io import read_cage, read_mesh, write_mesh
@@ -302,3 +304,18 @@ def test_damaged_binding_files_exit_2_with_one_line(tmp_path, logo_binding, how)
     code, out, err = lbc("deform", damaged, LOGO, "-o", tmp_path / "x.obj")
     assert_one_line_error(code, err, str(damaged))
     assert out == "" and not (tmp_path / "x.obj").exists()
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.integers(0, 10**6), bit=st.integers(0, 10**7))
+def test_fuzz_lbc_with_damaged_binding_files(tmp_path, capsys, logo_binding, cut, bit):
+    # The same kinds of damage as load_binding's fuzz, through the command: exit 0 on a file that still checks out,
+    # else exit 2 with one line; never another exit code or a traceback.
+    content = bytearray(logo_binding.read_bytes())
+    content[bit % len(content)] ^= 1 << (bit % 8)
+    path = tmp_path / "fuzzed.npz"
+    path.write_bytes(bytes(content[: max(cut % (2 * len(content)), 1)]))
+    code, out, err = run(capsys, "stats", path, "--quiet")
+    assert code in (0, 2)
+    if code == 2:
+        assert len(err.strip().splitlines()) == 1 and err.startswith("lbc: error:") and out == ""

@@ -9,7 +9,8 @@ import pytest
 import lbc_core
 from lbc_core import geodesics, meshing, solver
 from lbc_core.errors import CageError
-from lbc_core.options import DEFAULT_CELLS, METHODS, WEIGHTINGS, BindOptions
+from lbc_core import BindOptions
+from lbc_core.options import DEFAULT_CELLS, METHODS, WEIGHTINGS
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
