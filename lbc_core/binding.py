@@ -6,9 +6,9 @@
 import json
 import time
 import zipfile
-from pathlib import Path
 from dataclasses import dataclass, field
 from functools import cached_property, partial
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
