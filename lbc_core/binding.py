@@ -17,6 +17,7 @@ from . import __version__
 from .boundary import boundary_weights
 from .cage import Cage, make_cage, real_array
 from .errors import CageError
+from .frame import UnitFrame
 from .interpolation import interpolation_matrix
 from .io import writing
 from .meshing import DomainMesh, mesh_domain
@@ -27,6 +28,8 @@ from .solver import check_memory, solve_forecast, solve_on_mesh
 
 # Deforming fewer points than this is faster on one thread.
 PARALLEL_MIN_POINTS = 50_000
+# Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
+REPRODUCTION_TOLERANCE = 1e-9
 # Share of the progress bar each stage gets (the solve dominates).
 _STAGES = {"meshing": (0.0, 0.08), "solve": (0.08, 0.92), "interpolation": (0.92, 1.0)}
 
@@ -411,37 +414,42 @@ def bind(
     cells, weighting, epsilon, method = request.cells, request.weighting, request.epsilon, request.method
     tolerance, max_iterations = request.tolerance, request.max_iterations
     threshold = request.threshold_for(cage.n_control_points)
+    # Every stage computes in the unit frame; the weights are the same in any frame.
+    frame = UnitFrame.of(cage)
+    unit_cage = frame.cage_to_unit(cage)
 
-    domain = mesh_domain(cage, cells, method, progress=stage_progress(progress, *_STAGES["meshing"]), cancel=cancel)
+    unit_domain = mesh_domain(unit_cage, cells, method, progress=stage_progress(progress, *_STAGES["meshing"]),
+                              cancel=cancel)
     timings["meshing"] = time.perf_counter() - clock
 
     solver_options = {"weighting": weighting, "epsilon": epsilon, "max_iterations": max_iterations}
     if tolerance is not None:
         solver_options["tolerance"] = tolerance
     result = solve_on_mesh(
-        domain.vertices, domain.cells, domain.boundary_vertices, boundary_weights(domain, cage), cage.vertices,
+        unit_domain.vertices, unit_domain.cells, unit_domain.boundary_vertices,
+        boundary_weights(unit_domain, unit_cage), unit_cage.vertices,
         progress=stage_progress(progress, *_STAGES["solve"]), cancel=cancel, **solver_options,
     )
     timings.update(result.seconds)
 
     clock = time.perf_counter()
     located, outside, _ = interpolation_matrix(
-        domain.vertices, domain.cells, points, progress=stage_progress(progress, *_STAGES["interpolation"]),
-        cancel=cancel,
+        unit_domain.vertices, unit_domain.cells, frame.to_unit(points),
+        progress=stage_progress(progress, *_STAGES["interpolation"]), cancel=cancel,
     )
     timings["interpolation"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    weights = interpolate_and_reduce(located, result.weights, cage.vertices, domain.vertices, threshold,
-                                     tolerance=1e-9 * cage.bbox_diagonal)
+    weights = interpolate_and_reduce(located, result.weights, unit_cage.vertices, unit_domain.vertices, threshold,
+                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal)
     timings["reduction"] = time.perf_counter() - clock
     if progress is not None:
         progress(1.0, "bound")
-    options = dict(solver_options, cells=len(domain.cells), threshold=threshold, method=method)
+    options = dict(solver_options, cells=len(unit_domain.cells), threshold=threshold, method=method)
     return Binding(
         cage=cage,
         rest_cage_vertices=cage.vertices.copy(),
         weights=weights,
-        domain=domain,
+        domain=frame.domain_from_unit(unit_domain, cage),
         domain_weights=result.weights,
         outside=outside,
         points=points,
@@ -450,7 +458,7 @@ def bind(
         timings=timings,
         iterations=result.iterations,
         converged=result.converged,
-        objective=result.objective,
+        objective=result.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
     )
 
 

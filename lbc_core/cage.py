@@ -1080,6 +1080,8 @@ def _cross2(u, v):
 
 
 def _enclosed_measure(vertices, facets):
+    # About the centre: products of far-off coordinates would cancel away the measure of a small cage.
+    vertices = vertices - (vertices.min(axis=0) + vertices.max(axis=0)) / 2
     if vertices.shape[1] == 2:
         p, q = vertices[facets[:, 0]], vertices[facets[:, 1]]
         return 0.5 * np.sum(p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0])
