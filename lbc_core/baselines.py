@@ -23,6 +23,7 @@ from .boundary import boundary_weights
 from .cage import make_cage
 from .errors import Cancelled
 from .fem import stiffness_matrix
+from .frame import UnitFrame
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain
 
@@ -291,22 +292,29 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
     clock = time.perf_counter()
     cage = make_cage(cage_vertices, cage_faces)
     points = check_points(cage, points)
+    # As in lbc_core.bind, every stage computes in the unit frame.
+    frame = UnitFrame.of(cage)
+    unit_cage, unit_points = frame.cage_to_unit(cage), frame.to_unit(points)
     if domain is None:
-        domain = mesh_domain(cage, cells, progress=stage_progress(progress, 0.0, 0.4), cancel=cancel)
+        unit_domain = mesh_domain(unit_cage, cells, progress=stage_progress(progress, 0.0, 0.4), cancel=cancel)
+        domain = frame.domain_from_unit(unit_domain, cage)
         timings["meshing"] = time.perf_counter() - clock
+    else:
+        unit_domain = frame.domain_to_unit(domain)
     clock = time.perf_counter()
     if scheme == "mvc":
-        domain_weights = mean_value_coordinates(cage, domain.vertices, stage_progress(progress, 0.4, 0.6), cancel)
+        domain_weights = mean_value_coordinates(unit_cage, unit_domain.vertices, stage_progress(progress, 0.4, 0.6),
+                                                cancel)
     else:
         solve = harmonic_weights if scheme == "harmonic" else bbw_weights
-        domain_weights = solve(domain, boundary_weights(domain, cage))
+        domain_weights = solve(unit_domain, boundary_weights(unit_domain, unit_cage))
     timings["solve"] = time.perf_counter() - clock
     clock = time.perf_counter()
     located, outside, _ = interpolation_matrix(
-        domain.vertices, domain.cells, points, progress=stage_progress(progress, 0.6, 0.8), cancel=cancel
+        unit_domain.vertices, unit_domain.cells, unit_points, progress=stage_progress(progress, 0.6, 0.8), cancel=cancel
     )
     if scheme == "mvc":  # the closed form at the points themselves, not its interpolant
-        weights = mean_value_coordinates(cage, points, stage_progress(progress, 0.8, 1.0), cancel)
+        weights = mean_value_coordinates(unit_cage, unit_points, stage_progress(progress, 0.8, 1.0), cancel)
     else:
         weights = located @ domain_weights
     timings["interpolation"] = time.perf_counter() - clock

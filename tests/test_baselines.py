@@ -142,3 +142,21 @@ def test_bbw_bounded_partition_of_unity():
     np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=1e-12)
     assert weights.min() >= 0.0 and weights.max() <= 1.0 + 1e-12
     np.testing.assert_allclose(weights[domain.boundary_vertices], boundary_weights(domain, cage), atol=1e-8)
+
+
+@pytest.mark.parametrize("scheme", ["mvc", "harmonic"])
+def test_baselines_bind_far_from_the_origin_in_the_unit_frame(scheme):
+    """Like bind, the baselines compute in the unit frame: a cube at 1e6 binds and follows a scaling and shift."""
+    import lbc_core
+    from lbc_core.baselines import bind_harmonic, bind_mvc
+
+    cage = CUBE + 1e6
+    points = np.random.default_rng(3).uniform(0.05, 0.95, (50, 3)) + 1e6
+    bind_baseline = bind_mvc if scheme == "mvc" else bind_harmonic
+    binding = bind_baseline(cage, CUBE_QUADS, points, cells=500)
+    assert binding.domain.vertices[binding.domain.control_vertices].tobytes() == binding.cage.vertices.tobytes()
+    # A domain given in the cage's units (an LBC binding's) is kept as it is and mapped to the frame to compute on.
+    shared = bind_baseline(cage, CUBE_QUADS, points, domain=lbc_core.bind(cage, CUBE_QUADS, points, cells=500).domain)
+    for each in (binding, shared):
+        error = np.abs(each.deform(cage * 1.5 + 3.0) - (points * 1.5 + 3.0)).max()
+        assert error <= 8 * np.spacing(1.5e6 + 3.0)
