@@ -18,14 +18,14 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .binding import Binding, check_points, stage_progress
+from .binding import Binding, check_points
 from .boundary import boundary_weights
 from .cage import make_cage
-from .errors import Cancelled
 from .fem import stiffness_matrix
 from .frame import UnitFrame
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain
+from .progress import Progress
 
 # A point closer than this fraction of the cage's bounding-box diagonal to a vertex, edge or face is on it.
 ON_CAGE_TOLERANCE = 1e-10
@@ -46,7 +46,7 @@ def mean_value_coordinates(cage, points, progress=None, cancel=None):
     cage : Cage
     points : (m, d) float array
         In the cage's units and dimension.
-    progress : callable(fraction, message) or None
+    progress : callable(fraction, message), Progress or None
     cancel : callable() -> bool or None
         Checked between chunks; raises :class:`Cancelled` when it returns True.
 
@@ -55,6 +55,7 @@ def mean_value_coordinates(cage, points, progress=None, cancel=None):
     (m, n) float array
         One row per point, one column per control point; rows sum to 1.
     """
+    progress = Progress.of(progress, cancel)
     points = np.asarray(points, dtype=float)
     vertices, facets = cage.vertices, cage.facets
     tolerance = ON_CAGE_TOLERANCE * cage.bbox_diagonal
@@ -66,12 +67,10 @@ def mean_value_coordinates(cage, points, progress=None, cancel=None):
     evaluate = _mvc_2d if cage.dim == 2 else _mvc_3d
     weights = np.empty((len(points), len(vertices)))
     for start in range(0, len(points), chunk):
-        if cancel is not None and cancel():
-            raise Cancelled("mean value coordinates cancelled")
+        progress(start / len(points), "mean value coordinates")
         stop = min(start + chunk, len(points))
         weights[start:stop] = evaluate(vertices, facets, scatter, points[start:stop], tolerance)
-        if progress is not None:
-            progress(stop / len(points), "mean value coordinates")
+    progress(1.0, "mean value coordinates: done")
     return weights
 
 
@@ -290,36 +289,36 @@ def bbw_available():
 def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, progress, cancel):
     timings = {}
     clock = time.perf_counter()
+    progress = Progress.of(progress, cancel)
     cage = make_cage(cage_vertices, cage_faces)
     points = check_points(cage, points)
     # As in lbc_core.bind, every stage computes in the unit frame.
     frame = UnitFrame.of(cage)
     unit_cage, unit_points = frame.cage_to_unit(cage), frame.to_unit(points)
     if domain is None:
-        unit_domain = mesh_domain(unit_cage, cells, progress=stage_progress(progress, 0.0, 0.4), cancel=cancel)
+        unit_domain = mesh_domain(unit_cage, cells, progress=progress.part(0.0, 0.4))
         domain = frame.domain_from_unit(unit_domain, cage)
         timings["meshing"] = time.perf_counter() - clock
     else:
         unit_domain = frame.domain_to_unit(domain)
     clock = time.perf_counter()
     if scheme == "mvc":
-        domain_weights = mean_value_coordinates(unit_cage, unit_domain.vertices, stage_progress(progress, 0.4, 0.6),
-                                                cancel)
+        domain_weights = mean_value_coordinates(unit_cage, unit_domain.vertices, progress.part(0.4, 0.6))
     else:
+        progress(0.4, f"{scheme} coordinates: solving")
         solve = harmonic_weights if scheme == "harmonic" else bbw_weights
         domain_weights = solve(unit_domain, boundary_weights(unit_domain, unit_cage))
     timings["solve"] = time.perf_counter() - clock
     clock = time.perf_counter()
     located, outside, _ = interpolation_matrix(
-        unit_domain.vertices, unit_domain.cells, unit_points, progress=stage_progress(progress, 0.6, 0.8), cancel=cancel
+        unit_domain.vertices, unit_domain.cells, unit_points, progress=progress.part(0.6, 0.8)
     )
     if scheme == "mvc":  # the closed form at the points themselves, not its interpolant
-        weights = mean_value_coordinates(unit_cage, unit_points, stage_progress(progress, 0.8, 1.0), cancel)
+        weights = mean_value_coordinates(unit_cage, unit_points, progress.part(0.8, 1.0))
     else:
         weights = located @ domain_weights
     timings["interpolation"] = time.perf_counter() - clock
-    if progress is not None:
-        progress(1.0, "bound")
+    progress(1.0, "bound")
     return Binding(
         cage=cage,
         rest_cage_vertices=cage.vertices.copy(),

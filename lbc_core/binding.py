@@ -24,6 +24,7 @@ from .meshing import DomainMesh, mesh_domain
 from .options import DEFAULT_CELLS, BindOptions
 from .reduction import interpolate_and_reduce
 from .parallel import thread_map, worker_count
+from .progress import Progress
 from .solver import check_memory, solve_forecast, solve_on_mesh
 
 # Deforming fewer points than this is faster on one thread.
@@ -31,7 +32,7 @@ PARALLEL_MIN_POINTS = 50_000
 # Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
 REPRODUCTION_TOLERANCE = 1e-9
 # Share of the progress bar each stage gets (the solve dominates).
-_STAGES = {"meshing": (0.0, 0.08), "solve": (0.08, 0.92), "interpolation": (0.92, 1.0)}
+_STAGES = {"meshing": (0.0, 0.08), "solve": (0.08, 0.92), "interpolation": (0.92, 0.97), "reduction": (0.97, 1.0)}
 
 
 @dataclass
@@ -395,7 +396,8 @@ def bind(
         The same options as one object; keywords given besides it override its fields.
     progress : callable(fraction, message), optional
     cancel : callable() -> bool, optional
-        Returning True stops the bind with :class:`lbc_core.Cancelled`.
+        Returning True stops the bind with :class:`lbc_core.Cancelled`; every stage polls it at least every few tenths
+        of a second.
 
     Returns
     -------
@@ -408,6 +410,7 @@ def bind(
     """
     timings = {}
     clock = time.perf_counter()
+    progress = Progress.of(progress, cancel)
     request = BindOptions.of(options, cells=cells, weighting=weighting, epsilon=epsilon, threshold=threshold,
                              method=method, tolerance=tolerance, max_iterations=max_iterations)
     cage, points = check_request(cage_vertices, cage_faces, points, request, progress)
@@ -418,8 +421,7 @@ def bind(
     frame = UnitFrame.of(cage)
     unit_cage = frame.cage_to_unit(cage)
 
-    unit_domain = mesh_domain(unit_cage, cells, method, progress=stage_progress(progress, *_STAGES["meshing"]),
-                              cancel=cancel)
+    unit_domain = mesh_domain(unit_cage, cells, method, progress=progress.part(*_STAGES["meshing"]))
     timings["meshing"] = time.perf_counter() - clock
 
     solver_options = {"weighting": weighting, "epsilon": epsilon, "max_iterations": max_iterations}
@@ -428,22 +430,21 @@ def bind(
     result = solve_on_mesh(
         unit_domain.vertices, unit_domain.cells, unit_domain.boundary_vertices,
         boundary_weights(unit_domain, unit_cage), unit_cage.vertices,
-        progress=stage_progress(progress, *_STAGES["solve"]), cancel=cancel, **solver_options,
+        progress=progress.part(*_STAGES["solve"]), **solver_options,
     )
     timings.update(result.seconds)
 
     clock = time.perf_counter()
     located, outside, _ = interpolation_matrix(
-        unit_domain.vertices, unit_domain.cells, frame.to_unit(points),
-        progress=stage_progress(progress, *_STAGES["interpolation"]), cancel=cancel,
+        unit_domain.vertices, unit_domain.cells, frame.to_unit(points), progress=progress.part(*_STAGES["interpolation"])
     )
     timings["interpolation"] = time.perf_counter() - clock
     clock = time.perf_counter()
     weights = interpolate_and_reduce(located, result.weights, unit_cage.vertices, unit_domain.vertices, threshold,
-                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal)
+                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal,
+                                     progress=progress.part(*_STAGES["reduction"]))
     timings["reduction"] = time.perf_counter() - clock
-    if progress is not None:
-        progress(1.0, "bound")
+    progress(1.0, "bound")
     options = dict(solver_options, cells=len(unit_domain.cells), threshold=threshold, method=method)
     return Binding(
         cage=cage,
@@ -531,10 +532,3 @@ def check_points(cage, points, plane_z=None):
     if not np.all(np.isfinite(points)):
         raise CageError("some points have NaN or infinite coordinates: fix or delete them")
     return points
-
-
-def stage_progress(progress, start, stop):
-    """A progress callback mapping a stage's own [0, 1] onto [start, stop] of the whole (None stays None)."""
-    if progress is None:
-        return None
-    return lambda fraction, message: progress(start + (stop - start) * fraction, message)

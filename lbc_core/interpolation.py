@@ -18,7 +18,8 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from . import fem
-from .errors import CageError, Cancelled
+from .errors import CageError
+from .progress import Progress
 
 TOLERANCE = 1e-12  # relative to the domain's bounding-box diagonal: points this close to the domain are inside
 
@@ -42,10 +43,10 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
         the mesh need not be Delaunay.
     points : (m, d) float array
         Points to locate, in the vertices' length units.
-    progress : callable(fraction, message), optional
+    progress : callable(fraction, message) or Progress, optional
         Called with fraction in [0, 1], non-decreasing.
     cancel : callable() -> bool, optional
-        Polled between batches; when it returns True, :class:`~lbc_core.errors.Cancelled` is raised.
+        Polled between steps and batches; when it returns True, :class:`~lbc_core.errors.Cancelled` is raised.
 
     Returns
     -------
@@ -67,10 +68,11 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
     Cancelled
         ``cancel()`` returned True.
     """
+    progress = Progress.of(progress, cancel)
     vertices, cells, points = _validated(vertices, cells, points)
     n_vertices, d = vertices.shape
     n_points = len(points)
-    _report(progress, cancel, 0.0, "Interpolation: indexing the cells")
+    progress(0.0, "Interpolation: indexing the cells")
 
     corners = vertices[cells]  # (F, d+1, d)
     lo, hi = corners.min(axis=(0, 1)), corners.max(axis=(0, 1))
@@ -85,7 +87,7 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
     usable = np.flatnonzero(heights.min(axis=1) > (d + 1) * tol)
     if usable.size == 0:
         raise CageError("The domain mesh has no cell of non-zero area or volume; check the cage and its meshing.")
-    grid = _build_grid(corners, planes, usable, tol, n_points)
+    grid = _build_grid(corners, planes, usable, tol, n_points, progress.check)
     facet_search = None  # built on the first point found in no cell
 
     columns = np.zeros((n_points, d + 1), dtype=np.intp)
@@ -93,7 +95,7 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
     outside = np.zeros(n_points, dtype=bool)
     distance = np.zeros(n_points)
     for start in range(0, n_points, _CHUNK):
-        _report(progress, cancel, 0.05 + 0.95 * start / n_points, "Interpolation: locating points")
+        progress(0.05 + 0.95 * start / n_points, "Interpolation: locating points")
         stop = min(start + _CHUNK, n_points)
         chunk = points[start:stop] - centre
         cell, signed = _locate(grid, planes, chunk, tol)
@@ -109,13 +111,13 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
         if lost.size:
             if facet_search is None:
                 facet_search = _FacetSearch(vertices, cells)
-            squared, facet, bary = facet_search.closest(chunk[lost])
+            squared, facet, bary = facet_search.closest(chunk[lost], progress.check)
             gap = np.sqrt(squared)
             values[start + lost, :d] = bary
             columns[start + lost, :d] = facet_search.facets[facet]
             outside[start + lost] = gap > tol
             distance[start + lost] = np.where(gap > tol, gap, 0.0)
-    _report(progress, cancel, 1.0, "Interpolation: done")
+    progress(1.0, "Interpolation: done")
     return _csr(columns, values, n_vertices), outside, distance
 
 
@@ -138,13 +140,6 @@ def _validated(vertices, cells, points):
     if not np.isfinite(points).all():
         raise CageError("Some points to bind have non-finite coordinates (NaN or infinity); fix or remove them.")
     return vertices, cells.astype(np.intp, copy=False), points
-
-
-def _report(progress, cancel, fraction, message):
-    if cancel is not None and cancel():
-        raise Cancelled("Interpolation cancelled")
-    if progress is not None:
-        progress(fraction, message)
 
 
 def _csr(columns, values, n_columns):
@@ -260,7 +255,7 @@ class _Grid(NamedTuple):
     cells: np.ndarray  # (R,) cell indices
 
 
-def _build_grid(corners, planes, usable, tol, n_points):
+def _build_grid(corners, planes, usable, tol, n_points, check):
     """Register every usable cell in the buckets it may overlap.
 
     A cell goes in the buckets overlapped by its bounding box grown by tol, except those entirely outside one of
@@ -274,6 +269,7 @@ def _build_grid(corners, planes, usable, tol, n_points):
     usable : (U,) int array, the cells to register
     tol : float, length units
     n_points : int, points to be located (the spacing balances grid size against candidates per point)
+    check : callable, called between blocks of cells (raises to cancel)
 
     Returns
     -------
@@ -294,6 +290,7 @@ def _build_grid(corners, planes, usable, tol, n_points):
     bounds = list(np.searchsorted(cumulative, np.arange(_REGISTRATION_BATCH, cumulative[-1], _REGISTRATION_BATCH)))
     pieces_bucket, pieces_cell, pieces_depth = [], [], []
     for begin, stop in zip([0, *bounds], [*bounds, len(sizes)]):
+        check()
         owner, coordinates = _enumerate_blocks(first[begin:stop], span[begin:stop], sizes[begin:stop])
         cell = usable[begin + owner]
         signed = _signed_distances(planes[cell], lo + (coordinates + 0.5) * spacing)  # at the bucket's centre
@@ -434,12 +431,13 @@ class _FacetSearch:
         self.tree = cKDTree(centroids)
         self.leaves, self.box_lo, self.box_hi = _bounding_volume_hierarchy(self.corners, centroids)
 
-    def closest(self, points):
+    def closest(self, points, check):
         """The closest boundary point of each point.
 
         Parameters
         ----------
         points : (n, d) float array
+        check : callable, called between batches of points (raises to cancel)
 
         Returns
         -------
@@ -451,6 +449,7 @@ class _FacetSearch:
         squared, bary = _closest_on_facets(points, self.corners[first])
         best = _Best(squared, first, bary)
         for start in range(0, n, _TRAVERSAL_BATCH):
+            check()
             self._descend(points, np.arange(start, min(start + _TRAVERSAL_BATCH, n)), best)
         return best
 

@@ -8,6 +8,8 @@ and the correction repeated. Where a support is too small to reproduce the point
 import numpy as np
 import scipy.sparse as sp
 
+from .progress import Progress
+
 
 def restore_constraints(weights, controls, positions, columns=None, rounds=20):
     """Correct weights on their support so that they sum to 1, reproduce ``positions`` and are non-negative.
@@ -101,7 +103,7 @@ def constraint_residuals(weights, controls, positions, columns=None):
 ROWS_PER_CHUNK = 65_536
 
 
-def reduce_weights(weights, controls, positions, threshold, tolerance):
+def reduce_weights(weights, controls, positions, threshold, tolerance, progress=None, cancel=None):
     """Drop weights below ``threshold`` and restore the constraints on what remains.
 
     A point whose reduced support cannot meet the constraints (it lies outside the hull of its remaining control
@@ -119,6 +121,9 @@ def reduce_weights(weights, controls, positions, threshold, tolerance):
         Weights below it are dropped (the paper uses 1e-3 / n).
     tolerance : float
         Largest reproduction error accepted after the correction, in the units of ``positions``.
+    progress : callable(fraction, message) or Progress, optional
+    cancel : callable() -> bool, optional
+        Polled between chunks of rows; when it returns True, :class:`~lbc_core.errors.Cancelled` is raised.
 
     Returns
     -------
@@ -127,10 +132,11 @@ def reduce_weights(weights, controls, positions, threshold, tolerance):
     full = sp.csr_matrix(weights)
     full.sum_duplicates()
     return _by_chunks(full.shape[0], controls.shape[0], lambda rows: _reduce_rows(
-        full[rows], controls, positions[rows], threshold, tolerance))
+        full[rows], controls, positions[rows], threshold, tolerance), Progress.of(progress, cancel))
 
 
-def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance):
+def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance, progress=None,
+                           cancel=None):
     """Weights at points interpolated from a domain's vertices, reduced, one chunk of points at a time.
 
     Parameters
@@ -141,7 +147,7 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         Coordinates at the domain's vertices.
     controls : (n, d) float array
     domain_vertices : (N, d) float array
-    threshold, tolerance : float
+    threshold, tolerance, progress, cancel
         As in :func:`reduce_weights`.
 
     Returns
@@ -152,12 +158,18 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     # entries (the solver's faint tails) before the product, keeping what a support may need to grow into.
     sparse_domain = sp.csr_matrix(np.where(domain_weights >= threshold / 10, domain_weights, 0.0))
     return _by_chunks(located.shape[0], controls.shape[0], lambda rows: _reduce_rows(
-        located[rows] @ sparse_domain, controls, located[rows] @ domain_vertices, threshold, tolerance))
+        located[rows] @ sparse_domain, controls, located[rows] @ domain_vertices, threshold, tolerance),
+        Progress.of(progress, cancel))
 
 
-def _by_chunks(m, n, reduce_chunk):
-    """``reduce_chunk(rows)`` over consecutive row slices of at most ROWS_PER_CHUNK, stacked into an (m, n) CSR."""
-    chunks = [reduce_chunk(slice(start, start + ROWS_PER_CHUNK)) for start in range(0, m, ROWS_PER_CHUNK)]
+def _by_chunks(m, n, reduce_chunk, progress):
+    """``reduce_chunk(rows)`` over consecutive row slices of at most ROWS_PER_CHUNK, stacked into an (m, n) CSR;
+    ``progress`` is told before each chunk."""
+    chunks = []
+    for start in range(0, m, ROWS_PER_CHUNK):
+        progress(start / m, "reducing the weights")
+        chunks.append(reduce_chunk(slice(start, start + ROWS_PER_CHUNK)))
+    progress(1.0, "reducing the weights: done")
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix((0, n))
 
 

@@ -36,7 +36,8 @@ import scipy.sparse.linalg as spla
 from . import fem
 from .objective import tv_objective
 from .parallel import thread_map, worker_count
-from .errors import Cancelled, CageError
+from .errors import CageError
+from .progress import Progress
 from .reduction import constraint_residuals, grow_support, restore_constraints
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
@@ -133,7 +134,7 @@ def solve_on_mesh(
     relaxation : float
         Over-relaxation α in (0, 2).
     check_every : int
-        Iterations between progress reports and cancel checks. The primal test runs after every Anderson period (it
+        Iterations between progress reports (cancel is checked within every iteration). The primal test runs after every Anderson period (it
         costs one norm: a step's residual is α times its primal residual); the dual test once the primal one passes.
     anderson_memory : int
         Extrapolations remembered by Anderson acceleration (0: plain ADMM).
@@ -142,15 +143,17 @@ def solve_on_mesh(
     single_precision : bool
         Iterate in float32 (half the memory traffic); the result is corrected in float64, so the constraints hold
         to round-off either way.
-    progress : callable(fraction, message), optional
+    progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
-        When it returns True the solve raises :class:`lbc_core.Cancelled`.
+        Polled between the steps of every stage (geodesics, factorisation, each ADMM iteration, projection); when it
+        returns True the solve raises :class:`lbc_core.Cancelled`.
 
     Returns
     -------
     SolveResult
     """
     timer = _Timer()
+    progress = Progress.of(progress, cancel)
     vertices = np.asarray(vertices, dtype=float)
     cells = np.asarray(cells, dtype=np.int64)
     boundary_vertices = np.asarray(boundary_vertices, dtype=np.int64)
@@ -167,7 +170,8 @@ def solve_on_mesh(
         from .geodesics import geodesic_distances, tv_weights as make_tv_weights
 
         sources = _control_vertices(vertices, control_points)
-        tv_weights = make_tv_weights(cells, geodesic_distances(vertices, cells, sources, cancel), weighting)
+        distances = geodesic_distances(vertices, cells, sources, progress.part(0.0, _GEODESICS_END))
+        tv_weights = make_tv_weights(cells, distances, weighting)
         timer.lap("geodesics")
     tv_weights = np.asarray(tv_weights, dtype=float)
 
@@ -183,8 +187,9 @@ def solve_on_mesh(
     iterations, converged, history = 0, True, []
     if len(interior):
         dtype = np.float32 if single_precision else np.float64
+        progress(_GEODESICS_END, "factorising the solver's matrix")
         problem = _Problem(unit_vertices, cells, boundary_vertices, boundary_weights, unit_controls, interior,
-                           BETA[d], dtype)
+                           BETA[d], dtype, progress)
         timer.lap("factorisation")
         if problem.M.shape[0] == 0:
             # n = d + 1: a simplex cage. The constraints leave no freedom; Z = H are its barycentric coordinates.
@@ -193,19 +198,25 @@ def solve_on_mesh(
             Z, W, iterations, converged, history = _admm(
                 problem, tv_weights, epsilon, tolerance, max_iterations,
                 _default_penalty(d, n) if penalty is None else penalty, relaxation, check_every, anderson_memory,
-                anderson_period, progress, cancel,
+                anderson_period, progress.part(_FACTORISATION_END, _ADMM_END),
             )
             for record in history:  # objectives in the input's units
                 if "objective" in record:
                     record["objective"] *= scale ** (d - 1)
         timer.lap("solve")
-        weights[interior] = _project(Z, W, unit_controls, unit_vertices[interior])
+        progress(_ADMM_END, "projecting onto the constraints")
+        weights[interior] = _project(Z, W, unit_controls, unit_vertices[interior], progress)
     if len(interior):
         # From the operators at hand, in float64: TV scales with length^(d-1).
         objective = problem.objective(weights[interior], tv_weights) * scale ** (d - 1)
     else:
         objective = tv_objective(vertices, cells, weights, tv_weights)
+    progress(1.0, "solved")
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds)
+
+
+# Where each part of the solve ends on its progress range (the ADMM iterations take most of the time).
+_GEODESICS_END, _FACTORISATION_END, _ADMM_END = 0.1, 0.15, 0.98
 
 
 # Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (107-115; float32 loop,
@@ -306,13 +317,14 @@ def _available_memory():
         return None
 
 
-def _project(Z, W, controls, positions):
+def _project(Z, W, controls, positions, progress):
     """The output: W's exact zeros kept, partition of unity and reproduction restored on W's support.
 
     A vertex whose W support is too small to reproduce it (three control points for a point off their plane) gets
     Z's next largest weights added, largest first, until it is.
     """
     on_support = restore_constraints(W, controls, positions)
+    progress.check()
     unity, reproduction = constraint_residuals(on_support, controls, positions)
     failed = (unity > 1e-12) | (reproduction > 1e-12) | (on_support < 0).any(axis=1)
     if failed.any():
@@ -361,7 +373,8 @@ class _Problem:
     (F, n) slabs the per-cell work reads contiguously.
     """
 
-    def __init__(self, vertices, cells, boundary_vertices, boundary_weights, controls, interior, beta, dtype):
+    def __init__(self, vertices, cells, boundary_vertices, boundary_weights, controls, interior, beta, dtype,
+                 progress):
         d = vertices.shape[1]
         gradients, measures = fem.cell_gradients(vertices, cells)
         self.d = d
@@ -374,10 +387,13 @@ class _Problem:
         interior_index = _renumber(interior, len(vertices))[cells]  # (F, d+1), -1 on the boundary
         boundary_index = _renumber(boundary_vertices, len(vertices))[cells]
         self.G64 = _rows_on_columns(values, interior_index, len(interior))  # (d F, N_in)
+        progress.check()
         self.E64 = _rows_on_columns(values, boundary_index, len(boundary_vertices)) @ boundary_weights  # (d F, n)
+        progress.check()
         self.G = self.G64.astype(dtype)
         self.GT = self.G.T.tocsr()
         self.E = self.E64.astype(dtype)
+        progress.check()
         mass = fem.lumped_mass(cells, measures, len(vertices))[interior]
         self.sqrt_mass = np.sqrt(beta * mass)[:, None].astype(dtype)  # (N_in, 1)
         # Equality constraints z K = [x, 1] per vertex, K = [C, 1] (n, d+1): Z = Y M + H.
@@ -389,6 +405,7 @@ class _Problem:
         self.M = vt[rank:].astype(dtype)  # (n - d - 1, n), orthonormal rows
         self.MT = np.ascontiguousarray(self.M.T)
         self.H = (np.c_[vertices[interior], np.ones(len(interior))] @ np.linalg.pinv(K)).astype(dtype)  # (N_in, n)
+        progress.check()
         # The Y-step matrix, stiffness + β mass, as lower-triangle triplets from each cell's Gᵀ G block, corner pair
         # by corner pair on contiguous (F,) arrays.
         by_corner = np.ascontiguousarray(np.transpose(values, (2, 0, 1)))  # (d+1, d, F)
@@ -403,7 +420,9 @@ class _Problem:
                 cols.append(np.minimum(row, col))
         system_lower = sp.coo_matrix((np.concatenate(entries), (np.concatenate(rows), np.concatenate(cols))),
                                      shape=(len(interior), len(interior)))
-        self.factor = _Factor(system_lower, dtype)
+        progress.check()
+        self.factor = _Factor(system_lower, dtype)  # one uninterruptible call: 0.3-0.6 s at 64k tetrahedra
+        progress.check()
         # √|c| of each cell, to turn scaled gradients back into ω |c| |∇w|.
         self.sqrt_cell = np.sqrt(measures)[:, None]
 
@@ -476,9 +495,11 @@ class _DouglasRachford:
     for plain steps, which is what the Anderson safeguard relies on.
     """
 
-    def __init__(self, problem, tv_weights, epsilon, alpha, rho):
+    def __init__(self, problem, tv_weights, epsilon, alpha, rho, check):
         p = problem
         self.p, self.epsilon, self.alpha = p, epsilon, alpha
+        # Called between the parts of a step: one step of a large problem can take a second.
+        self.check = check
         n = tv_weights.shape[1]
         self.size_x = p.n_cells * p.d * n
         self.shape_x, self.shape_w = (p.d, p.n_cells, n), (p.n_interior, n)
@@ -487,7 +508,9 @@ class _DouglasRachford:
         self.thresholds = (p.sqrt_cell * tv_weights / rho).astype(p.G.dtype)
         self.boundary_part = p.E.reshape(self.shape_x)
         self.boundary_load = p.GT @ p.E  # (N_in, n): Gᵀ E, so that the reflection need not subtract E each step
+        check()
         self.chunks = _cell_chunks(p, self.size_x)
+        self.threads = worker_count()
 
     def split(self, state):
         """Views of a state as v_X (d, F, n) and v_W (N_in, n)."""
@@ -497,7 +520,24 @@ class _DouglasRachford:
         """The harmonic coordinates (the Y-step with X̃ = W̃ = 0) with zero duals."""
         p = self.p
         Z = p.factor.solve(-(p.GT @ p.E) @ p.MT) @ p.M + p.H
-        return np.concatenate([(p.G @ Z + p.E).ravel(), (p.sqrt_mass * np.clip(Z, 0.0, 1.0)).ravel()])
+        state = np.empty(self.size_x + Z.size, dtype=Z.dtype)
+        v_x, v_w = self.split(state)
+
+        def gradient(chunk):
+            np.add((chunk.G @ Z).reshape(v_x[:, chunk.cells].shape), self.boundary_part[:, chunk.cells],
+                   out=v_x[:, chunk.cells])
+
+        self.in_rounds(gradient)
+        v_w[:] = p.sqrt_mass * np.clip(Z, 0.0, 1.0)
+        return state
+
+    def in_rounds(self, function):
+        """``function`` over the chunks of cells, one chunk per thread at a time, checking for cancel between."""
+        results = []
+        for start in range(0, len(self.chunks), self.threads):
+            self.check()
+            results += thread_map(function, self.chunks[start:start + self.threads])
+        return results
 
     def __call__(self, state):
         """Return the next state and this step's :class:`_Step` (for residuals).
@@ -531,12 +571,13 @@ class _DouglasRachford:
         np.minimum(W, p.sqrt_mass, out=W)
         reflected_w = 2.0 * W
         reflected_w -= v_w
-        rhs = sum(thread_map(shrink_and_reflect, self.chunks))
+        rhs = sum(self.in_rounds(shrink_and_reflect))
         rhs -= self.boundary_load
         rhs += p.sqrt_mass * reflected_w
+        self.check()
         Z = p.factor.solve(rhs @ p.MT) @ p.M
         Z += p.H
-        thread_map(update, self.chunks)
+        self.in_rounds(update)
         np.multiply(p.sqrt_mass, Z, out=new_w)
         new_w -= W
         new_w *= alpha
@@ -576,11 +617,19 @@ class _Chunk:
 
 # Below this many entries in the X block, threads cost more than they save (2D problems of the paper's size).
 PARALLEL_MIN_ENTRIES = 500_000
+# At most this many entries of the X block per chunk: a chunk's share of a step then takes about 20-50 ms, and cancel
+# is checked between rounds of chunks (one step of 64k tetrahedra and 168 control points takes 0.6 s or more).
+ENTRIES_PER_CHUNK = 4_000_000
 
 
 def _cell_chunks(problem, size_x):
-    """Split the cells into one chunk per core when the problem is large enough to gain from threads."""
-    count = worker_count() if size_x >= PARALLEL_MIN_ENTRIES else 1
+    """Split the cells into one chunk per core when the problem is large enough to gain from threads, and into more
+    (a multiple of the cores) when a chunk would exceed ENTRIES_PER_CHUNK."""
+    if size_x < PARALLEL_MIN_ENTRIES:
+        count = 1
+    else:
+        rounds = -(-size_x // (ENTRIES_PER_CHUNK * worker_count()))
+        count = worker_count() * rounds
     if count == 1:
         return [_Chunk(slice(0, problem.n_cells), problem.G, problem.GT)]
     bounds = np.linspace(0, problem.n_cells, count + 1).astype(int)
@@ -595,8 +644,9 @@ def _cell_chunks(problem, size_x):
 class _Anderson:
     """Anderson acceleration (type II) of a fixed-point map, with the residual safeguard of Zhang et al. 2019."""
 
-    def __init__(self, size, memory, dtype):
+    def __init__(self, size, memory, dtype, check):
         self.memory = memory
+        self.check = check  # called between passes over the history, which is several times the state's size
         self.dF = np.zeros((memory, size), dtype=dtype)  # residual differences
         self.dG = np.zeros((memory, size), dtype=dtype)  # map-value differences
         self.gram = np.zeros((memory, memory))
@@ -611,6 +661,7 @@ class _Anderson:
         slot = self.count % self.memory
         np.subtract(residual, previous_residual, out=self.dF[slot])
         np.subtract(value, previous_value, out=self.dG[slot])
+        self.check()
         self.count += 1
         used = min(self.count, self.memory)
         # BLAS in the history's own precision: mixing in float64 would copy the whole history each call.
@@ -641,9 +692,10 @@ class _Anderson:
 
 
 def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alpha, check_every, memory, period,
-          progress, cancel):
-    step = _DouglasRachford(problem, tv_weights, epsilon, alpha, penalty)
-    anderson = _Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype) if memory else None
+          progress):
+    step = _DouglasRachford(problem, tv_weights, epsilon, alpha, penalty, progress.check)
+    anderson = (_Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype, progress.check)
+                if memory else None)
 
     def advance(start, last, count):
         """``count`` steps from ``start``. Returns the final state, the last two steps' :class:`_Step`, the residual
@@ -655,12 +707,15 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             previous, previous_state = (last, state) if k == count - 1 else (None, None)
             last = None
             state, last = step(state)
+            progress.check()
         residual = state - start
         residual_norm = np.linalg.norm(residual)
+        progress.check()
         last_norm = residual_norm if count == 1 else np.linalg.norm(state - previous_state)
         return state, last, previous, residual, residual_norm, float(last_norm)
 
     started = time.perf_counter()
+    progress(0.0, "ADMM: starting from the harmonic coordinates")
     value, out, _, residual, residual_norm, _ = advance(step.initial_state(), None, period)
     history = []
     converged = False
@@ -670,6 +725,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     next_check = check_every
     while iteration < max_iterations:
         candidate = anderson.extrapolate(value, residual) if anderson else None
+        progress.check()  # the extrapolation and the push below each read the whole history
         if candidate is None:
             candidate = value
         count = min(period, max_iterations - iteration)
@@ -684,6 +740,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             iteration += count
         elif anderson:
             anderson.push(next_value, next_residual, value, residual)
+            progress.check()
         value, residual, residual_norm = next_value, next_residual, next_norm
         scheduled = iteration >= next_check or iteration >= max_iterations
         if scheduled:
@@ -712,17 +769,14 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         if not scheduled:
             continue
         early_check_done = False
-        if progress is not None:
-            first_distance = first_distance or max(distance, 1.0 + 1e-9)
-            # Residuals fall roughly geometrically: show the share of the way, in log scale, to the tolerance.
-            fraction = max(fraction, iteration / max_iterations,
-                           min(0.99, np.log(first_distance / distance) / np.log(first_distance)))
-            # The time left, from the seconds per iteration so far and the share of the way done.
-            elapsed = time.perf_counter() - started
-            left = f", about {_duration(elapsed * (1 - fraction) / fraction)} left" if fraction > 0 else ""
-            progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
-        if cancel is not None and cancel():
-            raise Cancelled("cancelled during the LBC solve")
+        first_distance = first_distance or max(distance, 1.0 + 1e-9)
+        # Residuals fall roughly geometrically: show the share of the way, in log scale, to the tolerance.
+        fraction = max(fraction, iteration / max_iterations,
+                       min(0.99, np.log(first_distance / distance) / np.log(first_distance)))
+        # The time left, from the seconds per iteration so far and the share of the way done.
+        elapsed = time.perf_counter() - started
+        left = f", about {_duration(elapsed * (1 - fraction) / fraction)} left" if fraction > 0 else ""
+        progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
     # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries faint
     # tails there until full convergence. Both go back unscaled.
     W_unscaled = out.W.astype(np.float64) / problem.sqrt_mass.astype(np.float64)

@@ -5,6 +5,8 @@ Quality at the points and affine exactness on every shipped cage are in test_acc
 
 from pathlib import Path
 
+import time
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
@@ -375,3 +377,90 @@ def test_a_scaled_cage_gives_the_same_weights(dim):
     np.testing.assert_array_equal(large.domain.vertices, small.domain.vertices * 2.0**20)
     np.testing.assert_array_equal(large.domain_weights, small.domain_weights)
     assert large.objective == small.objective * 2.0 ** (20 * (dim - 1))
+
+
+# Issue 11, item 3: each stage of a bind, told by the first progress message it sends, and the 0.5 s within which a
+# cancel must stop it.
+STAGE_MESSAGES = {
+    "meshing": "",  # the first message of a bind is the mesher's
+    "geodesics": "geodesic distances",
+    "factorisation": "factorising the solver's matrix",
+    "ADMM": "ADMM iteration",
+    "projection": "projecting onto the constraints",
+    "interpolation": "Interpolation",
+    "reduction": "reducing the weights",
+}
+CANCEL_LATENCY = 0.5
+
+
+def cancel_latency(cage_vertices, cage_faces, points, stage, **options):
+    """Seconds from ``cancel()`` turning true, at the stage's first progress message, to :class:`Cancelled`."""
+    turned_true = []
+
+    def progress(fraction, message):
+        if not turned_true and message.startswith(STAGE_MESSAGES[stage]):
+            turned_true.append(time.perf_counter())
+
+    with pytest.raises(lbc_core.Cancelled):
+        lbc_core.bind(cage_vertices, cage_faces, points, progress=progress, cancel=lambda: bool(turned_true),
+                      **options)
+    assert turned_true, f"the {stage} stage sent no progress message"
+    return time.perf_counter() - turned_true[0]
+
+
+def longest_waits(cage_vertices, cage_faces, points, **options):
+    """The longest time between two polls of ``cancel`` in each stage of a whole bind: the latency of a cancel that
+    turns true at the worst moment. A wait is the stage's whose message came last before it began."""
+    events = []  # (time, stage or None for a poll)
+
+    def progress(fraction, message):
+        stages = [name for name, prefix in STAGE_MESSAGES.items() if prefix and message.startswith(prefix)]
+        events.append((time.perf_counter(), stages[0] if stages else None))
+
+    def cancel():
+        events.append((time.perf_counter(), "poll"))
+        return False
+
+    start = time.perf_counter()
+    lbc_core.bind(cage_vertices, cage_faces, points, progress=progress, cancel=cancel, **options)
+    longest, stage, last_poll = {}, "meshing", start
+    for moment, kind in events:
+        if kind == "poll":
+            longest[stage] = max(longest.get(stage, 0.0), moment - last_poll)
+            last_poll = moment
+        elif kind is not None:
+            stage = kind
+    return longest
+
+
+@pytest.fixture(scope="module")
+def gargoyle_waits():
+    """The waits of the 168-control-point gargoyle cage at the default resolution, where one ADMM iteration takes
+    tens of milliseconds and the geodesics (uninterrupted before issue 11) a second; 60 iterations show the loop's."""
+    vertices, faces = read_cage(DATA / "cages-3d" / "gargoyle" / "cage_L08.obj")
+    points, _ = read_mesh(DATA / "cages-3d" / "gargoyle" / "mesh.off")
+    return longest_waits(vertices, faces, points, cells=8000, max_iterations=60)
+
+
+@pytest.fixture(scope="module")
+def woody_waits(woody):
+    vertices, points, _ = woody
+    return longest_waits(vertices, None, points)
+
+
+@pytest.mark.parametrize("stage", list(STAGE_MESSAGES))
+def test_cancel_stops_every_stage_of_a_3d_bind_promptly(gargoyle, gargoyle_waits, stage):
+    vertices, faces, points, _ = gargoyle
+    latency = cancel_latency(vertices, faces, points, stage, cells=8000)
+    assert latency < CANCEL_LATENCY, f"cancel took {latency:.2f} s to stop the {stage} stage"
+    if stage != "meshing":  # the mesher's own loops are tested with it
+        assert gargoyle_waits[stage] < CANCEL_LATENCY, f"{stage}: {gargoyle_waits[stage]:.2f} s between cancel polls"
+
+
+@pytest.mark.parametrize("stage", list(STAGE_MESSAGES))
+def test_cancel_stops_every_stage_of_a_2d_bind_promptly(woody, woody_waits, stage):
+    vertices, points, _ = woody
+    latency = cancel_latency(vertices, None, points, stage)
+    assert latency < CANCEL_LATENCY, f"cancel took {latency:.2f} s to stop the {stage} stage"
+    if stage != "meshing":
+        assert woody_waits[stage] < CANCEL_LATENCY, f"{stage}: {woody_waits[stage]:.2f} s between cancel polls"
