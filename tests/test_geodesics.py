@@ -59,3 +59,23 @@ def test_tv_weights_shapes_and_choices():
         tv_weights(cells, distances, "cubic")
     with pytest.raises(ValueError, match="non-negative"):
         tv_weights(cells, distances, lambda x: -x)
+
+
+@pytest.mark.parametrize("d, n", [(2, 11), (3, 6)])
+def test_progress_is_reported_and_cancel_stops_between_sources(d, n, monkeypatch):
+    import lbc_core.geodesics as geodesics
+    from lbc_core.errors import Cancelled
+
+    monkeypatch.setattr(geodesics, "SOURCES_PER_CHUNK", 2)
+    points, cells = grid_mesh(d, n)
+    sources = np.arange(0, len(points), len(points) // 6)[:6]
+    fractions = []
+    distances = geodesic_distances(points, cells, sources, progress=lambda fraction, message: fractions.append(fraction))
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0 and len(fractions) >= 4
+    assert np.all(distances[sources, np.arange(len(sources))] == 0)
+    # Computed by chunks of two sources, the same distances as all at once.
+    monkeypatch.setattr(geodesics, "SOURCES_PER_CHUNK", 8)
+    np.testing.assert_allclose(geodesic_distances(points, cells, sources), distances, rtol=0, atol=1e-12)
+    polls = []
+    with pytest.raises(Cancelled):
+        geodesic_distances(points, cells, sources, cancel=lambda: polls.append(1) or len(polls) > 2)

@@ -77,3 +77,22 @@ def test_reduce_keeps_more_support_where_the_reduced_one_cannot_reproduce():
     values = reduced.toarray()
     assert np.abs(values @ controls - point).max() < 1e-12
     assert values.min() >= 0 and abs(values.sum() - 1) < 1e-12
+
+
+def test_reduce_reports_each_chunk_of_rows_and_stops_on_cancel(monkeypatch):
+    import pytest
+
+    import lbc_core.reduction as reduction
+    from lbc_core.errors import Cancelled
+
+    monkeypatch.setattr(reduction, "ROWS_PER_CHUNK", 100)
+    rng = np.random.default_rng(4)
+    points = rng.uniform(0.0, 1.0, (250, 2))
+    weights = sp.csr_matrix(bilinear_weights(points))
+    fractions = []
+    reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, progress=lambda fraction, message: fractions.append(fraction))
+    assert fractions == [0.0, 0.4, 0.8, 1.0]
+    polls = []
+    with pytest.raises(Cancelled):
+        reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, cancel=lambda: polls.append(1) or len(polls) > 2)
+    assert len(polls) == 3  # stopped before the third chunk
