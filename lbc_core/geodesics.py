@@ -74,11 +74,14 @@ def _heat_distances_tetrahedra(vertices, cells, sources, progress):
     volume_weights = sp.diags(np.repeat(measures, 3))
     stiffness = (G.T @ volume_weights @ G).tocsr()
     mass = sp.diags(fem.lumped_mass(cells, measures, n_vertices))
+    progress.check()
     heat_solver = _Factor(sp.tril(mass + h * h * stiffness).tocoo(), np.float64)
     progress.check()
     # The Poisson problem is singular (constants): pin vertex 0, then shift each column to 0 at its source.
     free = np.arange(1, n_vertices)
-    poisson_solver = _Factor(sp.tril(stiffness[free][:, free]).tocoo(), np.float64)
+    poisson_lower = sp.tril(stiffness[free][:, free]).tocoo()
+    progress.check()
+    poisson_solver = _Factor(poisson_lower, np.float64)
 
     sources = np.asarray(sources)
     distances = np.zeros((n_vertices, len(sources)))
