@@ -11,7 +11,7 @@ import scipy.sparse as sp
 from .progress import Progress
 
 
-def restore_constraints(weights, controls, positions, columns=None, rounds=20):
+def restore_constraints(weights, controls, positions, columns=None, rounds=20, check=None):
     """Correct weights on their support so that they sum to 1, reproduce ``positions`` and are non-negative.
 
     Parameters
@@ -26,6 +26,8 @@ def restore_constraints(weights, controls, positions, columns=None, rounds=20):
         The control point of each slot; None means K = n and slot j is control point j.
     rounds : int
         Correct-and-clamp rounds; corrections are small, so one or two usually suffice.
+    check : callable, optional
+        Called before each round (it raises to cancel).
 
     Returns
     -------
@@ -65,6 +67,8 @@ def restore_constraints(weights, controls, positions, columns=None, rounds=20):
     support = weights > 0
     weights = np.where(support, weights, 0.0)
     for _ in range(rounds):
+        if check is not None:
+            check()
         residual = target - reproduced(weights)
         gram = gram_on(support)
         # A tiny ridge keeps supports that cannot span the affine constraints from blowing up.
@@ -131,8 +135,9 @@ def reduce_weights(weights, controls, positions, threshold, tolerance, progress=
     """
     full = sp.csr_matrix(weights)
     full.sum_duplicates()
+    progress = Progress.of(progress, cancel)
     return _by_chunks(full.shape[0], controls.shape[0], lambda rows: _reduce_rows(
-        full[rows], controls, positions[rows], threshold, tolerance), Progress.of(progress, cancel))
+        full[rows], controls, positions[rows], threshold, tolerance, progress.check), progress)
 
 
 def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance, progress=None,
@@ -157,9 +162,10 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     # A weight below threshold / 10 at every corner of a cell cannot reach the threshold inside it; drop those
     # entries (the solver's faint tails) before the product, keeping what a support may need to grow into.
     sparse_domain = sp.csr_matrix(np.where(domain_weights >= threshold / 10, domain_weights, 0.0))
+    progress = Progress.of(progress, cancel)
     return _by_chunks(located.shape[0], controls.shape[0], lambda rows: _reduce_rows(
-        located[rows] @ sparse_domain, controls, located[rows] @ domain_vertices, threshold, tolerance),
-        Progress.of(progress, cancel))
+        located[rows] @ sparse_domain, controls, located[rows] @ domain_vertices, threshold, tolerance,
+        progress.check), progress)
 
 
 def _by_chunks(m, n, reduce_chunk, progress):
@@ -173,33 +179,33 @@ def _by_chunks(m, n, reduce_chunk, progress):
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix((0, n))
 
 
-def _reduce_rows(full, controls, positions, threshold, tolerance):
-    """:func:`reduce_weights` on one chunk of rows."""
+def _reduce_rows(full, controls, positions, threshold, tolerance, check):
+    """:func:`reduce_weights` on one chunk of rows; ``check`` is called between rounds of corrections."""
     n = controls.shape[0]
     kept = full.copy()
     kept.data[kept.data < threshold] = 0.0
     kept.eliminate_zeros()
     # Most rows reproduce on their kept support: correct them all at once on short padded rows.
     values, columns = _padded(kept)
-    corrected, done = _restore_and_check(values, columns, controls, positions, tolerance)
+    corrected, done = _restore_and_check(values, columns, controls, positions, tolerance, check)
     reduced = _scatter_rows(sp.csr_matrix(full.shape), np.flatnonzero(done),
                             _from_padded(corrected[done], columns[done], n))
     pending = np.flatnonzero(~done)
     if len(pending):
         kept_counts = np.diff(kept.indptr)[pending]
         reduced = _scatter_rows(reduced, pending, grow_support(full[pending], controls, positions[pending],
-                                                               kept_counts, tolerance))
+                                                               kept_counts, tolerance, check))
     return reduced
 
 
-def _restore_and_check(values, columns, controls, positions, tolerance):
+def _restore_and_check(values, columns, controls, positions, tolerance, check=None):
     """Corrected rows, and which of them meet the constraints."""
-    corrected = restore_constraints(values, controls, positions, columns)
+    corrected = restore_constraints(values, controls, positions, columns, check=check)
     unity, reproduction = constraint_residuals(corrected, controls, positions, columns)
     return corrected, (unity <= 1e-9) & (reproduction <= tolerance) & (corrected >= 0).all(axis=1)
 
 
-def grow_support(full, controls, positions, keep, tolerance):
+def grow_support(full, controls, positions, keep, tolerance, check=None):
     """Weights on each row's ``keep`` largest entries, plus the next largest, 1, 2, 4, ... at a time, until the
     constraints can be restored on them exactly.
 
@@ -213,6 +219,8 @@ def grow_support(full, controls, positions, keep, tolerance):
         How many of each row's largest entries to start from.
     tolerance : float
         Largest reproduction error accepted, in the units of ``positions``.
+    check : callable, optional
+        Called between rounds of corrections (it raises to cancel).
 
     Returns
     -------
@@ -229,7 +237,7 @@ def grow_support(full, controls, positions, keep, tolerance):
     while len(pending):
         size = np.minimum(keep[pending] + extra, values.shape[1])
         slots = np.where(np.arange(values.shape[1]) < size[:, None], values[pending], 0.0)
-        corrected, done = _restore_and_check(slots, columns[pending], controls, positions[pending], tolerance)
+        corrected, done = _restore_and_check(slots, columns[pending], controls, positions[pending], tolerance, check)
         done |= size >= values.shape[1]  # the full support: nothing more to add
         reduced = _scatter_rows(reduced, pending[done], _from_padded(corrected[done], columns[pending][done], n))
         pending = pending[~done]

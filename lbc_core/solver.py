@@ -209,7 +209,7 @@ def solve_on_mesh(
         progress.check()
     if len(interior):
         # From the operators at hand, in float64: TV scales with length^(d-1).
-        objective = problem.objective(weights[interior], tv_weights) * scale ** (d - 1)
+        objective = problem.objective(weights[interior], tv_weights, progress.check) * scale ** (d - 1)
     else:
         objective = tv_objective(vertices, cells, weights, tv_weights)
     progress(1.0, "solved")
@@ -324,13 +324,12 @@ def _project(Z, W, controls, positions, progress):
     A vertex whose W support is too small to reproduce it (three control points for a point off their plane) gets
     Z's next largest weights added, largest first, until it is.
     """
-    on_support = restore_constraints(W, controls, positions)
-    progress.check()
+    on_support = restore_constraints(W, controls, positions, check=progress.check)
     unity, reproduction = constraint_residuals(on_support, controls, positions)
     failed = (unity > 1e-12) | (reproduction > 1e-12) | (on_support < 0).any(axis=1)
     if failed.any():
         grown = grow_support(sp.csr_matrix(np.maximum(Z[failed], 0.0)), controls, positions[failed],
-                             np.count_nonzero(W[failed] > 0, axis=1), tolerance=1e-12)
+                             np.count_nonzero(W[failed] > 0, axis=1), tolerance=1e-12, check=progress.check)
         on_support[failed] = grown.toarray()
     return on_support
 
@@ -427,10 +426,19 @@ class _Problem:
         # √|c| of each cell, to turn scaled gradients back into ω |c| |∇w|.
         self.sqrt_cell = np.sqrt(measures)[:, None]
 
-    def objective(self, interior_weights, tv_weights):
-        """Σ ω |c| |∇w| (float64, unit-diagonal cage) of interior weights (N_in, n) with the boundary values."""
-        gradient = (self.G64 @ interior_weights + self.E64).reshape(self.d, self.n_cells, -1)
-        return _scaled_tv(gradient, tv_weights, self.sqrt_cell)
+    def objective(self, interior_weights, tv_weights, check):
+        """Σ ω |c| |∇w| (float64, unit-diagonal cage) of interior weights (N_in, n) with the boundary values, over
+        slices of NORM_SLICE gradient entries with ``check`` called between."""
+        n = interior_weights.shape[1]
+        per_slice = max(1, NORM_SLICE // (self.d * n))
+        total = 0.0
+        for start in range(0, self.n_cells, per_slice):
+            check()
+            cells = np.arange(start, min(start + per_slice, self.n_cells))
+            rows = (np.arange(self.d)[:, None] * self.n_cells + cells).ravel()  # component-major
+            gradient = (self.G64[rows] @ interior_weights + self.E64[rows]).reshape(self.d, len(cells), n)
+            total += _scaled_tv(gradient, tv_weights[cells], self.sqrt_cell[cells])
+        return total
 
 
 def _renumber(subset, n):
