@@ -344,7 +344,10 @@ def _check_weights(weights, arrays, damaged):
         damaged(f"the weights of point {row} sum to {sums[row]:.9g}, not 1")
     if str(arrays["scheme"]) in _REPRODUCING:
         inside = ~arrays["outside"]
-        miss = np.linalg.norm(weights[inside] @ rest - arrays["points"][inside], axis=1)
+        # About the cage's centre, as bind computes: far from the origin Σ w c - x would be the rounding of the
+        # offset times |Σ w - 1|, not the weights' miss.
+        centre = (rest.min(axis=0) + rest.max(axis=0)) / 2
+        miss = np.linalg.norm(weights[inside] @ (rest - centre) - (arrays["points"][inside] - centre), axis=1)
         if len(miss) and np.max(miss) > LOAD_TOLERANCE * diagonal:
             row = int(np.flatnonzero(inside)[np.argmax(miss)])
             damaged(f"the weights of point {row} place it {np.max(miss) / diagonal:.3g} of the cage's size away from "

@@ -367,6 +367,16 @@ def test_cages_far_from_the_origin_bind(dim):
     assert np.all(binding.domain.vertices >= 1e6 - 1e-9)
 
 
+@pytest.mark.parametrize("size, offset", [(1.0, 1e8), (1e-6, 1e4), (1e-9, 10.0)])
+def test_a_binding_far_from_the_origin_saves_and_loads(tmp_path, size, offset):
+    """The load check measures reproduction about the cage's centre, as bind does (it refused these before)."""
+    cage = L_POLYGON * size + offset
+    binding = lbc_core.bind(cage, None, inside_points(2, 20, np.random.default_rng(7)) * size + offset, cells=300)
+    binding.save(tmp_path / "far.npz")
+    loaded = lbc_core.load_binding(tmp_path / "far.npz", cage)
+    np.testing.assert_array_equal(loaded.deform(cage * 2.0), binding.deform(cage * 2.0))
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_a_scaled_cage_gives_the_same_weights(dim):
     """Scaling by a power of two is exact in the unit frame: identical weights, every length scaled exactly."""
