@@ -1,10 +1,10 @@
 """How long a cancel can wait in each stage of a bind, and the longest calls that cannot be interrupted (issue 11).
 
-A whole bind of the gargoyle in one of its cages (by default L08, 168 control points) runs with a ``cancel`` that only records when it is
-polled; the longest time between two polls in a stage is the latency of a cancel turning true at the worst moment
-there (the stages and the instrument are tests/test_binding.py's). The sparse Cholesky factorisations, which hold the
-GIL and cannot be interrupted, are timed on their own. ADMM iterations are capped: the waits repeat from one
-iteration to the next.
+A whole bind of the gargoyle in one of its cages (by default L08, 168 control points) runs with a ``cancel`` that
+only records when it is polled; the longest time between two polls in a stage is the latency of a cancel turning true
+at the worst moment there (the stages and the instrument are tests/test_binding.py's). The sparse Cholesky
+factorisations, which hold the GIL and cannot be interrupted, are timed on their own. ADMM iterations are capped: the
+waits repeat from one iteration to the next.
 
     .venv/bin/python bench/cancel_latency.py [--cage L08] [--cells 8000 64000] [--points N] [--iterations K]
 """

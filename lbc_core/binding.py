@@ -439,7 +439,8 @@ def bind(
 
     clock = time.perf_counter()
     located, outside, _ = interpolation_matrix(
-        unit_domain.vertices, unit_domain.cells, frame.to_unit(points), progress=progress.part(*_STAGES["interpolation"])
+        unit_domain.vertices, unit_domain.cells, frame.to_unit(points),
+        progress=progress.part(*_STAGES["interpolation"]),
     )
     timings["interpolation"] = time.perf_counter() - clock
     clock = time.perf_counter()

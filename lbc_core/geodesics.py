@@ -123,8 +123,10 @@ def tv_weights(cells, distances, weighting="quadratic"):
     cells = np.asarray(cells)
     # The mean over each cell's corners as a sparse product: no (F, d+1, n) temporary (340 MB at 64k tetrahedra).
     corners = cells.shape[1]
-    averaging = sp.csr_matrix((np.full(cells.size, 1.0 / corners), cells.ravel(), np.arange(0, cells.size + 1, corners)),
-                              shape=(len(cells), len(distances)))
+    averaging = sp.csr_matrix(
+        (np.full(cells.size, 1.0 / corners), cells.ravel(), np.arange(0, cells.size + 1, corners)),
+        shape=(len(cells), len(distances)),
+    )
     cell_distance = averaging @ (distances / largest if largest > 0 else distances)
     if callable(weighting):
         rho = weighting

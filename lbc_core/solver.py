@@ -134,8 +134,9 @@ def solve_on_mesh(
     relaxation : float
         Over-relaxation α in (0, 2).
     check_every : int
-        Iterations between progress reports (cancel is checked within every iteration). The primal test runs after every Anderson period (it
-        costs one norm: a step's residual is α times its primal residual); the dual test once the primal one passes.
+        Iterations between progress reports (cancel is checked within every iteration). The primal test runs after
+        every Anderson period (it costs one norm: a step's residual is α times its primal residual); the dual test
+        once the primal one passes.
     anderson_memory : int
         Extrapolations remembered by Anderson acceleration (0: plain ADMM).
     anderson_period : int

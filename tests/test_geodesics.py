@@ -70,7 +70,8 @@ def test_progress_is_reported_and_cancel_stops_between_sources(d, n, monkeypatch
     points, cells = grid_mesh(d, n)
     sources = np.arange(0, len(points), len(points) // 6)[:6]
     fractions = []
-    distances = geodesic_distances(points, cells, sources, progress=lambda fraction, message: fractions.append(fraction))
+    distances = geodesic_distances(points, cells, sources,
+                                   progress=lambda fraction, message: fractions.append(fraction))
     assert fractions == sorted(fractions) and fractions[-1] == 1.0 and len(fractions) >= 4
     assert np.all(distances[sources, np.arange(len(sources))] == 0)
     # Computed by chunks of two sources, the same distances as all at once.
