@@ -20,27 +20,45 @@ from .properties import is_bound
 MODIFIER_NAME = "LBC Deform"
 GROUP_NAME = "LBC Deform"
 
-_COLUMN = 220  # node editor spacing, for a readable node group
+_COLUMN = 220
+
+# The modifier inputs that are the artist's (kept when the mesh is bound again); the others are the add-on's.
+USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")  # node editor spacing, for a readable node group
 
 
-def build_node_group(slots):
-    """A new node group deforming by ``slots`` (index, weight) attribute pairs."""
+def build_node_group(slots, cage_vertex_count, mesh_vertex_count):
+    """A new node group deforming by ``slots`` (index, weight) attribute pairs.
+
+    The counts at bind time are baked into its error messages; the modifier's inputs carry them for the checks.
+    """
     group = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
     group.is_modifier = True
     interface = group.interface
     interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     interface.new_socket("Cage", in_out="INPUT", socket_type="NodeSocketObject")
-    count = interface.new_socket("Cage Vertices", in_out="INPUT", socket_type="NodeSocketInt")
-    count.description = "Vertex count of the cage at bind time; any other count stops the deformation"
-    enabled = interface.new_socket("Enabled", in_out="INPUT", socket_type="NodeSocketBool")
-    enabled.default_value = True
-    enabled.description = "Cleared by the LBC add-on when the cage's topology changed since binding"
+    strength = interface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat")
+    strength.default_value, strength.min_value, strength.max_value = 1.0, -10.0, 10.0
+    strength.description = "How far the mesh follows the cage: 0 rest, 1 the full deformation"
+    vertex_group = interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
+    vertex_group.description = "Only the vertices of this group follow the cage, by their weight (empty: all)"
+    invert = interface.new_socket("Invert Vertex Group", in_out="INPUT", socket_type="NodeSocketBool")
+    invert.description = "Vertices outside the group follow the cage instead"
+    internal = (
+        ("Cage Vertices", "NodeSocketInt", "Vertex count of the cage at bind time; any other count stops the deformer"),
+        ("Mesh Vertices", "NodeSocketInt", "Vertex count of the mesh at bind time; any other count stops the deformer"),
+        ("Enabled", "NodeSocketBool", "Cleared by the LBC add-on when the cage's topology changed since binding"),
+    )
+    for name, socket_type, description in internal:
+        socket = interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
+        socket.description = description
+        if hasattr(socket, "hide_in_modifier"):  # Blender 4.2 may lack it: then the modifier shows them too
+            socket.hide_in_modifier = True
     interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
 
     nodes, links = group.nodes, group.links
     group_in = nodes.new("NodeGroupInput")
     group_out = nodes.new("NodeGroupOutput")
-    group_out.location = (_COLUMN * 7, 0)
+    group_out.location = (_COLUMN * 8, 0)
 
     cage = nodes.new("GeometryNodeObjectInfo")
     cage.transform_space = "RELATIVE"
@@ -77,20 +95,64 @@ def build_node_group(slots):
     displacement = _vector_math(nodes, "SUBTRACT", (_COLUMN * 5, 150))
     links.new(total, _inputs(displacement, "Vector")[0])
     links.new(rest.outputs["Attribute"], _inputs(displacement, "Vector")[1])
+    factored = _vector_math(nodes, "SCALE", (_COLUMN * 6, 150))
+    links.new(displacement.outputs["Vector"], _input(factored, "Vector"))
+    links.new(_factor(group, group_in), _input(factored, "Scale"))
     set_position = nodes.new("GeometryNodeSetPosition")
-    set_position.location = (_COLUMN * 6, 150)
+    set_position.location = (_COLUMN * 7, 150)
     links.new(group_in.outputs["Geometry"], _input(set_position, "Geometry"))
-    links.new(displacement.outputs["Vector"], _input(set_position, "Offset"))
+    links.new(factored.outputs["Vector"], _input(set_position, "Offset"))
 
-    stop = _stop_condition(group, group_in, cage_geometry)
+    stop = _stop_condition(group, group_in, cage_geometry, cage_vertex_count, mesh_vertex_count)
     switch = nodes.new("GeometryNodeSwitch")
     switch.input_type = "GEOMETRY"
-    switch.location = (_COLUMN * 6.5, 400)
+    switch.location = (_COLUMN * 7.5, 400)
     links.new(stop, _input(switch, "Switch"))
     links.new(set_position.outputs["Geometry"], _input(switch, "False"))
     links.new(group_in.outputs["Geometry"], _input(switch, "True"))
     links.new(switch.outputs["Output"], _input(group_out, "Geometry"))
     return group
+
+
+def _factor(group, group_in):
+    """Per-vertex factor of the displacement: Strength × the vertex group's weight (inverted on request).
+
+    Like Mesh Deform's: a vertex group name that names no attribute of the mesh (or none) masks nothing.
+    """
+    nodes, links = group.nodes, group.links
+    weight = nodes.new("GeometryNodeInputNamedAttribute")
+    weight.data_type = "FLOAT"
+    weight.location = (_COLUMN * 4, 900)
+    links.new(group_in.outputs["Vertex Group"], _input(weight, "Name"))
+    complement = _math(nodes, "SUBTRACT", (_COLUMN * 5, 950))
+    _inputs(complement, "Value")[0].default_value = 1.0
+    links.new(weight.outputs["Attribute"], _inputs(complement, "Value")[1])
+    inverted = _float_switch(nodes, (_COLUMN * 5.5, 900))
+    links.new(group_in.outputs["Invert Vertex Group"], _input(inverted, "Switch"))
+    links.new(weight.outputs["Attribute"], _input(inverted, "False"))
+    links.new(complement.outputs["Value"], _input(inverted, "True"))
+    mask = _float_switch(nodes, (_COLUMN * 6, 900))
+    links.new(weight.outputs["Exists"], _input(mask, "Switch"))
+    _input(mask, "False").default_value = 1.0
+    links.new(inverted.outputs["Output"], _input(mask, "True"))
+    factor = _math(nodes, "MULTIPLY", (_COLUMN * 6, 750))
+    links.new(mask.outputs["Output"], _inputs(factor, "Value")[0])
+    links.new(group_in.outputs["Strength"], _inputs(factor, "Value")[1])
+    return factor.outputs["Value"]
+
+
+def _math(nodes, operation, location):
+    node = nodes.new("ShaderNodeMath")
+    node.operation = operation
+    node.location = location
+    return node
+
+
+def _float_switch(nodes, location):
+    node = nodes.new("GeometryNodeSwitch")
+    node.input_type = "FLOAT"
+    node.location = location
+    return node
 
 
 def _named_attribute(nodes, data_type, name, location):
@@ -125,74 +187,138 @@ def _vector_math(nodes, operation, location):
     return node
 
 
-def _stop_condition(group, group_in, cage_geometry):
-    """The boolean output that is true when the mesh must stay undeformed; each reason raises a modifier warning."""
-    nodes, links = group.nodes, group.links
-    size = nodes.new("GeometryNodeAttributeDomainSize")
-    size.component = "MESH"
-    size.location = (_COLUMN * 2, 500)
-    links.new(cage_geometry, _input(size, "Geometry"))
-    same = nodes.new("FunctionNodeCompare")
-    same.data_type = "INT"
-    same.operation = "NOT_EQUAL"
-    same.location = (_COLUMN * 3, 500)
-    links.new(size.outputs["Point Count"], _input(same, "A"))
-    links.new(group_in.outputs["Cage Vertices"], _input(same, "B"))
-    changed = _warning(
-        nodes,
-        "LBC: the cage is missing or its vertex count changed since binding; the mesh is left undeformed. "
-        "Rebind, or restore the cage",
-        (_COLUMN * 4, 500),
-    )
-    links.new(same.outputs["Result"], _input(changed, "Show"))
+def _stop_condition(group, group_in, cage_geometry, cage_vertex_count, mesh_vertex_count):
+    """The boolean output that is true when the mesh must stay undeformed.
 
+    Three causes, each with its own modifier error where Blender has the Warning node (4.3 and newer): the cage is
+    gone or has another vertex count, the mesh has another vertex count, the add-on cleared "Enabled" (the cage's
+    topology changed with its vertex count kept).
+    """
+    nodes, links = group.nodes, group.links
+    cage_changed = _count_differs(group, cage_geometry, group_in.outputs["Cage Vertices"], (_COLUMN * 2, 500))
+    mesh_changed = _count_differs(group, group_in.outputs["Geometry"], group_in.outputs["Mesh Vertices"],
+                                  (_COLUMN * 2, 800))
     disabled = nodes.new("FunctionNodeBooleanMath")
     disabled.operation = "NOT"
     disabled.location = (_COLUMN * 3, 650)
     links.new(group_in.outputs["Enabled"], _inputs(disabled, "Boolean")[0])
-    stopped = _warning(
-        nodes,
-        "LBC: the cage's topology changed since binding; the mesh is left undeformed. Rebind in the LBC panel",
-        (_COLUMN * 4, 650),
+    causes = (
+        (cage_changed, f"LBC: the cage is gone or no longer has the {cage_vertex_count} vertices it was bound with; "
+                       "the mesh is left undeformed. Bind again, or restore the cage"),
+        (mesh_changed, f"LBC: the mesh no longer has the {mesh_vertex_count} vertices it was bound with; it is left "
+                       "undeformed. Rebind in the LBC panel"),
+        (disabled.outputs["Boolean"], "LBC: the cage's topology changed since binding (same vertex count); the mesh "
+                                      "is left undeformed. Rebind in the LBC panel"),
     )
-    links.new(disabled.outputs["Boolean"], _input(stopped, "Show"))
+    stop = None
+    for row, (condition, message) in enumerate(causes):
+        condition = _warning(nodes, links, condition, message, (_COLUMN * 4, 500 + 150 * row))
+        if stop is None:
+            stop = condition
+        else:
+            either = nodes.new("FunctionNodeBooleanMath")
+            either.operation = "OR"
+            either.location = (_COLUMN * 5, 550 + 150 * row)
+            links.new(stop, _inputs(either, "Boolean")[0])
+            links.new(condition, _inputs(either, "Boolean")[1])
+            stop = either.outputs["Boolean"]
+    return stop
 
-    either = nodes.new("FunctionNodeBooleanMath")
-    either.operation = "OR"
-    either.location = (_COLUMN * 5, 550)
-    links.new(changed.outputs["Show"], _inputs(either, "Boolean")[0])
-    links.new(stopped.outputs["Show"], _inputs(either, "Boolean")[1])
-    return either.outputs["Boolean"]
+
+def _count_differs(group, geometry, expected, location):
+    """Boolean output: the geometry's mesh vertex count differs from the integer ``expected``."""
+    nodes, links = group.nodes, group.links
+    size = nodes.new("GeometryNodeAttributeDomainSize")
+    size.component = "MESH"
+    size.location = location
+    links.new(geometry, _input(size, "Geometry"))
+    differs = nodes.new("FunctionNodeCompare")
+    differs.data_type = "INT"
+    differs.operation = "NOT_EQUAL"
+    differs.location = (location[0] + _COLUMN, location[1])
+    links.new(size.outputs["Point Count"], _input(differs, "A"))
+    links.new(expected, _input(differs, "B"))
+    return differs.outputs["Result"]
 
 
-def _warning(nodes, message, location):
+def _warning(nodes, links, condition, message, location):
+    """``condition`` passed through a Warning node that shows ``message`` on the modifier while it is true; the
+    condition itself where Blender has no Warning node (4.2)."""
+    if not hasattr(bpy.types, "GeometryNodeWarning"):
+        return condition
     node = nodes.new("GeometryNodeWarning")
     node.warning_type = "ERROR"
     _input(node, "Message").default_value = message
     node.location = location
-    return node
+    links.new(condition, _input(node, "Show"))
+    return node.outputs["Show"]
 
 
-def _input_identifier(group, name):
-    for item in group.interface.items_tree:
-        if item.item_type == "SOCKET" and item.in_out == "INPUT" and item.name == name:
-            return item.identifier
-    raise KeyError(name)
+def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count):
+    """Give ``mesh_obj`` the deformer for a new binding.
 
+    A bound object keeps its LBC modifier (its place in the stack, name, Strength, vertex group) with a new node
+    group; otherwise a new modifier goes first in the stack (the weights belong to the mesh's own vertices, before
+    any other modifier moves them).
 
-def attach(mesh_obj, cage_obj, slots, cage_vertex_count):
-    """Add the deformer as the first modifier of ``mesh_obj`` (the weights belong to the mesh's own vertices).
-
-    Returns the modifier.
+    Returns
+    -------
+    (modifier, replaced node group or None)
+        The replaced group is still in the file: :func:`release_group` removes it once the binding is complete.
     """
-    group = build_node_group(slots)
-    modifier = mesh_obj.modifiers.new(MODIFIER_NAME, "NODES")
+    group = build_node_group(slots, cage_vertex_count, mesh_vertex_count)
+    modifier = find_modifier(mesh_obj)
+    if modifier is None:
+        modifier = mesh_obj.modifiers.new(MODIFIER_NAME, "NODES")
+        mesh_obj.modifiers.move(len(mesh_obj.modifiers) - 1, 0)
+    replaced, kept = modifier.node_group, inputs(modifier)
     modifier.node_group = group
-    modifier[_input_identifier(group, "Cage")] = cage_obj
-    modifier[_input_identifier(group, "Cage Vertices")] = cage_vertex_count
-    modifier[_input_identifier(group, "Enabled")] = True
-    mesh_obj.modifiers.move(len(mesh_obj.modifiers) - 1, 0)
-    return modifier
+    # Every input is set: a value Blender kept from the replaced group under the same identifier may be another one's.
+    defaults = {item.name: item.default_value for item in _input_items(group) if item.socket_type != "NodeSocketObject"}
+    set_inputs(modifier, {**defaults, **{name: kept[name] for name in USER_INPUTS if name in kept}, "Cage": cage_obj,
+                          "Cage Vertices": cage_vertex_count, "Mesh Vertices": mesh_vertex_count, "Enabled": True})
+    return modifier, replaced
+
+
+def inputs(modifier):
+    """The values of the modifier's inputs, by input name: {name: value}."""
+    group = modifier.node_group
+    if group is None:
+        return {}
+    return {item.name: modifier[item.identifier] for item in _input_items(group) if item.identifier in modifier}
+
+
+def set_inputs(modifier, values):
+    """Set the modifier's inputs by name; names its node group does not have are left out."""
+    identifiers = {item.name: item.identifier for item in _input_items(modifier.node_group)}
+    for name, value in values.items():
+        if name in identifiers:
+            modifier[identifiers[name]] = value
+
+
+def input_path(modifier, name):
+    """The property path of the modifier's input called ``name``, for ``UILayout.prop``; None when it has none."""
+    for item in _input_items(modifier.node_group):
+        if item.name == name:
+            return f'["{item.identifier}"]'
+    return None
+
+
+def _input_items(group):
+    return [item for item in group.interface.items_tree
+            if item.item_type == "SOCKET" and item.in_out == "INPUT" and item.socket_type != "NodeSocketGeometry"]
+
+
+def release_group(group, successor=None):
+    """Remove a node group of this add-on once no modifier uses it (a linked duplicate may still); its
+    ``successor``, the group that replaced it, then takes its name."""
+    if group is not None and not any(
+        modifier.type == "NODES" and modifier.node_group == group for obj in bpy.data.objects for modifier in obj.modifiers
+    ):
+        name = group.name
+        bpy.data.node_groups.remove(group)
+        if successor is not None:
+            successor.name = name
 
 
 def find_modifier(mesh_obj):
@@ -205,17 +331,13 @@ def find_modifier(mesh_obj):
 
 
 def detach(mesh_obj):
-    """Remove the modifier and its node group."""
+    """Remove the modifier and its node group (kept while a linked duplicate's modifier uses it)."""
     modifier = find_modifier(mesh_obj)
     if modifier is not None:
         mesh_obj.modifiers.remove(modifier)
     group = mesh_obj.lbc.node_group
     mesh_obj.lbc.node_group = None
-    # A duplicated bound object shares the node group: keep it while another modifier uses it.
-    if group is not None and not any(
-        modifier.type == "NODES" and modifier.node_group == group for obj in bpy.data.objects for modifier in obj.modifiers
-    ):
-        bpy.data.node_groups.remove(group)
+    release_group(group)
 
 
 def set_enabled(mesh_obj, enabled):
@@ -223,10 +345,9 @@ def set_enabled(mesh_obj, enabled):
     modifier = find_modifier(mesh_obj)
     if modifier is None:
         return False
-    key = _input_identifier(modifier.node_group, "Enabled")
-    if bool(modifier[key]) == enabled:
+    if bool(inputs(modifier).get("Enabled", True)) == enabled:
         return False
-    modifier[key] = enabled
+    set_inputs(modifier, {"Enabled": enabled})
     mesh_obj.update_tag()
     return True
 
@@ -248,25 +369,47 @@ def status(mesh_obj, depsgraph):
     -------
     (ok: bool, message: str)
     """
+    cause, message = diagnose(mesh_obj, depsgraph)
+    return cause is None, message
+
+
+def diagnose(mesh_obj, depsgraph):
+    """Why a bound object's deformer cannot work: (cause, message), cause None when it works.
+
+    ``cause`` is one word: "modifier", "weights", "cage deleted", "cage type", "cage vertices", "mesh vertices" or
+    "topology". Only "topology" needs the add-on to stop the deformer; the node group itself stops for the others.
+    """
     settings = mesh_obj.lbc
     if find_modifier(mesh_obj) is None:
-        return False, "The LBC modifier was removed: Unbind to clean up, or Rebind"
+        return "modifier", "The LBC modifier was removed: Unbind to clean up, or Rebind"
     if storage.slot_count(mesh_obj.data) != settings.slots:
-        return False, "The cached weights are missing from the mesh data: Rebind"
+        return "weights", "The cached weights are missing from the mesh data: Rebind"
+    count = len(mesh_obj.data.vertices)
+    # 0: bound by a version of the add-on that did not record it.
+    if settings.mesh_vertex_count and count != settings.mesh_vertex_count:
+        return "mesh vertices", (
+            f"The mesh has {count} vertices, it was bound with {settings.mesh_vertex_count}: it stays undeformed. "
+            "Rebind"
+        )
     cage = settings.cage
     if cage is None:
-        return False, "The cage object was deleted: the mesh stays undeformed. Pick a cage and Rebind, or Unbind"
+        return "cage deleted", (
+            "The cage was deleted: the mesh is back at rest. Select it, then a new cage (active), and Bind; or Unbind"
+        )
     if cage.type != "MESH":
-        return False, f"The cage '{cage.name}' is no longer a mesh: Rebind with a mesh cage"
+        return "cage type", f"The cage '{cage.name}' is no longer a mesh: Rebind with a mesh cage"
     topology, count = evaluated_cage_topology(cage, depsgraph)
     if count != settings.cage_vertex_count:
-        return False, (
-            f"The cage '{cage.name}' has {count} vertices, the binding was made for {settings.cage_vertex_count}: "
+        return "cage vertices", (
+            f"The cage '{cage.name}' has {count} vertices, it was bound with {settings.cage_vertex_count}: "
             "the mesh stays undeformed. Rebind"
         )
     if topology != settings.cage_topology:
-        return False, f"The topology of the cage '{cage.name}' changed since binding: the mesh stays undeformed. Rebind"
-    return True, f"Following '{cage.name}'"
+        return "topology", (
+            f"The topology of the cage '{cage.name}' changed since binding (same vertex count): the mesh stays "
+            "undeformed. Rebind"
+        )
+    return None, f"Following '{cage.name}'"
 
 
 _last_messages = {}  # object session_uid -> the last status printed, so a problem is reported once, not per redraw
@@ -276,22 +419,47 @@ def check_bindings(depsgraph, changed=None):
     """Check every bound object of the depsgraph's scene; stop or resume its deformation; print changes of state.
 
     ``changed``: when given, the names of the objects whose geometry changed; only bindings involving one of them
-    (or whose cage is gone) are checked.
+    (or whose cage is gone) are checked. Cages deleted by the user are let go first (:func:`forget_cage`).
     """
-    for obj in depsgraph.scene.objects:
-        if not is_bound(obj):
-            continue
+    bound = [obj for obj in depsgraph.scene.objects if is_bound(obj)]
+    deleted = []
+    for obj in bound:
+        cage = obj.lbc.cage
+        if cage is not None and not cage.users_collection and cage not in deleted:
+            deleted.append(cage)
+    for cage in deleted:
+        forget_cage(cage)
+    for obj in bound:
         cage = obj.lbc.cage
         if changed is not None and cage is not None and not {obj.name_full, cage.name_full} & changed:
             continue
-        ok, message = status(obj, depsgraph)
-        set_enabled(obj, ok)
+        cause, message = diagnose(obj, depsgraph)
+        set_enabled(obj, cause != "topology")
         if obj.lbc.status != message:  # writing the same value would trigger another depsgraph update
             obj.lbc.status = message
         if _last_messages.get(obj.session_uid) != message:
             _last_messages[obj.session_uid] = message
-            if not ok:
+            if cause is not None:
                 print(f"LBC: {obj.name}: {message}")
+
+
+def forget_cage(cage):
+    """Let go of a cage the user deleted, as Blender's Mesh Deform does.
+
+    Deleting an object (X) only unlinks it from its scene while something else counts as its user, and the
+    binding's pointer and the modifier's Cage input both do: the cage would live on off-scene with the meshes
+    following it. Every binding to ``cage`` drops it (the node group then leaves the mesh at rest), and the cage is
+    removed once nothing else uses it.
+    """
+    for obj in bpy.data.objects:
+        if is_bound(obj) and obj.lbc.cage == cage:
+            obj.lbc.cage = None
+            modifier = find_modifier(obj)
+            if modifier is not None:
+                set_inputs(modifier, {"Cage": None})
+                obj.update_tag()
+    if cage.users == 0:
+        bpy.data.objects.remove(cage)
 
 
 @persistent

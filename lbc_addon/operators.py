@@ -1,4 +1,4 @@
-"""Operators: Bind, Unbind, Rebind, Show / Hide Influence.
+"""Operators: Bind, Rebind, Rebind All (every mesh bound to a cage), Unbind, Show / Hide Influence.
 
 Bind runs modal in the UI: the solve goes to a worker thread, a timer polls it, the status bar shows its progress and
 Esc cancels it; the scene is only written when the solve succeeded. In background mode (``blender -b``, the bpy
@@ -10,7 +10,7 @@ import bpy
 from lbc_core import CageError, Cancelled
 
 from . import influence, jobs
-from .properties import BindOptions, is_bound
+from .properties import BindOptions, bound_to, is_bound
 
 _running = []  # the Worker of the bind in progress: one at a time, so two binds never write the same mesh
 
@@ -43,6 +43,9 @@ def _apply_all(operator, pairs):
             bound.append(jobs.apply(request, result))
         except CageError as error:
             operator.report({"ERROR"}, str(error))
+        except Exception as error:  # a write Blender refused: apply took everything back
+            operator.report({"ERROR"}, f"'{request.mesh_name}': writing the binding failed "
+                                       f"({type(error).__name__}: {error}); the scene was left as it was")
     for mesh_obj in bound:
         _report_result(operator, mesh_obj)
     return bound
@@ -204,6 +207,31 @@ class OBJECT_OT_lbc_rebind(_Binder, bpy.types.Operator):
         return triples
 
 
+class OBJECT_OT_lbc_rebind_all(_Binder, bpy.types.Operator):
+    """Bind every mesh bound to the active cage again, to the cage as it is now, each with its own options"""
+
+    bl_idname = "object.lbc_rebind_all"
+    bl_label = "Rebind All"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        if _running:
+            cls.poll_message_set("A bind is already running (Esc cancels it)")
+            return False
+        if context.mode != "OBJECT":
+            cls.poll_message_set("Rebind All works in Object Mode")
+            return False
+        if context.active_object is None or not bound_to(context.active_object, context.scene.objects):
+            cls.poll_message_set("Make a cage with bound meshes active")
+            return False
+        return True
+
+    def targets(self, context):
+        cage = context.active_object
+        return [(obj, cage, obj.lbc.bind_options()) for obj in bound_to(cage, context.scene.objects)]
+
+
 class OBJECT_OT_lbc_unbind(bpy.types.Operator):
     """Remove the binding: the mesh is exactly as before binding (data, modifiers, attributes)"""
 
@@ -224,7 +252,11 @@ class OBJECT_OT_lbc_unbind(bpy.types.Operator):
     def execute(self, context):
         objects = _bound_selection(context)
         for obj in objects:
-            jobs.remove(obj)
+            mesh_name = obj.data.name
+            keeping = jobs.remove(obj)
+            if keeping:
+                self.report({"WARNING"}, f"{obj.name}: unbound; its mesh data '{mesh_name}' keeps the weights, shared "
+                                         f"with {', '.join(keeping)}, which stay bound")
         self.report({"INFO"}, f"Unbound {len(objects)} mesh(es)")
         return {"FINISHED"}
 
@@ -236,7 +268,7 @@ def _influence_targets(context):
         return []
     if is_bound(active):
         return [active]
-    return [obj for obj in context.scene.objects if is_bound(obj) and obj.lbc.cage == active]
+    return bound_to(active, context.scene.objects)
 
 
 class OBJECT_OT_lbc_show_influence(bpy.types.Operator):
@@ -293,6 +325,7 @@ class OBJECT_OT_lbc_hide_influence(bpy.types.Operator):
 CLASSES = (
     OBJECT_OT_lbc_bind,
     OBJECT_OT_lbc_rebind,
+    OBJECT_OT_lbc_rebind_all,
     OBJECT_OT_lbc_unbind,
     OBJECT_OT_lbc_show_influence,
     OBJECT_OT_lbc_hide_influence,

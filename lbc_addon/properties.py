@@ -86,6 +86,7 @@ class LBC_PG_binding(BindOptions, bpy.types.PropertyGroup):
     node_group: PointerProperty(type=bpy.types.NodeTree)
     dimension: IntProperty(name="Dimension", description="2 or 3: how the weights were computed")
     cage_vertex_count: IntProperty(name="Cage Vertices")
+    mesh_vertex_count: IntProperty(name="Mesh Vertices", description="The mesh's vertex count at bind time")
     cage_topology: StringProperty(name="Cage Topology", description="Fingerprint of the cage's topology at bind time")
     core_fingerprint: StringProperty(name="Core Fingerprint", description="lbc_core's fingerprint of the welded cage")
     control_points: IntProperty(name="Control Points", description="Cage vertices after welding duplicates")
@@ -111,6 +112,11 @@ def is_bound(obj):
     attributes, never as ID properties (``obj.get``), which Blender 5.0 keeps apart from them.
     """
     return obj.type == "MESH" and obj.is_property_set("lbc") and obj.lbc.is_bound
+
+
+def bound_to(cage, objects):
+    """The objects among ``objects`` bound to ``cage``."""
+    return [obj for obj in objects if is_bound(obj) and obj.lbc.cage == cage]
 
 
 def register():

@@ -9,6 +9,8 @@ such attributes from the attribute lists and keeps them through deform modifiers
 
 import numpy as np
 
+from lbc_core.reduction import restore_constraints
+
 INDEX_PREFIX = ".lbc_index_"
 WEIGHT_PREFIX = ".lbc_weight_"
 REST_NAME = ".lbc_rest"
@@ -50,6 +52,35 @@ def slot_arrays(weights, column_vertex):
     return index, weight
 
 
+def cap_slots(index, weight, cage_rest, reproduced, slots):
+    """Keep each vertex's ``slots`` largest weights and restore the constraints on what is kept.
+
+    Parameters
+    ----------
+    index, weight : (m, K) int32 and float32 arrays
+        Slots as made by :func:`slot_arrays`.
+    cage_rest : (c, 3) float array
+        The cage's rest positions, mesh space.
+    reproduced : (m, 3) float array
+        What the weights must reproduce: Σ w c of the full weights (the vertex itself, or the closest point inside
+        the cage for a vertex outside it).
+    slots : int
+        The new K.
+
+    Returns
+    -------
+    index (m, slots) int32, weight (m, slots) float32: partition of unity and reproduction restored on each
+    vertex's kept slots, weights non-negative.
+    """
+    if index.shape[1] <= slots:
+        return index, weight
+    keep = np.argsort(-weight, axis=1, kind="stable")[:, :slots]
+    index = np.take_along_axis(index, keep, axis=1)
+    weight = np.take_along_axis(weight, keep, axis=1).astype(np.float64)
+    weight = restore_constraints(weight, np.asarray(cage_rest, dtype=np.float64), reproduced, columns=index)
+    return index.astype(np.int32), weight.astype(np.float32)
+
+
 def rest_offsets(index, weight, cage_rest):
     """Σ_k w_k c_k at rest, from the float32 weights and positions the deformer will multiply."""
     rest = np.asarray(cage_rest, dtype=np.float32).astype(np.float64)
@@ -65,6 +96,47 @@ def write(mesh, index, weight, rest):
         attribute.data.foreach_set("value", np.ascontiguousarray(weight[:, slot]))
     attribute = mesh.attributes.new(REST_NAME, "FLOAT_VECTOR", "POINT")
     attribute.data.foreach_set("vector", np.asarray(rest, dtype=np.float32).ravel())
+
+
+def copy_attributes(mesh, names):
+    """The values of the mesh's attributes called ``names`` (those that exist), for :func:`restore_attributes`.
+
+    Returns
+    -------
+    list of (name, domain, data_type, values (length × width,) array)
+    """
+    saved = []
+    for name in names:
+        attribute = mesh.attributes.get(name)
+        if attribute is None:
+            continue
+        field, dtype = _FIELDS[attribute.data_type]
+        values = np.empty(len(attribute.data) * _WIDTHS.get(attribute.data_type, 1), dtype=dtype)
+        attribute.data.foreach_get(field, values)
+        saved.append((name, attribute.domain, attribute.data_type, values))
+    return saved
+
+
+def restore_attributes(mesh, saved, names):
+    """Remove the attributes called ``names``, then recreate those of ``saved`` (:func:`copy_attributes`)."""
+    for name in names:
+        attribute = mesh.attributes.get(name)
+        if attribute is not None:
+            mesh.attributes.remove(attribute)
+    for name, domain, data_type, values in saved:
+        attribute = mesh.attributes.new(name, data_type, domain)
+        attribute.data.foreach_set(_FIELDS[data_type][0], values)
+
+
+# The attribute types this add-on writes (its own and the influence colors): foreach field and dtype, width.
+_FIELDS = {"INT": ("value", np.int32), "FLOAT": ("value", np.float32), "FLOAT_VECTOR": ("vector", np.float32),
+           "FLOAT_COLOR": ("color", np.float32)}
+_WIDTHS = {"FLOAT_VECTOR": 3, "FLOAT_COLOR": 4}
+
+
+def binding_names(mesh):
+    """The names of every attribute this add-on's binding wrote on the mesh."""
+    return [a.name for a in mesh.attributes if a.name.startswith((INDEX_PREFIX, WEIGHT_PREFIX)) or a.name == REST_NAME]
 
 
 def slot_count(mesh):
@@ -93,8 +165,7 @@ def read(mesh):
 
 def remove(mesh):
     """Delete every attribute this add-on wrote, leaving the mesh's own attributes as they were."""
-    names = [a.name for a in mesh.attributes if a.name.startswith((INDEX_PREFIX, WEIGHT_PREFIX)) or a.name == REST_NAME]
-    for name in names:
+    for name in binding_names(mesh):
         mesh.attributes.remove(mesh.attributes[name])
 
 

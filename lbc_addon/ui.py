@@ -2,13 +2,8 @@
 
 import bpy
 
-from . import storage
-from .properties import is_bound
-
-
-def _bound_to(cage, scene):
-    """Meshes of the scene bound to ``cage``."""
-    return [obj for obj in scene.objects if is_bound(obj) and obj.lbc.cage == cage]
+from . import deformer, storage
+from .properties import bound_to, is_bound
 
 
 def _format_bytes(count):
@@ -24,8 +19,11 @@ def draw_binding(layout, obj):
     ok = settings.status.startswith("Following")
     box = layout.box()
     box.label(text=settings.status or "Bound", icon="CHECKMARK" if ok else "ERROR")
-    if not ok:
+    if settings.cage is None:  # deleted: bind to another cage (Bind's poll says what to select)
+        box.operator("object.lbc_bind", icon="MOD_MESHDEFORM")
+    elif not ok:
         box.operator("object.lbc_rebind", icon="FILE_REFRESH")
+    draw_modifier_inputs(layout, obj)
     column = layout.column(align=True)
     column.label(text=f"Cage: {settings.cage.name if settings.cage else '(deleted)'}", icon="MESH_CUBE")
     column.label(text=f"{settings.dimension}D binding, {settings.control_points} control points")
@@ -40,6 +38,21 @@ def draw_binding(layout, obj):
     row.operator("object.lbc_rebind", icon="FILE_REFRESH")
     row.operator("object.lbc_unbind", icon="X")
     draw_influence(layout, obj)
+
+
+def draw_modifier_inputs(layout, obj):
+    """The artist's inputs of the LBC modifier (Strength, vertex group mask), where they live: on the modifier."""
+    modifier = deformer.find_modifier(obj)
+    if modifier is None:
+        return
+    column = layout.column(align=True)
+    strength = deformer.input_path(modifier, "Strength")
+    if strength is not None:  # a binding made before these inputs existed has none: Rebind adds them
+        column.prop(modifier, strength, text="Strength")
+        row = column.row(align=True)
+        row.prop_search(modifier, deformer.input_path(modifier, "Vertex Group"), obj, "vertex_groups",
+                        text="Vertex Group")
+        row.prop(modifier, deformer.input_path(modifier, "Invert Vertex Group"), text="", icon="ARROW_LEFTRIGHT")
 
 
 def draw_influence(layout, obj):
@@ -59,11 +72,12 @@ def draw(layout, context):
     if is_bound(obj):
         draw_binding(layout, obj)
         return
-    meshes = _bound_to(obj, context.scene)
+    meshes = bound_to(obj, context.scene.objects)
     if meshes:
         layout.label(text=f"Cage of {len(meshes)} mesh(es):", icon="MOD_MESHDEFORM")
         for mesh_obj in meshes:
             layout.label(text=f"{mesh_obj.name}: {mesh_obj.lbc.status}")
+        layout.operator("object.lbc_rebind_all", icon="FILE_REFRESH")
         if obj.mode == "EDIT":
             layout.label(text="Select a cage vertex, then:")
             draw_influence(layout, meshes[0])

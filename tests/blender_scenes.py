@@ -5,7 +5,8 @@ The test_addon_* modules import from here; the bound gargoyle fixtures built fro
 
 from pathlib import Path
 
-import bpy
+import bpy  # noqa: I001  (first: importing bpy makes bmesh importable)
+import bmesh
 import numpy as np
 from mathutils import Matrix
 
@@ -133,3 +134,33 @@ def mesh_state(obj):
         "mesh_properties": sorted(mesh.keys()),
         "node_groups": sorted(group.name for group in bpy.data.node_groups),
     }
+
+
+def suzanne_in_box_scene(cuts=9):
+    """Suzanne subdivided (``cuts`` 9: 48,612 vertices) in a 56-vertex box cage (a cube subdivided with 2 cuts).
+
+    The box is Suzanne's bounding box grown by 10 %; returns (mesh, cage).
+    """
+    reset()
+    bpy.ops.mesh.primitive_monkey_add()
+    mesh = bpy.context.active_object
+    mesh.name = "Suzanne"
+    _subdivide(mesh.data, cuts)
+    points = positions(mesh.data)
+    low, high = points.min(axis=0), points.max(axis=0)
+    center, half = (low + high) / 2, 0.55 * (high - low)
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    cage = mesh_object("Box", center + corners * half, faces)
+    _subdivide(cage.data, 2)
+    return mesh, cage
+
+
+def _subdivide(mesh, cuts):
+    """Cut every edge of a ``bpy.types.Mesh`` ``cuts`` times, filling faces with a grid."""
+    edit = bmesh.new()
+    edit.from_mesh(mesh)
+    bmesh.ops.subdivide_edges(edit, edges=edit.edges[:], cuts=cuts, use_grid_fill=True)
+    edit.to_mesh(mesh)
+    edit.free()
+    mesh.update()

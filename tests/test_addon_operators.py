@@ -73,22 +73,40 @@ def _undo_context():
     return bpy.context.temp_override(window=window, screen=window.screen, area=area)
 
 
-def test_undo_after_bind_restores_the_unbound_scene():
+def _undo_step(operator, **options):
+    """Run ``operator`` and push the undo step the UI pushes after an operator with the UNDO flag.
+
+    Scripts can ask for that step with bpy.ops...("EXEC_DEFAULT", True), but in the headless bpy 4.5.4 module that
+    crashes for any operator (object.modifier_add too), so it is pushed here the way the UI does it.
+    """
+    assert operator(**options) == {"FINISHED"}
+    bpy.ops.ed.undo_push(message=operator.get_rna_type().name)
+
+
+def test_undo_after_bind_unbind_and_rebind_returns_the_exact_earlier_state():
     mesh, cage = sphere_in_box_scene()
     _decorate(mesh)
-    before = mesh_state(mesh)
+    states = [mesh_state(mesh)]
     with _undo_context():
         bpy.ops.ed.undo_push(message="before bind")
-        # The UI pushes an undo step after an operator with the UNDO flag. Scripts can ask for it with
-        # bpy.ops...("EXEC_DEFAULT", True), but in the headless bpy 4.5.4 module that crashes for any operator
-        # (object.modifier_add too), so the step is pushed here the way the UI does it.
-        assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
-        bpy.ops.ed.undo_push(message=bpy.types.OBJECT_OT_lbc_bind.bl_label)
-        assert bpy.data.objects["Sphere"].lbc.is_bound
-        assert bpy.ops.ed.undo() == {"FINISHED"}
-    mesh = bpy.data.objects["Sphere"]  # undo reloads the data: old references are gone
-    assert not is_bound(mesh)
-    assert mesh_state(mesh) == before
+        with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[mesh, cage]):
+            _undo_step(bpy.ops.object.lbc_bind, resolution=CELLS)
+        states.append(mesh_state(bpy.data.objects["Sphere"]))
+        mesh = bpy.data.objects["Sphere"]
+        with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+            mesh.lbc.resolution = 600  # the rebind makes other weights
+            _undo_step(bpy.ops.object.lbc_rebind)
+        states.append(mesh_state(bpy.data.objects["Sphere"]))
+        assert states[2] != states[1]
+        mesh = bpy.data.objects["Sphere"]
+        with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+            _undo_step(bpy.ops.object.lbc_unbind)
+        assert mesh_state(bpy.data.objects["Sphere"]) == states[0]
+        for expected in reversed(states):
+            assert bpy.ops.ed.undo() == {"FINISHED"}
+            mesh = bpy.data.objects["Sphere"]  # undo reloads the data: old references are gone
+            assert mesh_state(mesh) == expected
+            assert is_bound(mesh) == (expected is not states[0])
 
 
 def test_bind_with_an_open_cage_fails_and_leaves_the_scene_unchanged():
@@ -241,3 +259,58 @@ def test_esc_during_a_modal_bind_cancels_it_and_changes_nothing():
     assert ({"WARNING"}, "Bind cancelled: nothing changed") in harness.reports
     assert (mesh_state(mesh), sorted(bpy.data.node_groups.keys())) == before
     assert not is_bound(mesh)
+
+
+def test_rebind_all_binds_every_mesh_of_the_active_cage_again_with_its_own_options():
+    mesh, cage = sphere_in_box_scene()
+    second = mesh_object("Second", positions(mesh.data) * 0.5, [list(p.vertices) for p in mesh.data.polygons],
+                         mesh.matrix_world.copy())
+    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert bind(second, cage, resolution=600, weighting="linear") == {"FINISHED"}
+    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[cage]):
+        assert bpy.ops.object.lbc_rebind_all.poll()
+        for obj in (mesh, second):
+            obj.lbc.bind_seconds = -1.0  # a mark the new bind overwrites
+        assert bpy.ops.object.lbc_rebind_all() == {"FINISHED"}
+    assert mesh.lbc.bind_seconds > 0 and second.lbc.bind_seconds > 0
+    assert (mesh.lbc.resolution, second.lbc.resolution, second.lbc.weighting) == (CELLS, 600, "linear")
+    assert [m.type for m in second.modifiers] == ["NODES"]  # replaced, not stacked
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        with pytest.raises(RuntimeError, match="Make a cage with bound meshes active"):
+            bpy.ops.object.lbc_rebind_all()
+
+
+def test_unbinding_a_linked_duplicate_keeps_the_weights_the_original_still_uses(capfd):
+    mesh, cage = sphere_in_box_scene()
+    before = mesh_state(mesh)
+    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.duplicate(linked=True) == {"FINISHED"}  # Alt+D
+    twin = next(obj for obj in bpy.data.objects if obj.data == mesh.data and obj != mesh)
+    assert is_bound(twin)
+    with bpy.context.temp_override(active_object=twin, object=twin, selected_objects=[twin]):
+        assert bpy.ops.object.lbc_unbind() == {"FINISHED"}
+    assert "keeps the weights, shared with Sphere" in capfd.readouterr().out
+    assert not is_bound(twin) and not twin.modifiers
+    cage.location.y += 0.5  # the original still follows its cage
+    expected = positions(mesh.data) + np.array(mesh.matrix_world.inverted().to_3x3()) @ np.array([0.0, 0.5, 0.0])
+    assert np.abs(evaluated_positions(mesh) - expected).max() < 1e-5 * diagonal(mesh)
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_unbind() == {"FINISHED"}
+    assert mesh_state(mesh) == before  # the last one takes the weights with it
+
+
+def test_a_failed_write_is_reported_and_taken_back(monkeypatch):
+    from lbc_addon import deformer
+
+    mesh, cage = sphere_in_box_scene()
+    _decorate(mesh)
+    before = mesh_state(mesh)
+
+    def refused(*args, **kwargs):
+        raise IndexError("bpy_prop_collection[index]: index 2 out of range")  # 5.2's Compare had 2 inputs
+
+    monkeypatch.setattr(deformer, "_stop_condition", refused)
+    with pytest.raises(RuntimeError, match="writing the binding failed .*IndexError.* the scene was left as it was"):
+        bind(mesh, cage, resolution=CELLS)
+    assert mesh_state(mesh) == before and not is_bound(mesh)

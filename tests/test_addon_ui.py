@@ -27,7 +27,11 @@ class Layout:
         self.record.append(("operator", idname))
 
     def prop(self, data, name, **kwargs):
-        self.record.append(("prop", name))
+        self.record.append(("prop", kwargs.get("text", name)))
+
+    def prop_search(self, data, name, search_data, search_name, **kwargs):
+        assert hasattr(search_data, search_name)
+        self.record.append(("prop", kwargs.get("text", name)))
 
     def box(self):
         return Layout(self.record)
@@ -43,6 +47,9 @@ class Layout:
 
     def operators(self):
         return [name for kind, name in self.record if kind == "operator"]
+
+    def props(self):
+        return [name for kind, name in self.record if kind == "prop"]
 
 
 def _draw(active, selected):
@@ -60,21 +67,25 @@ def test_bound_mesh_shows_state_figures_and_actions(bound_gargoyle):
     assert "67 control points" in text and "2674 mesh vertices, 0 outside" in text
     assert f"max {mesh.lbc.slots}" in text and "Cache in the .blend:" in text and "KB" in text
     assert {"object.lbc_rebind", "object.lbc_unbind", "object.lbc_show_influence"} <= set(layout.operators())
+    # The modifier's inputs, drawn from the modifier itself (one source of truth, also in the modifier panel).
+    assert layout.props() == ["Strength", "Vertex Group", ""]
 
 
-def test_deleted_cage_shows_why_and_offers_rebind(bound_gargoyle):
+def test_deleted_cage_shows_why_and_offers_bind(bound_gargoyle):
     mesh, cage = bound_gargoyle
-    bpy.data.objects.remove(cage)
+    with bpy.context.temp_override(selected_objects=[cage], active_object=cage, object=cage):
+        bpy.ops.object.delete()
     bpy.context.evaluated_depsgraph_get()
     layout = _draw(mesh, [mesh])
-    assert "cage object was deleted" in layout.labels() and "(deleted)" in layout.labels()
-    assert layout.operators()[0] == "object.lbc_rebind"
+    assert "The cage was deleted: the mesh is back at rest" in layout.labels() and "(deleted)" in layout.labels()
+    assert layout.operators()[0] == "object.lbc_bind"
 
 
 def test_cage_lists_its_meshes_and_a_selection_offers_bind(bound_gargoyle):
     mesh, cage = bound_gargoyle
     layout = _draw(cage, [cage])
     assert "Cage of 1 mesh(es)" in layout.labels() and "Gargoyle: Following" in layout.labels()
+    assert "object.lbc_rebind_all" in layout.operators()
     mesh2, box = sphere_in_box_scene()
     layout = _draw(box, [mesh2, box])
     assert "Bind 1 selected mesh(es) to 'Box'" in layout.labels()
