@@ -12,11 +12,11 @@ Example::
 import bpy
 
 from . import deformer, jobs
-from .properties import is_bound
+from .properties import DEFAULT_INFLUENCES, is_bound
 
 
 def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, threshold=0.0,
-         mode="AUTO", progress=None, cancel=None):
+         influences=DEFAULT_INFLUENCES, mode="AUTO", progress=None, cancel=None):
     """Bind ``mesh_obj`` to ``cage_obj`` (replacing an existing binding) and add the deformer.
 
     Parameters are those of the Bind operator; ``progress(fraction, message)`` and ``cancel() -> bool`` are passed
@@ -36,7 +36,7 @@ def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0
     """
     request = jobs.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), resolution=resolution,
                             weighting=weighting, epsilon=epsilon, tolerance=tolerance, threshold=threshold,
-                            mode=mode)
+                            influences=influences, mode=mode)
     result = jobs.solve(request, progress, cancel)
     bound = jobs.apply(request, result)
     settings = bound.lbc

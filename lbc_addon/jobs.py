@@ -18,7 +18,7 @@ import lbc_core
 from lbc_core import CageError
 
 from . import deformer, geometry, influence, storage
-from .properties import is_bound
+from .properties import DEFAULT_INFLUENCES, is_bound
 
 
 @dataclass
@@ -67,7 +67,7 @@ def find_object(uid):
 
 
 def snapshot(mesh_obj, cage_obj, depsgraph, resolution=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
-             threshold=0.0, mode="AUTO"):
+             threshold=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
     """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
     if mesh_obj.type != "MESH":
         raise CageError(f"'{mesh_obj.name}' is not a mesh: only meshes can be bound")
@@ -106,7 +106,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, resolution=0, weighting="quadratic",
         frame=frame,
         loop=loop,
         options={"resolution": resolution, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
-                 "threshold": threshold, "mode": mode},
+                 "threshold": threshold, "influences": influences, "mode": mode},
         cage_topology=cage_topology,
         mesh_topology=geometry.topology_fingerprint(mesh_obj.data),
     )
@@ -141,6 +141,9 @@ def solve(request, progress=None, cancel=None):
     )
     column_vertex = column_base[binding.control_input_index]
     index, weight = storage.slot_arrays(binding.weights, column_vertex)
+    if options["influences"]:
+        reproduced = storage.rest_offsets(index, weight, request.cage_points)
+        index, weight = storage.cap_slots(index, weight, request.cage_points, reproduced, options["influences"])
     return BindResult(
         index=index,
         weight=weight,
@@ -228,9 +231,8 @@ class _SavedBinding:
         self.modifiers = [modifier.name for modifier in mesh_obj.modifiers]
         self.active_modifier = mesh_obj.modifiers.active.name if mesh_obj.modifiers.active else None
         modifier = deformer.find_modifier(mesh_obj) if is_bound(mesh_obj) else None
-        # The inputs raw, by identifier: taking them back needs nothing that could have failed.
-        self.deformer = None if modifier is None else (
-            modifier.name, modifier.node_group, {key: modifier[key] for key in modifier.keys()})
+        self.deformer = None if modifier is None else (modifier.name, modifier.node_group,
+                                                       deformer.raw_inputs(modifier))
         self.node_groups = {group.session_uid for group in bpy.data.node_groups}
         self.settings = _settings_values(mesh_obj.lbc) if mesh_obj.is_property_set("lbc") else None
 
@@ -244,15 +246,14 @@ class _SavedBinding:
             name, group, values = self.deformer
             modifier = mesh_obj.modifiers[name]
             modifier.node_group = group
-            for key, value in values.items():
-                modifier[key] = value
+            deformer.set_raw_inputs(modifier, values)
         for group in list(bpy.data.node_groups):
             if group.session_uid not in self.node_groups:
                 bpy.data.node_groups.remove(group)
         mesh = mesh_obj.data
         storage.restore_attributes(mesh, self.attributes, storage.binding_names(mesh) + [influence.ATTRIBUTE_NAME])
-        if self.active_color is not None and self.active_color in mesh.color_attributes:
-            mesh.color_attributes.active_color = mesh.color_attributes[self.active_color]
+        active = self.active_color
+        mesh.color_attributes.active_color_name = active if active in mesh.color_attributes else ""
         if self.settings is None:
             mesh_obj.property_unset("lbc")
         else:

@@ -174,7 +174,7 @@ class OBJECT_OT_lbc_bind(_Binder, BindOptions, bpy.types.Operator):
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
-        for name in ("mode", "resolution", "weighting", "epsilon", "tolerance", "threshold"):
+        for name in ("mode", "resolution", "weighting", "epsilon", "tolerance", "threshold", "influences"):
             layout.prop(self, name)
 
 

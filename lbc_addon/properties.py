@@ -8,6 +8,9 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 from lbc_core.meshing import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D
 from lbc_core.solver import DEFAULT_TOLERANCE
 
+# Slots per mesh vertex the deformer evaluates by default: see bench/RESULTS.md, "Blender deformer".
+DEFAULT_INFLUENCES = 12
+
 # lbc_core's weighting functions ρ of the geodesic distance D in the TV weights ω = ρ(D).
 WEIGHTING_ITEMS = (
     ("quadratic", "Quadratic", "ρ(D) = D², the paper's choice: the most local coordinates"),
@@ -63,6 +66,14 @@ class BindOptions:
         soft_max=0.05,
         precision=5,
     )
+    influences: IntProperty(
+        name="Max Influences",
+        description="At most this many cage vertices move one mesh vertex (the largest weights are kept and made to "
+        "sum to 1 and reproduce the vertex again); the deformer's cost per frame grows with it. 0: no limit",
+        default=DEFAULT_INFLUENCES,
+        min=0,
+        soft_max=32,
+    )
     mode: EnumProperty(name="Dimension", items=MODE_ITEMS, default="AUTO")
 
     def bind_options(self):
@@ -73,6 +84,7 @@ class BindOptions:
             "epsilon": self.epsilon,
             "tolerance": self.tolerance,
             "threshold": self.threshold,
+            "influences": self.influences,
             "mode": self.mode,
         }
 

@@ -9,7 +9,7 @@ such attributes from the attribute lists and keeps them through deform modifiers
 
 import numpy as np
 
-from lbc_core.reduction import restore_constraints
+from lbc_core.reduction import ROWS_PER_CHUNK, constraint_residuals, restore_constraints
 
 INDEX_PREFIX = ".lbc_index_"
 WEIGHT_PREFIX = ".lbc_weight_"
@@ -55,6 +55,10 @@ def slot_arrays(weights, column_vertex):
 def cap_slots(index, weight, cage_rest, reproduced, slots):
     """Keep each vertex's ``slots`` largest weights and restore the constraints on what is kept.
 
+    Where the largest ``slots`` weights of some vertex cannot sum to 1 and reproduce it while staying non-negative
+    (its kept cage vertices lie too flat around it), the cap grows by one until every vertex's can: the constraints
+    hold for every vertex, as for the uncapped weights.
+
     Parameters
     ----------
     index, weight : (m, K) int32 and float32 arrays
@@ -65,20 +69,26 @@ def cap_slots(index, weight, cage_rest, reproduced, slots):
         What the weights must reproduce: Σ w c of the full weights (the vertex itself, or the closest point inside
         the cage for a vertex outside it).
     slots : int
-        The new K.
+        The cap on K.
 
     Returns
     -------
-    index (m, slots) int32, weight (m, slots) float32: partition of unity and reproduction restored on each
-    vertex's kept slots, weights non-negative.
+    index (m, K') int32, weight (m, K') float32, K' = min(K, the smallest cap from ``slots`` on that works).
     """
-    if index.shape[1] <= slots:
-        return index, weight
-    keep = np.argsort(-weight, axis=1, kind="stable")[:, :slots]
-    index = np.take_along_axis(index, keep, axis=1)
-    weight = np.take_along_axis(weight, keep, axis=1).astype(np.float64)
-    weight = restore_constraints(weight, np.asarray(cage_rest, dtype=np.float64), reproduced, columns=index)
-    return index.astype(np.int32), weight.astype(np.float32)
+    cage_rest = np.asarray(cage_rest, dtype=np.float64)
+    scale = float(np.linalg.norm(np.ptp(cage_rest, axis=0))) if len(cage_rest) else 1.0
+    order = np.argsort(-weight, axis=1, kind="stable")
+    for cap in range(slots, index.shape[1]):
+        kept_index = np.take_along_axis(index, order[:, :cap], axis=1)
+        kept = np.take_along_axis(weight, order[:, :cap], axis=1).astype(np.float64)
+        restored = np.empty_like(kept)
+        for start in range(0, len(kept), ROWS_PER_CHUNK):
+            rows = slice(start, start + ROWS_PER_CHUNK)
+            restored[rows] = restore_constraints(kept[rows], cage_rest, reproduced[rows], columns=kept_index[rows])
+        unity, reproduction = constraint_residuals(restored, cage_rest, reproduced, columns=kept_index)
+        if len(restored) == 0 or (unity.max() <= 1e-6 and reproduction.max() <= 1e-6 * scale):
+            return kept_index.astype(np.int32), restored.astype(np.float32)
+    return index, weight
 
 
 def rest_offsets(index, weight, cage_rest):
