@@ -45,14 +45,17 @@ def draw_modifier_inputs(layout, obj):
     modifier = deformer.find_modifier(obj)
     if modifier is None:
         return
+    if deformer.input_identifier(modifier, "Strength") is None:
+        return  # a binding made before these inputs existed: Rebind adds them
+
+    def where(name):
+        return deformer.input_property(modifier, deformer.input_identifier(modifier, name))
+
     column = layout.column(align=True)
-    strength = deformer.input_path(modifier, "Strength")
-    if strength is not None:  # a binding made before these inputs existed has none: Rebind adds them
-        column.prop(modifier, strength, text="Strength")
-        row = column.row(align=True)
-        row.prop_search(modifier, deformer.input_path(modifier, "Vertex Group"), obj, "vertex_groups",
-                        text="Vertex Group")
-        row.prop(modifier, deformer.input_path(modifier, "Invert Vertex Group"), text="", icon="ARROW_LEFTRIGHT")
+    column.prop(*where("Strength"), text="Strength")
+    row = column.row(align=True)
+    row.prop_search(*where("Vertex Group"), obj, "vertex_groups", text="Vertex Group")
+    row.prop(*where("Invert Vertex Group"), text="", icon="ARROW_LEFTRIGHT")
 
 
 def draw_influence(layout, obj):

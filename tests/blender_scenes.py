@@ -35,6 +35,13 @@ def reset():
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
+def undo_context():
+    """A context with the window and 3D view ed.undo_push and ed.undo need (the bpy module has one window)."""
+    window = bpy.context.window_manager.windows[0]
+    area = next(area for area in window.screen.areas if area.type == "VIEW_3D")
+    return bpy.context.temp_override(window=window, screen=window.screen, area=area)
+
+
 def mesh_object(name, vertices, faces, matrix=Matrix.Identity(4), edges=()):
     """A new mesh object linked to the scene, with ``vertices`` given in world space."""
     vertices = np.asarray(vertices, dtype=float)

@@ -15,6 +15,7 @@ from blender_scenes import (
     diagonal,
     evaluated_positions,
     positions,
+    undo_context,
 )
 
 
@@ -243,9 +244,7 @@ def _delete_with_x(obj):
 def test_x_on_the_cage_frees_it_and_the_mesh_returns_to_rest_like_mesh_deform(bound_gargoyle):
     mesh, cage = bound_gargoyle
     # Mesh Deform, on a second mesh sharing nothing with the first: X frees its cage (the modifier holds no user).
-    other = mesh.copy()
-    other.data = mesh.data.copy()
-    other.modifiers.clear()
+    other = bpy.data.objects.new("Other", mesh.data.copy())
     bpy.context.scene.collection.objects.link(other)
     mesh_deform = other.modifiers.new("MeshDeform", "MESH_DEFORM")
     reference_cage = cage.copy()
@@ -318,3 +317,49 @@ def test_mesh_with_another_vertex_count_stays_at_rest_with_one_message(bound_gar
     assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
     _assert_one_modifier_error(mesh, "the mesh no longer has the 2674 vertices")
     assert mesh.lbc.status.startswith("The mesh has 2673 vertices, it was bound with 2674")
+
+
+def test_shape_keys_ride_along_with_the_cage_displacement(bound_gargoyle):
+    """What the README says is bound: the mesh's own vertices; shape keys (applied before the modifiers) move with
+    the displacement the cage gives each vertex."""
+    mesh, cage = bound_gargoyle
+    rest = positions(mesh.data)
+    mesh.shape_key_add(name="Basis")
+    key = mesh.shape_key_add(name="Lift")
+    offsets = np.zeros_like(rest)
+    offsets[:100, 2] = 0.05
+    key.data.foreach_set("co", (rest + offsets).astype(np.float32).ravel())
+    key.value = 1.0
+    cage.location.y += 0.5
+    shift = np.array(mesh.matrix_world.inverted().to_3x3()) @ np.array([0.0, 0.5, 0.0])
+    assert np.abs(evaluated_positions(mesh) - (rest + offsets + shift)).max() < 1e-5 * diagonal(mesh)
+
+
+def test_below_a_modifier_that_changes_the_vertex_count_the_deformer_stops_with_one_message(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    subdivision = mesh.modifiers.new("Subdivision", "SUBSURF")
+    mesh.modifiers.move(len(mesh.modifiers) - 1, 0)  # above the deformer
+    cage.location.y += 0.5
+    plain = mesh.modifiers[deformer.MODIFIER_NAME]
+    plain.show_viewport = False
+    expected = evaluated_positions(mesh)  # subdivided, undeformed
+    plain.show_viewport = True
+    assert np.array_equal(evaluated_positions(mesh), expected)
+    _assert_one_modifier_error(mesh, "the mesh no longer has the 2674 vertices")
+    if hasattr(bpy.types, "GeometryNodeWarning"):  # the panel reads the modifier's message
+        assert mesh.lbc.status.startswith("The mesh no longer has the 2674 vertices")
+    assert subdivision.name == mesh.modifiers[0].name
+
+
+def test_undo_after_x_on_the_cage_brings_back_the_cage_and_the_binding(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    with undo_context():
+        bpy.ops.ed.undo_push(message="before delete")
+        _delete_with_x(cage)
+        bpy.ops.ed.undo_push(message="Delete")  # what the UI pushes after X
+        assert "Cage" not in bpy.data.objects
+        assert bpy.ops.ed.undo() == {"FINISHED"}
+    mesh, cage = bpy.data.objects["Gargoyle"], bpy.data.objects["Cage"]
+    assert mesh.lbc.cage == cage and mesh.lbc.status == "Following 'Cage'"
+    cage.location.z += 0.3
+    assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() > 0.1
