@@ -1,17 +1,21 @@
 """Per-frame cost of the LBC deformer against Blender's Mesh Deform on the same mesh, cage and poses.
 
-    PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle] [--slots 0,12]
+    PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle] [--slots 8,12]
+        [--sums chain,fma,fma-vector] [--reference-cells 16000]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
 one deformer. Frames are interleaved: in each round every variant gets the same new pose of the cage, in a rotating
 order, and the time of the depsgraph update that follows the cage edit (``evaluated_depsgraph_get``, the add-on's
-depsgraph handler included) is recorded. Printed: the median over the rounds, the lower and upper quartiles, and the
-load average before and after.
+depsgraph handler included) is recorded, as wall time and as the process's CPU time. Printed: the medians over the
+rounds, the lower and upper quartiles, and the load average before and after.
 
 Scenes: Suzanne subdivided to 48,612 vertices in a 56-vertex box cage, and the demo's gargoyle (two Catmull-Clark
-levels: 64,130 vertices) in its 67-vertex cage L10. Variants: no deformer, Mesh Deform (precision 5), LBC as bound,
-and LBC with its slots capped (``--slots``; see :func:`lbc_addon.storage.cap_slots`) to see what K costs.
+levels: 64,130 vertices) in its 67-vertex cage L10. Variants: no deformer, Mesh Deform (precision 5), LBC with every
+weight (uncapped K), LBC with its slots capped as the add-on does (``--slots``, default the add-on's cap; see
+:func:`lbc_addon.storage.cap_slots`), and LBC with its weighted sum built in another shape (``--sums``; see
+:func:`rebuild_sum`). ``--reference-cells`` also prints how far the default binding is from a finer one: the
+yardstick for the error a cap makes.
 """
 
 import argparse
@@ -27,8 +31,15 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 import bpy  # noqa: E402
 
-from blender_scenes import gargoyle_scene, positions, register_addon, suzanne_in_box_scene  # noqa: E402
+from blender_scenes import (  # noqa: E402
+    evaluated_positions,
+    gargoyle_scene,
+    positions,
+    register_addon,
+    suzanne_in_box_scene,
+)
 from lbc_addon import api, deformer, storage  # noqa: E402
+from lbc_addon.properties import DEFAULT_INFLUENCES  # noqa: E402
 
 
 def gargoyle_subdivided():
@@ -74,8 +85,9 @@ def copy_object(mesh, name):
     return copy
 
 
-def lbc_variant(bound, cage, name, slots):
-    """A copy of the bound mesh deformed by LBC with at most ``slots`` slots (0: as bound)."""
+def lbc_variant(bound, cage, name, slots, sum_form=None):
+    """A copy of the bound mesh deformed by LBC with at most ``slots`` slots (0: as bound), its weighted sum built
+    as ``sum_form`` (see :func:`rebuild_sum`; None: the add-on's)."""
     obj = copy_object(bound, name)
     index, weight = storage.read(obj.data)
     rest = storage.rest_offsets(index, weight, cage_rest_local(cage, obj))
@@ -83,8 +95,64 @@ def lbc_variant(bound, cage, name, slots):
         index, weight = storage.cap_slots(index, weight, cage_rest_local(cage, obj), rest, slots)
     storage.remove(obj.data)
     storage.write(obj.data, index, weight, storage.rest_offsets(index, weight, cage_rest_local(cage, obj)))
-    deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices))
+    deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices), len(obj.data.vertices))
+    if sum_form is not None:
+        rebuild_sum(obj, sum_form)
     return obj
+
+
+def rebuild_sum(obj, form):
+    """Rebuild the deformer's Σ w_k c_k in another shape, to measure the node tree's shape as a lever.
+
+    The add-on's: per slot a Scale (sample × weight), summed pairwise in a balanced tree of Adds
+    (:func:`lbc_addon.deformer.pairwise_sum`). "chain": the Scales added one after the other to a running total.
+    "fma": per slot one Multiply Add (sample × weight + running total), the weight converted to a vector on the
+    way. "fma-vector": the same with each weight stored as a vector attribute (w, w, w), three times its memory, so
+    that nothing is converted.
+    """
+    group = obj.modifiers[0].node_group
+    nodes, links = group.nodes, group.links
+    samples = sorted((n for n in nodes if n.bl_idname == "GeometryNodeSampleIndex"), key=lambda n: -n.location.y)
+    weights = {deformer._input(n, "Name").default_value: n for n in nodes
+               if n.bl_idname == "GeometryNodeInputNamedAttribute" and n.data_type == "FLOAT"}
+    subtract = next(n for n in nodes if n.bl_idname == "ShaderNodeVectorMath" and n.operation == "SUBTRACT")
+    for node in list(nodes):  # the add-on's sum: every vector Add, and the Scales of the samples
+        if node.bl_idname == "ShaderNodeVectorMath" and (node.operation == "ADD" or node.operation == "SCALE" and any(
+                link.from_node.bl_idname == "GeometryNodeSampleIndex" for link in node.inputs[0].links)):
+            nodes.remove(node)
+    if form == "fma-vector":
+        _, weight_values = storage.read(obj.data)
+        for slot in range(weight_values.shape[1]):
+            attribute = obj.data.attributes.new(f".bench_weight3_{slot}", "FLOAT_VECTOR", "POINT")
+            attribute.data.foreach_set("vector", np.repeat(weight_values[:, slot], 3))
+    total = None
+    for slot, sample in enumerate(samples):
+        if form == "fma-vector":
+            weight = deformer._named_attribute(nodes, "FLOAT_VECTOR", f".bench_weight3_{slot}", (0, 0))
+        else:
+            weight = weights[storage.weight_name(slot)]
+        if form.startswith("fma"):
+            node = deformer._vector_math(nodes, "MULTIPLY_ADD", (0, 0))
+            vectors = deformer._inputs(node, "Vector")
+            links.new(sample.outputs["Value"], vectors[0])
+            links.new(weight.outputs["Attribute"], vectors[1])
+            if total is None:
+                vectors[2].default_value = (0.0, 0.0, 0.0)
+            else:
+                links.new(total, vectors[2])
+            total = node.outputs["Vector"]
+            continue
+        node = deformer._vector_math(nodes, "SCALE", (0, 0))
+        links.new(sample.outputs["Value"], deformer._input(node, "Vector"))
+        links.new(weight.outputs["Attribute"], deformer._input(node, "Scale"))
+        if total is None:
+            total = node.outputs["Vector"]
+        else:  # "chain"
+            add = deformer._vector_math(nodes, "ADD", (0, 0))
+            links.new(total, deformer._inputs(add, "Vector")[0])
+            links.new(node.outputs["Vector"], deformer._inputs(add, "Vector")[1])
+            total = add.outputs["Vector"]
+    links.new(total, deformer._inputs(subtract, "Vector")[0])
 
 
 def cage_rest_local(cage, obj):
@@ -117,22 +185,24 @@ def deformation_error(obj, reference, cage, rest, scale):
 
 
 def evaluated(obj):
+    """``obj``'s deformed vertices, linking it into the scene for the time it takes if it is not."""
     collection = bpy.context.scene.collection
     linked = obj.name not in collection.objects
     if linked:
         collection.objects.link(obj)
-    evaluated_obj = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    mesh = evaluated_obj.to_mesh()
     try:
-        return positions(mesh)
+        return evaluated_positions(obj)
     finally:
-        evaluated_obj.to_mesh_clear()
         if linked:
             collection.objects.unlink(obj)
 
 
 def measure(variants, cage, rest, rounds):
-    """Milliseconds of the depsgraph update after a cage edit, per variant: {name: array (rounds,)}."""
+    """Milliseconds of the depsgraph update after a cage edit, per variant: {name: (wall, cpu) arrays (rounds,)}.
+
+    Wall time is what the artist waits; the process's CPU time (every thread's) is the work done, which a machine
+    shared with other jobs inflates less.
+    """
     collection = bpy.context.scene.collection
     times = {name: [] for name in variants}
     names = list(variants)
@@ -144,53 +214,82 @@ def measure(variants, cage, rest, rounds):
             set_cage(cage, pose(rest, 0.37 * number))
             bpy.context.evaluated_depsgraph_get()  # untimed: relations rebuilt after linking
             set_cage(cage, pose(rest, 0.37 * number + 0.2))
-            start = time.perf_counter()
+            start, cpu = time.perf_counter(), time.process_time()
             bpy.context.evaluated_depsgraph_get()
-            times[name].append(1000 * (time.perf_counter() - start))
+            times[name].append((1000 * (time.perf_counter() - start), 1000 * (time.process_time() - cpu)))
             collection.objects.unlink(obj)
     set_cage(cage, rest)
     return {name: np.array(values) for name, values in times.items()}
 
 
-def run_scene(name, slot_caps, rounds, precision):
+def run_scene(name, slot_caps, sum_forms, rounds, precision, reference_cells):
     mesh, cage = SCENES[name]()
     rest = positions(cage.data)
     print(f"\n{name}: {len(mesh.data.vertices)} vertices, cage {len(rest)} vertices")
     start = time.perf_counter()
-    summary = api.bind(mesh, cage)
-    print(f"  LBC bound in {time.perf_counter() - start:.1f} s: K = {summary['slots']}, "
+    summary = api.bind(mesh, cage, influences=0)  # every weight: the caps below are taken from these
+    full = summary["slots"]
+    print(f"  LBC bound in {time.perf_counter() - start:.1f} s: K = {full} uncapped, "
           f"{summary['mean_influences']:.1f} influences per vertex on average, {summary['outside']} outside")
     scale = float(np.linalg.norm(np.ptp(positions(mesh.data), axis=0)))
     bpy.context.scene.collection.objects.unlink(mesh)
     variants = {"no deformer": copy_object(mesh, "plain")}
     variants["Mesh Deform"] = mesh_deform_variant(mesh, cage, "meshdeform", precision)
-    variants[f"LBC K={summary['slots']}"] = mesh
+    variants[f"LBC K={full}"] = mesh
+
+    def compare(key, reference, what):
+        error = deformation_error(variants[key], reference, cage, rest, scale)
+        print(f"  {key}: largest difference to {what} over three poses {error:.2e} of the mesh's diagonal")
+
+    if reference_cells:
+        # The yardstick for a cap's error: how far the binding itself is from one on twice as fine a domain mesh.
+        variants[f"LBC {reference_cells} cells"] = fine = copy_object(mesh, "fine")
+        bpy.context.scene.collection.objects.link(fine)
+        storage.remove(fine.data)
+        start = time.perf_counter()
+        api.bind(fine, cage, resolution=reference_cells, influences=0)
+        print(f"  LBC at {reference_cells} cells bound in {time.perf_counter() - start:.1f} s")
+        bpy.context.scene.collection.objects.unlink(fine)
+        compare(f"LBC {reference_cells} cells", mesh, "the default resolution's")
+        del variants[f"LBC {reference_cells} cells"]
     for cap in slot_caps:
-        if cap and cap < summary["slots"]:
-            variants[f"LBC K={cap}"] = lbc_variant(mesh, cage, f"lbc{cap}", cap)
-            error = deformation_error(variants[f"LBC K={cap}"], mesh, cage, rest, scale)
-            print(f"  LBC K={cap}: largest difference to K={summary['slots']} over three poses {error:.2e} of the "
-                  "mesh's diagonal")
+        if cap < full:
+            variants[f"LBC K<={cap}"] = lbc_variant(mesh, cage, f"lbc{cap}", cap)
+            compare(f"LBC K<={cap}", mesh, f"K={full}")
+            print(f"    (K = {len(storage.binding_names(variants[f'LBC K<={cap}'].data)) // 2} after the cap)")
+    for form in sum_forms:  # at every weight, and at the add-on's cap
+        variants[f"LBC K={full} {form}"] = lbc_variant(mesh, cage, form, 0, form)
+        compare(f"LBC K={full} {form}", mesh, "the add-on's tree")
+        variants[f"LBC K<={DEFAULT_INFLUENCES} {form}"] = lbc_variant(mesh, cage, form, DEFAULT_INFLUENCES, form)
     load = os.getloadavg()[0]
     times = measure(variants, cage, rest, rounds)
     print(f"  {rounds} interleaved frames each, load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
-    print(f"  {'variant':16}{'median ms':>10}{'quartiles':>16}")
+    print(f"  {'variant':22}{'wall ms: median':>16}{'quartiles':>14}{'CPU ms: median':>16}{'quartiles':>14}")
     for variant, values in times.items():
-        low, mid, high = np.percentile(values, [25, 50, 75])
-        print(f"  {variant:16}{mid:10.2f}{f'{low:.2f}-{high:.2f}':>16}")
+        columns = ""
+        for kind in (0, 1):
+            low, mid, high = np.percentile(values[:, kind], [25, 50, 75])
+            columns += f"{mid:16.2f}{f'{low:.2f}-{high:.2f}':>14}"
+        print(f"  {variant:22}{columns}")
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=31, help="timed frames per variant (interleaved rounds)")
     parser.add_argument("--scenes", default="suzanne,gargoyle")
-    parser.add_argument("--slots", default="", help="comma-separated slot caps to measure besides the bound K")
+    parser.add_argument("--slots", default=str(DEFAULT_INFLUENCES),
+                        help="comma-separated caps on the slots to measure besides the uncapped K (default: the "
+                        "add-on's)")
+    parser.add_argument("--sums", default="", help="comma-separated other shapes of the weighted sum: chain,fma,fma-vector")
+    parser.add_argument("--reference-cells", type=int, default=0,
+                        help="also bind at this resolution and print how far the default binding is from it")
     parser.add_argument("--precision", type=int, default=5, help="Mesh Deform precision")
     args = parser.parse_args(argv)
     register_addon()
     caps = [int(value) for value in args.slots.split(",") if value]
     for name in args.scenes.split(","):
-        run_scene(name, caps, args.frames, args.precision)
+        run_scene(name, caps, [form for form in args.sums.split(",") if form], args.frames, args.precision,
+                  args.reference_cells)
 
 
 if __name__ == "__main__":

@@ -138,12 +138,20 @@ class _Binder:
         _running.remove(self._worker)
 
 
-def _bind_poll_message(context):
-    """Why Bind cannot run now, or None when it can."""
+def _busy_message(context, label):
+    """Why no bind labelled ``label`` can start now (another runs, or not in Object Mode), or None."""
     if _running:
         return "A bind is already running (Esc cancels it)"
     if context.mode != "OBJECT":
-        return "Bind works in Object Mode"
+        return f"{label} works in Object Mode"
+    return None
+
+
+def _bind_poll_message(context):
+    """Why Bind cannot run now, or None when it can."""
+    busy = _busy_message(context, "Bind")
+    if busy:
+        return busy
     cage = context.active_object
     if cage is None or cage.type != "MESH":
         return "Select the mesh(es) to bind, then the cage mesh last so it is active"
@@ -187,16 +195,12 @@ class OBJECT_OT_lbc_rebind(_Binder, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if _running:
-            cls.poll_message_set("A bind is already running (Esc cancels it)")
-            return False
-        if context.mode != "OBJECT":
-            cls.poll_message_set("Rebind works in Object Mode")
-            return False
-        if not _bound_selection(context):
-            cls.poll_message_set("Select a bound mesh")
-            return False
-        return True
+        message = _busy_message(context, cls.bl_label)
+        if message is None and not _bound_selection(context):
+            message = "Select a bound mesh"
+        if message:
+            cls.poll_message_set(message)
+        return message is None
 
     def targets(self, context):
         triples = []
@@ -216,16 +220,13 @@ class OBJECT_OT_lbc_rebind_all(_Binder, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if _running:
-            cls.poll_message_set("A bind is already running (Esc cancels it)")
-            return False
-        if context.mode != "OBJECT":
-            cls.poll_message_set("Rebind All works in Object Mode")
-            return False
-        if context.active_object is None or not bound_to(context.active_object, context.scene.objects):
-            cls.poll_message_set("Make a cage with bound meshes active")
-            return False
-        return True
+        message = _busy_message(context, cls.bl_label)
+        if message is None and (context.active_object is None
+                                or not bound_to(context.active_object, context.scene.objects)):
+            message = "Make a cage with bound meshes active"
+        if message:
+            cls.poll_message_set(message)
+        return message is None
 
     def targets(self, context):
         cage = context.active_object

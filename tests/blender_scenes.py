@@ -42,6 +42,12 @@ def undo_context():
     return bpy.context.temp_override(window=window, screen=window.screen, area=area)
 
 
+def delete_with_x(obj):
+    """What X in the 3D view does: bpy.ops.object.delete on the selection."""
+    with bpy.context.temp_override(selected_objects=[obj], active_object=obj, object=obj):
+        assert bpy.ops.object.delete() == {"FINISHED"}
+
+
 def mesh_object(name, vertices, faces, matrix=Matrix.Identity(4), edges=()):
     """A new mesh object linked to the scene, with ``vertices`` given in world space."""
     vertices = np.asarray(vertices, dtype=float)

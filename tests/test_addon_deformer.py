@@ -12,6 +12,7 @@ from mathutils import Matrix
 
 from lbc_addon import deformer, storage
 from blender_scenes import (
+    delete_with_x,
     diagonal,
     evaluated_positions,
     positions,
@@ -235,12 +236,6 @@ def test_animated_cage_moves_the_mesh_on_frame_change(bound_gargoyle):
     assert np.abs(evaluated_positions(mesh) - rest).max() < 1e-5 * diagonal(mesh)
 
 
-def _delete_with_x(obj):
-    """What X in the 3D view does: bpy.ops.object.delete on the selection."""
-    with bpy.context.temp_override(selected_objects=[obj], active_object=obj, object=obj):
-        assert bpy.ops.object.delete() == {"FINISHED"}
-
-
 def test_x_on_the_cage_frees_it_and_the_mesh_returns_to_rest_like_mesh_deform(bound_gargoyle):
     mesh, cage = bound_gargoyle
     # Mesh Deform, on a second mesh sharing nothing with the first: X frees its cage (the modifier holds no user).
@@ -250,12 +245,12 @@ def test_x_on_the_cage_frees_it_and_the_mesh_returns_to_rest_like_mesh_deform(bo
     reference_cage = cage.copy()
     bpy.context.scene.collection.objects.link(reference_cage)
     mesh_deform.object = reference_cage
-    _delete_with_x(reference_cage)
+    delete_with_x(reference_cage)
     assert mesh_deform.object is None and len(bpy.data.objects) == 3
 
     cage.location.x += 0.3
     assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() > 0.1
-    _delete_with_x(cage)
+    delete_with_x(cage)
     assert "Cage" not in bpy.data.objects  # not kept alive off-scene by the binding
     assert mesh.lbc.cage is None and "cage was deleted" in mesh.lbc.status
     assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
@@ -265,7 +260,7 @@ def test_x_on_the_cage_frees_it_and_the_mesh_returns_to_rest_like_mesh_deform(bo
 def test_a_cage_also_used_elsewhere_survives_x_and_is_only_let_go(bound_gargoyle):
     mesh, cage = bound_gargoyle
     cage.use_fake_user = True  # the artist keeps it in the file
-    _delete_with_x(cage)
+    delete_with_x(cage)
     assert "Cage" in bpy.data.objects and mesh.lbc.cage is None
     assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
 
@@ -355,7 +350,7 @@ def test_undo_after_x_on_the_cage_brings_back_the_cage_and_the_binding(bound_gar
     mesh, cage = bound_gargoyle
     with undo_context():
         bpy.ops.ed.undo_push(message="before delete")
-        _delete_with_x(cage)
+        delete_with_x(cage)
         bpy.ops.ed.undo_push(message="Delete")  # what the UI pushes after X
         assert "Cage" not in bpy.data.objects
         assert bpy.ops.ed.undo() == {"FINISHED"}

@@ -10,6 +10,7 @@ from mathutils import Matrix
 from lbc_addon.properties import is_bound
 from blender_scenes import (
     bind,
+    delete_with_x,
     diagonal,
     evaluated_positions,
     mesh_object,
@@ -292,8 +293,7 @@ def test_unbinding_a_linked_duplicate_keeps_the_weights_the_original_still_uses(
     assert np.abs(evaluated_positions(mesh) - expected).max() < 1e-5 * diagonal(mesh)
     # The unbound twin holds no user of the cage any more: X frees it (Blender 5.2 kept one through the removed
     # modifier's input).
-    with bpy.context.temp_override(selected_objects=[cage], active_object=cage, object=cage):
-        assert bpy.ops.object.delete() == {"FINISHED"}
+    delete_with_x(cage)
     bpy.context.evaluated_depsgraph_get()
     assert "Box" not in bpy.data.objects
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):

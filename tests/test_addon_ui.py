@@ -8,6 +8,7 @@ import bpy
 
 from lbc_addon import ui
 from blender_scenes import (
+    delete_with_x,
     register_addon,
     sphere_in_box_scene,
 )
@@ -73,8 +74,7 @@ def test_bound_mesh_shows_state_figures_and_actions(bound_gargoyle):
 
 def test_deleted_cage_shows_why_and_offers_bind(bound_gargoyle):
     mesh, cage = bound_gargoyle
-    with bpy.context.temp_override(selected_objects=[cage], active_object=cage, object=cage):
-        bpy.ops.object.delete()
+    delete_with_x(cage)
     bpy.context.evaluated_depsgraph_get()
     layout = _draw(mesh, [mesh])
     assert "The cage was deleted: the mesh is back at rest" in layout.labels() and "(deleted)" in layout.labels()
