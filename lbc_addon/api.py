@@ -11,8 +11,10 @@ Example::
 
 import bpy
 
+from lbc_core import CageError
+
 from . import deformer, jobs
-from .properties import DEFAULT_INFLUENCES, is_bound
+from .properties import DEFAULT_INFLUENCES, bound_to, is_bound
 
 
 def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, threshold=0.0,
@@ -52,9 +54,46 @@ def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0
 
 
 def unbind(mesh_obj):
-    """Remove the binding; the mesh is exactly as before it was bound. Does nothing for an unbound mesh."""
-    if is_bound(mesh_obj):
-        jobs.remove(mesh_obj)
+    """Remove the binding; the mesh is exactly as before it was bound. Does nothing for an unbound mesh.
+
+    Returns
+    -------
+    list of str
+        The bound objects sharing the mesh data (linked duplicates), for which the weights stay in it; empty when
+        they were removed with the binding.
+    """
+    return jobs.remove(mesh_obj) if is_bound(mesh_obj) else []
+
+
+def rebind_all(cage_obj, progress=None, cancel=None):
+    """Bind every mesh of the scene bound to ``cage_obj`` again, to the cage as it is now, each with its own options.
+
+    Returns the summaries of :func:`bind`, one per mesh; raises as :func:`bind` does, the meshes bound before the
+    error keeping their new binding.
+    """
+    meshes = bound_to(cage_obj, bpy.context.scene.objects)
+    return [bind(mesh_obj, cage_obj, **mesh_obj.lbc.bind_options(), progress=progress, cancel=cancel)
+            for mesh_obj in meshes]
+
+
+def set_deformer(mesh_obj, **inputs):
+    """Set the inputs of a bound mesh's LBC modifier: ``strength`` (float), ``vertex_group`` (str, "" for none),
+    ``invert_vertex_group`` (bool); the same as the panel's fields.
+
+    Raises
+    ------
+    lbc_core.CageError
+        When the mesh is not bound or its modifier was removed.
+    """
+    modifier = deformer.find_modifier(mesh_obj) if is_bound(mesh_obj) else None
+    if modifier is None:
+        raise CageError(f"'{mesh_obj.name}' has no LBC modifier: bind it first")
+    names = {"strength": "Strength", "vertex_group": "Vertex Group", "invert_vertex_group": "Invert Vertex Group"}
+    unknown = set(inputs) - set(names)
+    if unknown:
+        raise TypeError(f"set_deformer() got unknown inputs {sorted(unknown)}; it takes {sorted(names)}")
+    deformer.set_inputs(modifier, {names[key]: value for key, value in inputs.items()})
+    mesh_obj.update_tag()
 
 
 def status(mesh_obj):

@@ -58,3 +58,21 @@ def test_reopened_blend_deforms_the_same_without_recomputing(bound_gargoyle, tmp
     mesh = bpy.data.objects["Gargoyle"]
     assert np.array_equal(evaluated_positions(mesh), expected)
     assert api.status(mesh)[0]
+
+
+def test_rebind_all_and_the_deformer_inputs_from_a_script():
+    mesh, cage = sphere_in_box_scene()
+    api.bind(mesh, cage, resolution=600, influences=4)
+    summaries = api.rebind_all(cage)
+    assert len(summaries) == 1 and summaries[0]["slots"] == mesh.lbc.slots < 8  # capped: 4, or more where needed
+    assert (mesh.lbc.resolution, mesh.lbc.influences) == (600, 4)
+    rest = evaluated_positions(mesh)
+    cage.location.x += 0.4
+    full = evaluated_positions(mesh) - rest
+    api.set_deformer(mesh, strength=0.5)
+    np.testing.assert_allclose(evaluated_positions(mesh) - rest, 0.5 * full, atol=1e-6)
+    with pytest.raises(TypeError, match="unknown inputs"):
+        api.set_deformer(mesh, streng=1.0)
+    assert api.unbind(mesh) == []
+    with pytest.raises(lbc_core.CageError, match="has no LBC modifier"):
+        api.set_deformer(mesh, strength=1.0)
