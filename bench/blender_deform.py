@@ -280,7 +280,8 @@ def main(argv=None):
     parser.add_argument("--slots", default=str(DEFAULT_INFLUENCES),
                         help="comma-separated caps on the slots to measure besides the uncapped K (default: the "
                         "add-on's)")
-    parser.add_argument("--sums", default="", help="comma-separated other shapes of the weighted sum: chain,fma,fma-vector")
+    parser.add_argument("--sums", default="",
+                        help="comma-separated other shapes of the weighted sum: chain,fma,fma-vector")
     parser.add_argument("--reference-cells", type=int, default=0,
                         help="also bind at this resolution and print how far the default binding is from it")
     parser.add_argument("--precision", type=int, default=5, help="Mesh Deform precision")

@@ -2,8 +2,9 @@
 
 The node group reads the evaluated cage through Object Info in relative mode (so the cage's positions arrive in the
 mesh's local space, following its animation, armature, drivers), samples the cage position of each of the K slots,
-and moves every vertex by (Σ w_k c_k − rest) × Strength × its vertex group weight (see :mod:`storage`). Geometry Nodes is compiled C++ evaluated in the
-depsgraph: it runs in renders, in the viewport while the cage is edited, and in files opened without this add-on.
+and moves every vertex by (Σ w_k c_k − rest) × Strength × its vertex group weight (see :mod:`storage`). Geometry
+Nodes is compiled C++ evaluated in the depsgraph: it runs in renders, in the viewport while the cage is edited, and in
+files opened without this add-on.
 
 When the cage's vertex count differs from the one bound (or the cage is gone), the node group itself passes the mesh
 through undeformed and shows an error on the modifier: that works without the add-on. A change of topology that keeps
@@ -20,10 +21,10 @@ from .properties import is_bound
 MODIFIER_NAME = "LBC Deform"
 GROUP_NAME = "LBC Deform"
 
-_COLUMN = 220
+_COLUMN = 220  # node editor spacing, for a readable node group
 
 # The modifier inputs that are the artist's (kept when the mesh is bound again); the others are the add-on's.
-USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")  # node editor spacing, for a readable node group
+USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")
 
 
 def build_node_group(slots, cage_vertex_count, mesh_vertex_count):
@@ -396,9 +397,9 @@ def _input_items(group):
 def release_group(group, successor=None):
     """Remove a node group of this add-on once no modifier uses it (a linked duplicate may still); its
     ``successor``, the group that replaced it, then takes its name."""
-    if group is not None and not any(
-        modifier.type == "NODES" and modifier.node_group == group for obj in bpy.data.objects for modifier in obj.modifiers
-    ):
+    used = any(modifier.type == "NODES" and modifier.node_group == group
+               for obj in bpy.data.objects for modifier in obj.modifiers)
+    if group is not None and not used:
         name = group.name
         bpy.data.node_groups.remove(group)
         if successor is not None:
@@ -418,12 +419,19 @@ def detach(mesh_obj):
     """Remove the modifier and its node group (kept while a linked duplicate's modifier uses it)."""
     modifier = find_modifier(mesh_obj)
     if modifier is not None:
-        # Cleared first: Blender 5.2 removes a modifier without giving back the user its Object input held.
-        set_inputs(modifier, {"Cage": None})
-        mesh_obj.modifiers.remove(modifier)
+        remove_modifier(mesh_obj, modifier)
     group = mesh_obj.lbc.node_group
     mesh_obj.lbc.node_group = None
     release_group(group)
+
+
+def remove_modifier(mesh_obj, modifier):
+    """Remove a Geometry Nodes modifier of this add-on from ``mesh_obj``, its Cage input cleared first: Blender 5.2
+    removes a modifier without giving back the user its Object input held, which would keep a deleted cage alive."""
+    identifier = input_identifier(modifier, "Cage") if modifier.node_group is not None else None
+    if identifier is not None:
+        set_raw_inputs(modifier, {identifier: None})
+    mesh_obj.modifiers.remove(modifier)
 
 
 def set_enabled(mesh_obj, enabled):

@@ -241,7 +241,7 @@ class _SavedBinding:
 
         for modifier in list(mesh_obj.modifiers):
             if modifier.name not in self.modifiers:
-                mesh_obj.modifiers.remove(modifier)
+                deformer.remove_modifier(mesh_obj, modifier)
         if self.deformer is not None:
             name, group, values = self.deformer
             modifier = mesh_obj.modifiers[name]

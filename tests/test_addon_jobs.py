@@ -127,16 +127,18 @@ def test_a_failure_at_any_write_step_leaves_the_scene_bit_for_bit_as_before(monk
         deformer.set_inputs(deformer.find_modifier(mesh), {"Strength": 0.5, "Vertex Group": "top"})
         influence.show(mesh, 3)
         cage.location.x += 0.2
-    before = _binding_state(mesh)
+    before, users = _binding_state(mesh), cage.users
     deformed = evaluated_positions(mesh)
     for module, name in WRITE_STEPS:
         with monkeypatch.context() as patch:
             patch.setattr(module, name, _fail_after(getattr(module, name)))
-            with pytest.raises(RuntimeError, match="injected failure") if replacing or name != "show" else nullcontext():
+            fails = replacing or name != "show"
+            with pytest.raises(RuntimeError, match="injected failure") if fails else nullcontext():
                 jobs.apply(request, result)
         if not replacing and name == "show":
             continue  # a first bind shows no influence: this step does not run
         assert _binding_state(mesh) == before, f"failure in {module.__name__}.{name}"
+        assert cage.users == users  # the binding holds no more of the cage than before (X must still free it)
         assert np.array_equal(evaluated_positions(mesh), deformed)
 
 
