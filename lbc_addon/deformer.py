@@ -52,8 +52,7 @@ def build_node_group(slots, cage_vertex_count, mesh_vertex_count):
     for name, socket_type, description in internal:
         socket = interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
         socket.description = description
-        if hasattr(socket, "hide_in_modifier"):  # Blender 4.2 may lack it: then the modifier shows them too
-            socket.hide_in_modifier = True
+        socket.hide_in_modifier = True
     interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
 
     nodes, links = group.nodes, group.links
