@@ -12,6 +12,8 @@ the vertex count (faces rebuilt, vertices reordered) is caught by :func:`check_b
 modifier's "Enabled" input; the panel says why and offers Rebind.
 """
 
+import functools
+
 import bpy
 from bpy.app.handlers import persistent
 
@@ -542,13 +544,14 @@ def check_bindings(depsgraph, changed=None):
                 print(f"LBC: {obj.name}: {message}")
 
 
-def forget_cage(cage):
+def forget_cage(cage, defer=None):
     """Let go of a cage the user deleted, as Blender's Mesh Deform does.
 
     Deleting an object (X) only unlinks it from its scene while something else counts as its user, and the
     binding's pointer and the modifier's Cage input both do: the cage would live on off-scene with the meshes
     following it. Every binding to ``cage`` drops it (the node group then leaves the mesh at rest), and the cage is
-    removed once nothing else uses it.
+    removed once nothing else uses it (:func:`remove_if_orphan`). This runs in a depsgraph handler: in a session with
+    an event loop the removal waits for a timer, outside the handler; ``defer`` None means "when there is one".
     """
     for obj in bpy.data.objects:
         if is_bound(obj) and obj.lbc.cage == cage:
@@ -557,8 +560,19 @@ def forget_cage(cage):
             if modifier is not None:
                 set_inputs(modifier, {"Cage": None})
                 obj.update_tag()
-    if cage.users == 0:
-        bpy.data.objects.remove(cage)
+    if defer is None:
+        defer = not bpy.app.background
+    if defer:
+        bpy.app.timers.register(functools.partial(remove_if_orphan, cage.name_full), first_interval=0.0)
+    else:
+        remove_if_orphan(cage.name_full)
+
+
+def remove_if_orphan(name):
+    """Remove the object called ``name`` if it is in no collection and nothing uses it any more."""
+    obj = bpy.data.objects.get(name)
+    if obj is not None and obj.users == 0 and not obj.users_collection:
+        bpy.data.objects.remove(obj)
 
 
 @persistent

@@ -358,3 +358,15 @@ def test_undo_after_x_on_the_cage_brings_back_the_cage_and_the_binding(bound_gar
     assert mesh.lbc.cage == cage and mesh.lbc.status == "Following 'Cage'"
     cage.location.z += 0.3
     assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() > 0.1
+
+
+def test_with_an_event_loop_the_deleted_cage_is_removed_by_a_timer_outside_the_handler(bound_gargoyle, monkeypatch):
+    mesh, cage = bound_gargoyle
+    timers = []
+    monkeypatch.setattr(bpy.app.timers, "register", lambda function, first_interval: timers.append(function))
+    bpy.context.scene.collection.objects.unlink(cage)  # what X does to an object with other users
+    deformer.forget_cage(cage, defer=True)
+    assert mesh.lbc.cage is None and "Cage" in bpy.data.objects and len(timers) == 1
+    assert timers[0]() is None  # run once, not again
+    assert "Cage" not in bpy.data.objects
+    assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
