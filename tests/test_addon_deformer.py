@@ -87,14 +87,14 @@ def test_one_cage_vertex_moves_far_fewer_vertices_than_mesh_deform(bound_gargoyl
     assert np.mean(counts["LBC"]) < 0.5 * np.mean(counts["Mesh Deform"])
 
 
-def _delete_cage_vertex(cage, index):
+def _delete_vertex(obj, index):
     edit = bmesh.new()
-    edit.from_mesh(cage.data)
+    edit.from_mesh(obj.data)
     edit.verts.ensure_lookup_table()
     bmesh.ops.delete(edit, geom=[edit.verts[index]], context="VERTS")
-    edit.to_mesh(cage.data)
+    edit.to_mesh(obj.data)
     edit.free()
-    cage.data.update()
+    obj.data.update()
 
 
 def _assert_one_modifier_error(mesh, text):
@@ -110,7 +110,7 @@ def _assert_one_modifier_error(mesh, text):
 
 def test_cage_with_another_vertex_count_leaves_the_mesh_undeformed_with_a_modifier_error(bound_gargoyle):
     mesh, cage = bound_gargoyle
-    _delete_cage_vertex(cage, 3)
+    _delete_vertex(cage, 3)
     assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
     # One cause, one message on the modifier (the add-on does not switch it off as well), naming the bound count.
     _assert_one_modifier_error(mesh, "no longer has the 67 vertices it was bound with")
@@ -301,13 +301,7 @@ def test_vertex_group_masks_the_deformation_and_invert_swaps_it(bound_gargoyle):
 
 def test_mesh_with_another_vertex_count_stays_at_rest_with_one_message(bound_gargoyle):
     mesh, cage = bound_gargoyle
-    edit = bmesh.new()
-    edit.from_mesh(mesh.data)
-    edit.verts.ensure_lookup_table()
-    bmesh.ops.delete(edit, geom=[edit.verts[0]], context="VERTS")
-    edit.to_mesh(mesh.data)
-    edit.free()
-    mesh.data.update()
+    _delete_vertex(mesh, 0)
     cage.location.x += 0.3
     assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
     _assert_one_modifier_error(mesh, "the mesh no longer has the 2674 vertices")
