@@ -8,7 +8,7 @@ refined (circumcentre insertion, or the split of the feature-edge piece it encro
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
 the cage's winding number around it is 1. The lattice points then take two optimal-Delaunay smoothing steps and up
 to three sliver-perturbation rounds, each followed by the same conforming tetrahedralisation. When the cell count
-misses the target by more than 10 % (thin or small cages), everything is done once more with a corrected size.
+misses the target by more than 15 % (thin or small cages), everything is done once more with a corrected size.
 
 Every loop is bounded: recovery rounds, a surface-sample budget, and a cancel check in each round. When recovery
 runs out of its budget (feature edges meeting at very small angles can make Ruppert-style refinement cascade), the
@@ -22,7 +22,6 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import CageError
-from ..fem import boundary_facets
 from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, signed_measures
 from ..geometry import winding_numbers
 from .common import far_points, on_common, raw_mesh, rows_in
@@ -31,7 +30,7 @@ from .surface import JITTER, OutOfBudget, Surface
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
 # along the surface and the smoothing, the meshes of the test cages have 7.9 to 11.4 per a^3 at 4k, 8.4 to 9.8 at 10k.
 _TETS_PER_CUBE = 8.5
-_COUNT_TOLERANCE = 0.1  # beyond this relative miss of the target cell count, mesh again with a corrected size
+_COUNT_TOLERANCE = 0.15  # beyond this relative miss of the target cell count, mesh again with a corrected size
 _SURFACE_SPACING = 1.0  # surface sample spacing, × the lattice cube side
 _BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage surface
 _ODT_SWEEPS = 2  # optimal-Delaunay smoothing steps of the lattice points
@@ -167,10 +166,14 @@ def _conforming_delaunay(surface, lattice, far, steps):
 
 
 def _conforms(tets, triangles):
-    """Whether the tetrahedra's boundary triangles are exactly the surface triangles."""
-    boundary = np.sort(boundary_facets(tets), axis=1)
-    triangles = np.sort(triangles, axis=1)
-    return len(boundary) == len(triangles) and rows_in(boundary, triangles).all()
+    """Whether the tetrahedra's boundary triangles (faces of one tetrahedron) are exactly the surface triangles."""
+    base = int(tets.max()) + 1  # a sorted face (i, j, k) is the number (i base + j) base + k: exact below 2^63
+    faces = _cell_faces(tets).astype(np.int64)
+    keys, counts = np.unique((faces[:, 0] * base + faces[:, 1]) * base + faces[:, 2], return_counts=True)
+    boundary = keys[counts == 1]
+    triangles = np.sort(triangles, axis=1).astype(np.int64)
+    expected = (triangles[:, 0] * base + triangles[:, 1]) * base + triangles[:, 2]
+    return len(boundary) == len(expected) and np.isin(expected, boundary).all()
 
 
 def _odt_positions(vertices, tets, movable):
