@@ -16,7 +16,7 @@ import lbc_core
 from lbc_core import meshing
 from lbc_core.cage import make_cage
 from lbc_core.errors import Cancelled
-from test_meshing import CAGES_2D, check_contract, load_cage
+from test_meshing import CAGES_2D, CUBE_QUADS, CUBE_VERTICES, check_contract, load_cage
 
 # Variants on cages of every kind: n-gon caps, a small-angle apex, rings of coplanar quads, extrusions, a thin plate.
 VARIANT_CAGES = ["cube", "cylinder-32-ngon", "cone-32-ngon", "prism-16-rings-3", "limbs", "thin-plate"]
@@ -105,3 +105,21 @@ def test_cancel_inside_the_2d_split_loop():
                             cancel=cancel_inside("mesh_delaunay", seconds))
     assert seconds, "the split loop never polled cancel"
     assert time.perf_counter() - seconds[0] < 0.5
+
+
+@pytest.mark.parametrize("scale", [(1.0, 1.0, 1e-4), (1.0, 1e-4, 1e-4)], ids=["box 1 x 1 x 1e-4", "needle 1e-4"])
+def test_thin_boxes_mesh(scale):
+    """Isotropic cells would need the thickness as their size (1e8 of them for the box): the mesh is made
+    stretched along the principal axes and mapped back."""
+    cage = make_cage(CUBE_VERTICES * np.array(scale), CUBE_QUADS)
+    mesh = meshing.mesh_domain(cage)
+    check_contract(cage, mesh)
+    assert len(mesh.cells) == pytest.approx(meshing.DEFAULT_CELLS_3D, rel=0.2)
+
+
+@pytest.mark.parametrize("depth", [1e-8, 1e-7, 1e-5, 1e-3, 1e-2])
+def test_cube_with_a_dented_corner_meshes(depth):
+    vertices = CUBE_VERTICES.copy()
+    vertices[7] -= depth
+    cage = make_cage(vertices, CUBE_QUADS)
+    check_contract(cage, meshing.mesh_domain(cage, cells=2000))
