@@ -123,3 +123,13 @@ def test_cube_with_a_dented_corner_meshes(depth):
     vertices[7] -= depth
     cage = make_cage(vertices, CUBE_QUADS)
     check_contract(cage, meshing.mesh_domain(cage, cells=2000))
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e4, 1e6, 1e8])
+def test_l_polygon_far_from_the_origin_meshes(offset):
+    """An L-shaped polygon moved far away (at 1e6 the 2D split loop used to run forever)."""
+    outline = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
+    cage = make_cage(outline + offset)
+    mesh = meshing.mesh_domain(cage)
+    check_contract(cage, mesh)
+    assert len(mesh.cells) == pytest.approx(meshing.DEFAULT_CELLS_2D, rel=0.1)

@@ -81,11 +81,15 @@ def finish(cage, vertices, cells, boundary_vertices, boundary_facet, boundary_ba
     vertices[boundary_vertices] = bary_positions(cage, boundary_facet, boundary_bary)
     vertices[control_vertices] = cage.vertices
     cells = np.asarray(cells, dtype=np.int64)
-    if len(cells) == 0 or np.min(signed_measures(vertices, cells)) <= 0:
-        raise CageError("the mesh has degenerate cells: the cage may be self-intersecting or have near-duplicate "
-                        "vertices; check it and try a different cell count")
-    if len(np.unique(cells)) != len(vertices):
-        raise CageError("some mesh vertices belong to no cell: the cage may be self-intersecting; check it")
+    flat = signed_measures(vertices, cells) <= 0
+    unused = np.setdiff1d(np.arange(len(vertices)), cells)
+    if len(cells) == 0 or flat.any() or len(unused):
+        near = np.isin(boundary_vertices, np.r_[cells[flat].ravel(), unused])
+        faces = np.unique(cage.facet_face[boundary_facet[near]])
+        listed = ", ".join(map(str, faces[:10]))
+        where = f" near cage faces {listed} (numbered from 0 in input order)" if len(faces) else ""
+        raise CageError(f"the mesh has flat or unconnected cells{where}: very sharp angles or nearly touching parts "
+                        "of the cage there are the usual cause; widen or separate them, or try a different cell count")
     return DomainMesh(vertices, cells, boundary_vertices, boundary_facet, boundary_bary, control_vertices)
 
 
