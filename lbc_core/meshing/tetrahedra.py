@@ -6,8 +6,8 @@ surface triangles (the sphere centred in the triangle's plane through its corner
 triangle is a face of the 3D Delaunay tetrahedralisation). Surface triangles missing from the tetrahedralisation are
 refined (circumcentre insertion, or the split of the feature-edge piece it encroaches, as in Ruppert's algorithm)
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
-the cage's winding number around it is 1. The lattice points then take two optimal-Delaunay smoothing steps and up
-to three sliver-perturbation rounds, each followed by the same conforming tetrahedralisation. When the cell count
+the cage's winding number around it is 1. The lattice points then take two optimal-Delaunay smoothing steps and one
+sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming tetrahedralisation. When the cell count
 misses the target by more than 15 % (thin or small cages), everything is done once more with a corrected size.
 
 Every loop is bounded: recovery rounds, a surface-sample budget, and a cancel check in each round. When recovery
@@ -34,7 +34,7 @@ _COUNT_TOLERANCE = 0.15  # beyond this relative miss of the target cell count, m
 _SURFACE_SPACING = 1.0  # surface sample spacing, × the lattice cube side
 _BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage surface
 _ODT_SWEEPS = 2  # optimal-Delaunay smoothing steps of the lattice points
-_SLIVER_ROUNDS = 3  # then rounds of random moves of the lattice corners of slivers ...
+_SLIVER_ROUNDS = 1  # then rounds of random moves of the lattice corners of slivers ...
 _SLIVER_RATIO = 0.15  # ... tetrahedra with a radius ratio below this
 _PERTURBATION = 0.15  # the largest move per coordinate, × the lattice cube side
 _RECOVERY_ROUNDS = 40  # rounds of surface refinement per tetrahedralisation
