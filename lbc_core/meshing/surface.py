@@ -10,6 +10,7 @@ angles between feature edges. Every sample still keeps the facet it lies on and 
 so boundary values stay exact at every sample.
 """
 
+import time
 from collections import namedtuple
 
 import numpy as np
@@ -40,7 +41,7 @@ incidence : (P, R) scipy.sparse.csr_matrix, 1 where a point lies on a region (cl
 
 
 class OutOfBudget(RuntimeError):
-    """Refinement would need more samples than its budget allows."""
+    """Refinement would need more samples (or rounds) than its budget allows; ``Surface.trouble`` says where."""
 
 
 class Surface:
@@ -56,10 +57,11 @@ class Surface:
     spacing : float, the sample spacing
     rng : numpy.random.Generator
     budget : int, the most samples refinement may make
+    deadline : float, the time.perf_counter() after which refinement gives up
     """
 
-    def __init__(self, cage, spacing, rng, budget):
-        self.cage, self.rng, self.spacing, self.budget = cage, rng, spacing, budget
+    def __init__(self, cage, spacing, rng, budget, deadline):
+        self.cage, self.rng, self.spacing, self.budget, self.deadline = cage, rng, spacing, budget, deadline
         facets = cage.facets
         n_facets = len(facets)
         corners = cage.vertices[facets]
@@ -112,6 +114,7 @@ class Surface:
         self.edge_params = [np.sort((np.arange(1, m) + JITTER * rng.uniform(-1.0, 1.0, m - 1)) / m) for m in counts]
         self.inner = [self._region_lattice(r) for r in range(self.n_regions)]  # (facet, bary) per region
         self.triangulations = [None] * self.n_regions  # per region, local numbering; None when out of date
+        self.trouble = np.arange(self.n_regions)  # the regions refinement worked on last, for error messages
         self._number()
 
     # --- frames and location ---------------------------------------------------------------------------------
@@ -229,11 +232,14 @@ class Surface:
             missing = []
             for r in range(self.n_regions):
                 steps.check()
+                if time.perf_counter() > self.deadline:
+                    raise OutOfBudget("out of time")
                 if self.triangulations[r] is None:
                     self.triangulations[r], lost = self._triangulate(r)
                     missing += lost
             if not missing:
                 break
+            self.trouble = np.unique(self.edge_regions[[k for k, _ in missing]])
             for k, piece in set(missing):
                 self._split(k, piece)
         else:
@@ -313,7 +319,8 @@ class Surface:
         in the diametral circle of a piece of the region's boundary: then that piece is split instead.
         """
         sides = {}
-        for r in np.unique(self.triangle_region[missing]):
+        self.trouble = np.unique(self.triangle_region[missing])
+        for r in self.trouble:
             pairs, labels = self._pieces(r)
             sides.update({tuple(sorted(map(int, pair))): label for pair, label in zip(pairs, labels)})
         split = set()
@@ -326,6 +333,8 @@ class Surface:
         inserted = {}
         for s, pieces in zip(missing, triangle_pieces):
             steps.check()
+            if time.perf_counter() > self.deadline:
+                raise OutOfBudget("out of time")
             if split & pieces:
                 continue
             r = self.triangle_region[s]

@@ -10,11 +10,14 @@ the cage's winding number around it is 1. The lattice points then take two optim
 sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming tetrahedralisation. When the cell count
 misses the target by more than 15 % (thin or small cages), everything is done once more with a corrected size.
 
-Every loop is bounded: recovery rounds, a surface-sample budget, and a cancel check in each round. When recovery
+Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells),
+and a cancel check in each round. When recovery
 runs out of its budget (feature edges meeting at very small angles can make Ruppert-style refinement cascade), the
 last conforming tetrahedralisation of the smoothing rounds is kept if there is one; else the mesh is made again
 with fresh jitter and a coarser surface, and only then is the cage refused, naming the faces where it failed.
 """
+
+import time
 
 import numpy as np
 import scipy.sparse as sp
@@ -41,6 +44,11 @@ _RECOVERY_ROUNDS = 40  # rounds of surface refinement per tetrahedralisation
 # Refinement may make at most this many times the initial surface samples (plus a few thousand for small cages).
 _SAMPLE_BUDGET = 6
 _ATTEMPTS = 3  # fresh jitter and a coarser surface (× 1.5 spacing each time) before a cage is refused
+# Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells): nearly touching parts
+# of a cage need samples as close as the gap, which can take minutes to reach or never fit the sample budget. The
+# slowest corpus mesh takes 8 s at 8000 cells, 33 s at 64000, on the loaded 2-core test machine.
+_SECONDS = 10.0
+_SECONDS_PER_1000 = 2.0
 
 
 class _NotConforming(Exception):
@@ -54,28 +62,34 @@ class _NotConforming(Exception):
 def mesh(cage, cells, steps):
     """Tetrahedra filling the cage (in the meshing frame): a DomainMesh before the final check."""
     side = (_TETS_PER_CUBE * cage.measure / cells) ** (1.0 / 3.0)
-    surface, vertices, tets = _attempts(cage, side, steps.part(0.0, 0.6))
+    deadline = time.perf_counter() + _SECONDS + _SECONDS_PER_1000 * cells / 1000.0
+    surface, vertices, tets = _attempts(cage, side, deadline, steps.part(0.0, 0.6))
     ratio = len(tets) / cells
     if abs(ratio - 1.0) > _COUNT_TOLERANCE:  # thin or small cages: mostly surface band, fewer tetrahedra per volume
-        surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), steps.part(0.6, 0.95))
+        try:
+            surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), deadline, steps.part(0.6, 0.95))
+        except CageError:
+            pass  # the first mesh conforms: keep it, with its cell count off target
     steps(0.95, "checking the tetrahedralisation")
     samples = surface.last
     return raw_mesh(vertices, tets, np.arange(len(samples.points)), samples.facet, samples.bary)
 
 
-def _attempts(cage, side, steps):
+def _attempts(cage, side, deadline, steps):
     """The smoothed conforming tetrahedralisation at lattice side ``side``, retried with fresh jitter and a coarser
-    surface when refinement runs out of budget; CageError after the last attempt."""
+    surface when refinement runs out of budget; CageError after the last attempt or past the deadline."""
     for attempt in range(_ATTEMPTS):
         try:
-            return _tetrahedralise(cage, side, 1.5**attempt, attempt, steps.part(attempt / _ATTEMPTS,
-                                                                                  (attempt + 1) / _ATTEMPTS))
+            return _tetrahedralise(cage, side, 1.5**attempt, attempt, deadline,
+                                   steps.part(attempt / _ATTEMPTS, (attempt + 1) / _ATTEMPTS))
         except _NotConforming as failure:
             facets = failure.facets
+        if time.perf_counter() > deadline:
+            break
     raise CageError(_diagnose(cage, facets))
 
 
-def _tetrahedralise(cage, side, coarsening, seed, steps):
+def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     """The conforming Delaunay tetrahedralisation for a lattice of cube side ``side``, smoothed.
 
     Returns
@@ -88,11 +102,11 @@ def _tetrahedralise(cage, side, coarsening, seed, steps):
     steps(0.0, "sampling the cage surface")
     spacing = _SURFACE_SPACING * side * coarsening
     budget = int(_SAMPLE_BUDGET * (_initial_count(cage, spacing)) + 5000)
+    surface = Surface(cage, spacing, rng, budget, deadline)
     try:
-        surface = Surface(cage, spacing, rng, budget)
         samples = surface.samples(steps)
     except OutOfBudget:
-        raise _NotConforming(np.arange(len(cage.facets))) from None
+        raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
     lattice = _bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
     far = far_points(cage.vertices)
     rounds = _ODT_SWEEPS + _SLIVER_ROUNDS + 1
@@ -100,7 +114,7 @@ def _tetrahedralise(cage, side, coarsening, seed, steps):
     for round_ in range(rounds):
         steps((round_ + 1) / (rounds + 1), "tetrahedralising (Delaunay)")
         try:
-            samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, steps)
+            samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
         except _NotConforming:
             if best is None:
                 raise
@@ -139,7 +153,7 @@ def _initial_count(cage, spacing):
     return area / (np.sqrt(3.0) / 2.0 * spacing**2) + cage.n_control_points
 
 
-def _conforming_delaunay(surface, lattice, far, steps):
+def _conforming_delaunay(surface, lattice, far, deadline, steps):
     """Refine the surface samples until every surface triangle is a face of the Delaunay tetrahedralisation.
 
     Returns
@@ -148,9 +162,10 @@ def _conforming_delaunay(surface, lattice, far, steps):
     lattice : (I, 3) float array, the lattice points kept (outside the protecting spheres)
     delaunay : scipy.spatial.Delaunay of the samples' points, lattice and far, in that order
     """
-    regions = np.arange(surface.n_regions)
     try:
         for _ in range(_RECOVERY_ROUNDS):
+            if time.perf_counter() > deadline:
+                break
             samples = surface.samples(steps)
             lattice = _outside_protecting_spheres(lattice, samples.points, samples.triangles)
             steps.check()
@@ -158,11 +173,10 @@ def _conforming_delaunay(surface, lattice, far, steps):
             is_face = rows_in(np.sort(samples.triangles, axis=1), _cell_faces(delaunay.simplices))
             if is_face.all():
                 return samples, lattice, delaunay
-            regions = np.unique(samples.triangle_region[~is_face])
             surface.refine(np.flatnonzero(~is_face), steps)
     except OutOfBudget:
         pass
-    raise _NotConforming(np.flatnonzero(np.isin(surface.region, regions)))
+    raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble)))
 
 
 def _conforms(tets, triangles):
