@@ -23,6 +23,7 @@ test: $(BIN)/.installed
 
 bench: $(BIN)/.installed
 	$(BIN)/python bench/run.py
+	$(BIN)/python bench/bench_mesher.py
 
 extension: $(BIN)/.installed
 	$(BIN)/python tools/build_extension.py

@@ -33,6 +33,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
 from .errors import CageError
+from .geometry import cross2, enclosed_measure, in_triangle_2d, triangle_normals, unit
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
@@ -92,7 +93,7 @@ class Cage:
     @property
     def measure(self):
         """Signed area (2D) or volume (3D) enclosed; positive for the stored orientation."""
-        return float(_enclosed_measure(self.vertices, self.facets))
+        return float(enclosed_measure(self.vertices, self.facets))
 
     def fingerprint(self):
         """A hash of the topology (vertex count and facets); positions do not enter it.
@@ -371,7 +372,7 @@ def _make_polygon_cage(vertices, weld_tolerance, max_control_points):
     _check_polygon_simple(welded, zero, names)
     n = len(welded)
     edges = np.stack([np.arange(n), (np.arange(n) + 1) % n], axis=1)
-    if _enclosed_measure(welded, edges) < 0:
+    if enclosed_measure(welded, edges) < 0:
         edges = edges[:, ::-1]
     return Cage(welded, edges, np.arange(n), vertex_map, warnings)
 
@@ -392,7 +393,7 @@ def _check_polygon_simple(vertices, zero, names):
     start, end = vertices, np.roll(vertices, -1, axis=0)
     # A spike: the next vertex lies on the line of the incoming edge, behind the corner.
     incoming, outgoing = end - start, np.roll(end - start, -1, axis=0)
-    spike = (np.abs(_cross2(incoming, outgoing)) <= zero * np.linalg.norm(incoming, axis=1)) & (
+    spike = (np.abs(cross2(incoming, outgoing)) <= zero * np.linalg.norm(incoming, axis=1)) & (
         np.einsum("ij,ij->i", incoming, outgoing) < 0
     )
     defects = []
@@ -471,7 +472,7 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
                 )
     _check_self_intersection(welded, triangles[clean], triangle_face[clean], zero, defects)
     _raise_all(defects)
-    if _enclosed_measure(welded, triangles) <= ZERO_LENGTH * diagonal**3:
+    if enclosed_measure(welded, triangles) <= ZERO_LENGTH * diagonal**3:
         raise CageError("the cage encloses zero volume: give it thickness, or bind in 2D with a polygon cage")
     return Cage(welded, triangles, triangle_face, vertex_map, warnings)
 
@@ -585,7 +586,7 @@ def _split_quad(vertices, quad, zero):
     lengths = (np.linalg.norm(points[0] - points[2]), np.linalg.norm(points[1] - points[3]))
     preference = np.argsort(lengths, kind="stable")
     for choice in preference:
-        normals = _triangle_normals(vertices[options[choice]])
+        normals = triangle_normals(vertices[options[choice]])
         if normals[0] @ normals[1] > 0 and not np.any(_degenerate(vertices[options[choice]], zero)):
             return options[choice]
     # A zero-area or bow-tie quad: the degenerate-face or self-intersection check names it.
@@ -609,13 +610,13 @@ def _ear_clip(vertices, face, index, zero):
         corner = flat[remaining]
         before, after = np.roll(corner, 1, axis=0), np.roll(corner, -1, axis=0)
         # Convex corners standing clear of the line through their neighbours (collinear ones make no ear).
-        convex = _cross2(corner - before, after - corner) > zero * np.linalg.norm(after - before, axis=1)
+        convex = cross2(corner - before, after - corner) > zero * np.linalg.norm(after - before, axis=1)
         ears = np.flatnonzero(convex)
         others = np.flatnonzero(~convex)  # only non-convex corners can lie inside a convex ear
         if len(others):
             count = len(remaining)
-            blocked = _in_triangle_2d(corner[others][None], before[ears][:, None], corner[ears][:, None],
-                                      after[ears][:, None], zero)
+            blocked = in_triangle_2d(corner[others][None], before[ears][:, None], corner[ears][:, None],
+                                     after[ears][:, None], zero)
             own = (others[None] == (ears[:, None] - 1) % count) | (others[None] == (ears[:, None] + 1) % count)
             ears = ears[~np.any(blocked & ~own, axis=1)]
         if not len(ears):
@@ -654,7 +655,7 @@ def _degenerate(corners, zero):
     edges = np.roll(corners, -1, axis=1) - corners
     longest = np.max(np.linalg.norm(edges, axis=2), axis=1)
     if corners.shape[2] == 2:
-        twice_area = np.abs(_cross2(edges[:, 0], edges[:, 1]))
+        twice_area = np.abs(cross2(edges[:, 0], edges[:, 1]))
     else:
         twice_area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
     return twice_area <= zero * longest
@@ -788,7 +789,7 @@ def _orient_outward(vertices, triangles, pairing, defects):
         defects.append("the cage surface is not orientable (like a Möbius strip): it cannot enclose a volume")
         return None
     oriented = np.where(flip[:, None], triangles[:, ::-1], triangles)
-    if _enclosed_measure(vertices, oriented) < 0:
+    if enclosed_measure(vertices, oriented) < 0:
         oriented, flip = oriented[:, ::-1], ~flip
     return oriented, flip
 
@@ -877,7 +878,7 @@ def _overlapping_boxes(low, high, chunk=2_000_000):
 def _disjoint_meet(vertices, first, second, equal, zero):
     """(P,) bool: triangles with no shared vertex that cross or touch."""
     a, b = vertices[first], vertices[second]  # (P, 3, 3)
-    normal_a, normal_b = _unit(_triangle_normals(a)), _unit(_triangle_normals(b))
+    normal_a, normal_b = unit(triangle_normals(a)), unit(triangle_normals(b))
     height_a = _zeroed(np.einsum("pkj,pj->pk", a - b[:, :1], normal_b), zero)  # a's corners over b's plane
     height_b = _zeroed(np.einsum("pkj,pj->pk", b - a[:, :1], normal_a), zero)
     apart = np.zeros(len(a), dtype=bool)
@@ -928,7 +929,7 @@ def _in_triangle_3d(x, b, normal, zero):
 
 def _coplanar_overlap(a, b, normal, zero):
     """(P,) bool: coplanar triangles a, b (P, 3, 3) without a shared vertex that overlap or touch."""
-    axis_u = _unit(b[:, 1] - b[:, 0])
+    axis_u = unit(b[:, 1] - b[:, 0])
     axis_v = np.cross(normal, axis_u)
 
     def flatten(points):
@@ -941,8 +942,8 @@ def _coplanar_overlap(a, b, normal, zero):
         for m in range(3):
             hit |= _segments_touch(a[:, k], a[:, (k + 1) % 3], b[:, m], b[:, (m + 1) % 3], zero)
     # Boundaries apart: they overlap only if one contains the other.
-    hit |= _in_triangle_2d(a[:, 0], *_ccw(b).transpose(1, 0, 2), zero)
-    hit |= _in_triangle_2d(b[:, 0], *_ccw(a).transpose(1, 0, 2), zero)
+    hit |= in_triangle_2d(a[:, 0], *_ccw(b).transpose(1, 0, 2), zero)
+    hit |= in_triangle_2d(b[:, 0], *_ccw(a).transpose(1, 0, 2), zero)
     return hit
 
 
@@ -954,7 +955,7 @@ def _vertex_neighbours_meet(vertices, first, second, equal, zero):
     v = vertices[first[:, 0]]
     a, b = vertices[first[:, 1]] - v, vertices[first[:, 2]] - v
     c, d = vertices[second[:, 1]] - v, vertices[second[:, 2]] - v
-    normal_1, normal_2 = _unit(np.cross(a, b)), _unit(np.cross(c, d))
+    normal_1, normal_2 = unit(np.cross(a, b)), unit(np.cross(c, d))
     ha, hb = (_zeroed(np.einsum("pj,pj->p", x, normal_2), zero) for x in (a, b))
     hc, hd = (_zeroed(np.einsum("pj,pj->p", x, normal_1), zero) for x in (c, d))
     coplanar = ((ha == 0) & (hb == 0)) | ((hc == 0) & (hd == 0))
@@ -980,23 +981,23 @@ def _segment_on_plane(a, b, ha, hb):
 
 def _wedges_overlap(a, b, c, d, normal, tolerance=1e-9):
     """(P,) bool: the wedges a-v-b and c-v-d (directions from v, in the plane of ``normal``) overlap."""
-    axis_u = _unit(a)
+    axis_u = unit(a)
     axis_v = np.cross(normal, axis_u)
     def flatten(x):  # unit directions in the plane's (u, v) frame
-        return _unit(np.stack([np.einsum("pj,pj->p", x, axis_u), np.einsum("pj,pj->p", x, axis_v)], axis=1))
+        return unit(np.stack([np.einsum("pj,pj->p", x, axis_u), np.einsum("pj,pj->p", x, axis_v)], axis=1))
 
     a, b, c, d = (flatten(x) for x in (a, b, c, d))
     # Order each wedge counter-clockwise; wedges of triangles are narrower than a half-turn.
-    swap = _cross2(a, b) < 0
+    swap = cross2(a, b) < 0
     a, b = np.where(swap[:, None], b, a), np.where(swap[:, None], a, b)
-    swap = _cross2(c, d) < 0
+    swap = cross2(c, d) < 0
     c, d = np.where(swap[:, None], d, c), np.where(swap[:, None], c, d)
 
     def strictly_inside(x, start, end):
-        return (_cross2(start, x) > tolerance) & (_cross2(x, end) > tolerance)
+        return (cross2(start, x) > tolerance) & (cross2(x, end) > tolerance)
 
     def same(x, y):
-        return (np.abs(_cross2(x, y)) <= tolerance) & (np.einsum("pj,pj->p", x, y) > 0)
+        return (np.abs(cross2(x, y)) <= tolerance) & (np.einsum("pj,pj->p", x, y) > 0)
 
     return (
         strictly_inside(c, a, b) | strictly_inside(d, a, b) | strictly_inside(a, c, d) | strictly_inside(b, c, d)
@@ -1011,11 +1012,11 @@ def _edge_neighbours_fold(vertices, first, second, equal, zero):
     second = _rotate_rows(second, np.argmin(np.any(equal, axis=1), axis=1))
     u, v = vertices[first[:, 1]], vertices[first[:, 2]]
     a, b = vertices[first[:, 0]] - u, vertices[second[:, 0]] - u
-    edge = _unit(v - u)
+    edge = unit(v - u)
     a_across = a - np.einsum("pj,pj->p", a, edge)[:, None] * edge
     b_across = b - np.einsum("pj,pj->p", b, edge)[:, None] * edge
     # The out-of-plane offset of one far corner from the other's plane.
-    offset = np.linalg.norm(np.cross(_unit(a_across), b_across), axis=1)
+    offset = np.linalg.norm(np.cross(unit(a_across), b_across), axis=1)
     return (offset <= zero) & (np.einsum("pj,pj->p", a_across, b_across) > 0)
 
 
@@ -1026,7 +1027,7 @@ def _segments_touch(p1, q1, p2, q2, zero):
     """(P,) bool: 2D segments p1-q1 and p2-q2 (P, 2) cross or come within ``zero`` of each other's ends."""
 
     def side(p, q, r):  # signed distance of r from the line p-q
-        return _zeroed(_cross2(q - p, r - p) / np.linalg.norm(q - p, axis=1), zero)
+        return _zeroed(cross2(q - p, r - p) / np.linalg.norm(q - p, axis=1), zero)
 
     def within(p, q, r):  # r's projection falls on the segment p-q
         along = q - p
@@ -1043,17 +1044,10 @@ def _segments_touch(p1, q1, p2, q2, zero):
     return proper | touching
 
 
-def _in_triangle_2d(x, a, b, c, zero):
-    """Points x inside counter-clockwise 2D triangles a, b, c or within ``zero`` of them (broadcasting, last axis 2)."""
-    inside = True
-    for p, q in ((a, b), (b, c), (c, a)):
-        inside = inside & (_cross2(q - p, x - p) >= -zero * np.linalg.norm(q - p, axis=-1))
-    return inside
-
 
 def _ccw(triangles):
     """(P, 3, 2): 2D triangles reordered counter-clockwise."""
-    clockwise = _cross2(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]) < 0
+    clockwise = cross2(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]) < 0
     return np.where(clockwise[:, None, None], triangles[:, ::-1], triangles)
 
 
@@ -1062,28 +1056,7 @@ def _rotate_rows(triangles, start):
     return np.take_along_axis(triangles, (start[:, None] + np.arange(3)) % 3, axis=1)
 
 
-def _triangle_normals(corners):
-    """(..., 3): area-weighted (twice the area) normals of triangles (..., 3, 3)."""
-    return np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
-
-
-def _unit(vectors):
-    return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
 
 
 def _zeroed(values, zero):
     return np.where(np.abs(values) <= zero, 0.0, values)
-
-
-def _cross2(u, v):
-    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-
-def _enclosed_measure(vertices, facets):
-    # About the centre: products of far-off coordinates would cancel away the measure of a small cage.
-    vertices = vertices - (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    if vertices.shape[1] == 2:
-        p, q = vertices[facets[:, 0]], vertices[facets[:, 1]]
-        return 0.5 * np.sum(p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0])
-    p, q, r = (vertices[facets[:, k]] for k in range(3))
-    return np.sum(np.einsum("ij,ij->i", p, np.cross(q, r))) / 6.0

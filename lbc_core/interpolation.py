@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 
 from . import fem
 from .errors import CageError
+from .geometry import closest_on_facets
 from .progress import Progress
 
 TOLERANCE = 1e-12  # relative to the domain's bounding-box diagonal: points this close to the domain are inside
@@ -446,7 +447,7 @@ class _FacetSearch:
         """
         n = len(points)
         _, first = self.tree.query(points)
-        squared, bary = _closest_on_facets(points, self.corners[first])
+        squared, bary = closest_on_facets(points, self.corners[first])
         best = _Best(squared, first, bary)
         for start in range(0, n, _TRAVERSAL_BATCH):
             check()
@@ -464,7 +465,7 @@ class _FacetSearch:
         facet = self.leaves[node]  # (pairs, leaf size), -1 for padding
         pair, slot = np.nonzero(facet >= 0)
         point, facet = point[pair], facet[pair, slot]
-        squared, bary = _closest_on_facets(points[point], self.corners[facet])
+        squared, bary = closest_on_facets(points[point], self.corners[facet])
         # The least distance per point: sort by (point, distance) and take each point's first entry.
         order = np.lexsort((squared, point))
         first = order[np.flatnonzero(np.diff(point[order], prepend=-1))]
@@ -529,66 +530,3 @@ def _box_squared_distance(points, lo, hi):
     """Squared distances (n,) from points (n, d) to the boxes [lo, hi] (n, d); 0 inside, inf for empty boxes."""
     gap = np.maximum(np.maximum(lo - points, points - hi), 0.0)
     return np.einsum("ij,ij->i", gap, gap)
-
-
-def _closest_on_facets(points, corners):
-    """Closest point of each segment (d = 2) or triangle (d = 3) to the matching point.
-
-    Parameters
-    ----------
-    points : (n, d) float array
-    corners : (n, d, d) float array, each facet's corners
-
-    Returns
-    -------
-    squared : (n,) float array, squared distance (length^2 units)
-    bary : (n, d) float array, barycentric coordinates of the closest point (non-negative, sum 1)
-    """
-    if points.shape[1] == 2:
-        return _closest_on_segments(points, corners[:, 0], corners[:, 1])
-    return _closest_on_triangles(points, corners[:, 0], corners[:, 1], corners[:, 2])
-
-
-def _closest_on_segments(points, a, b):
-    """Closest point on segments ab: squared distance (n,) and barycentric coordinates (n, 2) (for a, b)."""
-    ab, ap = b - a, points - a
-    length2 = np.einsum("ij,ij->i", ab, ab)
-    # A zero-length segment is its point a; the clip keeps rounding from leaving the segment.
-    t = np.clip(np.einsum("ij,ij->i", ap, ab) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
-    offset = ap - t[:, None] * ab
-    return np.einsum("ij,ij->i", offset, offset), np.stack([1.0 - t, t], axis=1)
-
-
-def _closest_on_triangles(points, a, b, c):
-    """Closest point on triangles abc: squared distance (n,) and barycentric coordinates (n, 3) (for a, b, c).
-
-    The closest point is the projection onto the triangle's plane when that falls inside, else the closest point of
-    one of the three edges: taking the least of these four candidates also handles degenerate (flat) triangles,
-    whose projection is simply skipped.
-    """
-    ab, ac, ap = b - a, c - a, points - a
-    g11 = np.einsum("ij,ij->i", ab, ab)
-    g12 = np.einsum("ij,ij->i", ab, ac)
-    g22 = np.einsum("ij,ij->i", ac, ac)
-    r1 = np.einsum("ij,ij->i", ab, ap)
-    r2 = np.einsum("ij,ij->i", ac, ap)
-    det = g11 * g22 - g12 * g12
-    proper = det > 1e-12 * g11 * g22
-    safe = np.where(proper, det, 1.0)
-    v = (g22 * r1 - g12 * r2) / safe
-    w = (g11 * r2 - g12 * r1) / safe
-    inside = proper & (v >= 0) & (w >= 0) & (v + w <= 1)
-    offset = ap - v[:, None] * ab - w[:, None] * ac
-    n = len(points)
-    candidates_squared = np.empty((4, n))
-    candidates_bary = np.zeros((4, n, 3))
-    candidates_squared[0] = np.where(inside, np.einsum("ij,ij->i", offset, offset), np.inf)
-    candidates_bary[0] = np.stack([1.0 - v - w, v, w], axis=1)
-    ends = (a, b, c)
-    for slot, (i, j) in enumerate([(0, 1), (1, 2), (2, 0)], start=1):
-        candidates_squared[slot], edge_bary = _closest_on_segments(points, ends[i], ends[j])
-        candidates_bary[slot, :, i] = edge_bary[:, 0]
-        candidates_bary[slot, :, j] = edge_bary[:, 1]
-    best = np.argmin(candidates_squared, axis=0)
-    rows = np.arange(n)
-    return candidates_squared[best, rows], candidates_bary[best, rows]

@@ -116,8 +116,8 @@ def core_wheel():
     """Build lbc_core as a pure-Python wheel in wheels/; returns its path."""
     version = re.search(r'__version__ = "([^"]+)"', (ROOT / "lbc_core" / "__init__.py").read_text()).group(1)
     dist_info = f"lbc_core-{version}.dist-info"
-    files = {
-        f"lbc_core/{path.name}": path.read_bytes() for path in sorted((ROOT / "lbc_core").glob("*.py"))
+    files = {  # subpackages included (lbc_core.meshing)
+        path.relative_to(ROOT).as_posix(): path.read_bytes() for path in sorted((ROOT / "lbc_core").rglob("*.py"))
     }
     requires = "".join(f"Requires-Dist: {name}\n" for name in ["numpy", *dependencies()])
     files[f"{dist_info}/METADATA"] = (

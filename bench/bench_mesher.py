@@ -1,0 +1,70 @@
+"""Meshing on the cage corpus: cells, meshing time and whole-bind time per cage family, at the default resolution.
+
+Run from the repository root:  python bench/bench_mesher.py [cells]
+Prints a markdown table (the README's mesher table) and the tetrahedra's radius ratios. Each cage binds 1000 points
+spread over its middle (points outside a non-convex cage are bound to its closest point, as always).
+"""
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+
+import cage_corpus  # noqa: E402
+import lbc_core  # noqa: E402
+from lbc_core import meshing  # noqa: E402
+from lbc_core.geometry import radius_ratios  # noqa: E402
+from lbc_core.io import read_cage  # noqa: E402
+
+FAMILIES = [
+    ("cube (6 quads)", "cube", "as-made"),
+    ("cylinder, 32 sides, n-gon caps (Blender's default)", "cylinder-32-ngon", "as-made"),
+    ("cylinder, 64 sides, triangle-fan caps", "cylinder-64-fan", "as-made"),
+    ("cone, 32 sides, n-gon cap", "cone-32-ngon", "as-made"),
+    ("prism, 16 sides, 3 rings, n-gon caps", "prism-16-rings-3", "as-made"),
+    ("UV sphere (16 × 8)", "uv-sphere", "as-made"),
+    ("torus (24 × 8)", "torus", "as-made"),
+    ("Suzanne's hull", "monkey-hull", "as-made"),
+    ("box with extruded limbs", "limbs", "as-made"),
+    ("bent tube, 12-gon caps", "bent-tube", "as-made"),
+    ("thin plate (aspect 0.02)", "thin-plate", "as-made"),
+    ("subdivided box, top nudged by 1e-4", "near-coplanar-quads", "as-made"),
+    ("cylinder moved to 1e6", "cylinder-32-ngon", "moved-1e6"),
+    ("cylinder squashed to aspect 1e-3", "cylinder-32-ngon", "squashed-1e-3"),
+    ("cylinder dented by 1e-8", "cylinder-32-ngon", "dented-1e-8"),
+    ("cylinder dented by 1e-2", "cylinder-32-ngon", "dented-1e-2"),
+    ("gargoyle cage_L12", ROOT / "tests/data/cages-3d/gargoyle/cage_L12.obj", None),
+]
+
+
+def main():
+    cells = int(sys.argv[1]) if len(sys.argv) > 1 else meshing.DEFAULT_CELLS_3D
+    rng = np.random.default_rng(0)
+    print(f"| cage | control points | tetrahedra | meshing s | bind s | meshing share | radius ratio mean / 1st pct |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for label, name, kind in FAMILIES:
+        if kind is None:
+            vertices, faces = read_cage(name)
+        else:
+            vertices, faces = cage_corpus.variant(*cage_corpus.load(name), kind)
+        low, high = vertices.min(axis=0), vertices.max(axis=0)
+        points = 0.5 * (low + high) + 0.25 * (high - low) * rng.uniform(-1.0, 1.0, (1000, 3))
+        cage = lbc_core.make_cage(vertices, faces)
+        clock = time.perf_counter()
+        mesh = meshing.mesh_domain(cage, cells=cells)
+        alone = time.perf_counter() - clock
+        clock = time.perf_counter()
+        binding = lbc_core.bind(vertices, faces, points, cells=cells)
+        total = time.perf_counter() - clock
+        share = binding.timings["meshing"] / total
+        ratio = radius_ratios(mesh.vertices, mesh.cells)
+        print(f"| {label} | {cage.n_control_points} | {len(mesh.cells)} | {alone:.2f} | {total:.1f} | "
+              f"{100 * share:.0f} % | {ratio.mean():.2f} / {np.percentile(ratio, 1):.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

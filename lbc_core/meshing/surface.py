@@ -1,0 +1,383 @@
+"""3D surface samples: the cage cut into planar regions, samples on the regions' boundaries and inside them, and
+each region's 2D Delaunay triangulation.
+
+A planar region is a connected set of cage facets whose normals agree within
+:data:`~lbc_core.meshing.COPLANAR_ANGLE` across their shared edges: the triangles an n-gon or a quad was split into,
+a grid-subdivided side of a box, a plane nudged by round-off. The edges between facets of different regions are the
+*feature edges*; only they are sampled as edges. Inside a region the split lines of n-gons are no features: an
+ear-clipped cap's skinny triangles and their small angles never reach the tetrahedraliser, which meets only the
+angles between feature edges. Every sample still keeps the facet it lies on and its barycentric coordinates there,
+so boundary values stay exact at every sample.
+"""
+
+import time
+from collections import namedtuple
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import Delaunay, cKDTree
+
+from ..geometry import circumcircles, cross2, distance_to_segments, orient_positive, triangle_normals, unit
+from . import COPLANAR_ANGLE
+from .common import bary_positions, cell_edges, far_points, rows_in, split_counts
+
+JITTER = 0.05  # random shift of samples, × their spacing: breaks co-circular and co-spherical ties
+# Region samples stay this far (× spacing) from the region's boundary and from the cage vertices in it: beyond
+# half a boundary piece, so no region sample encroaches a boundary piece to begin with.
+_MARGIN = 0.7
+_ROUNDS_2D = 30  # rounds of splitting boundary pieces missing from a region's triangulation
+
+Samples = namedtuple("Samples", "points facet bary triangles triangle_region incidence")
+Samples.__doc__ = """The cage-surface samples of one refinement round.
+
+points : (P, 3) float array, control points first (in cage order)
+facet : (P,) int array, a cage facet each point lies on
+bary : (P, 3) float array, its barycentric coordinates there
+triangles : (S, 3) int array, the regions' triangulations, oriented outward
+triangle_region : (S,) int array
+incidence : (P, R) scipy.sparse.csr_matrix, 1 where a point lies on a region (closed: its boundary included)
+"""
+
+
+class OutOfBudget(RuntimeError):
+    """Refinement would need more samples (or rounds) than its budget allows; ``Surface.trouble`` says where."""
+
+
+class Surface:
+    """The cage's planar regions and their samples, refined on request.
+
+    Points are numbered: control points (cage order), then the samples inside the feature edges (edge by edge,
+    at parameters t in (0, 1) from the edge's lower to its higher vertex index), then the samples inside the
+    regions (region by region).
+
+    Parameters
+    ----------
+    cage : Cage, in the meshing frame
+    spacing : float, the sample spacing
+    rng : numpy.random.Generator
+    budget : int, the most samples refinement may make
+    deadline : float, the time.perf_counter() after which refinement gives up
+    """
+
+    def __init__(self, cage, spacing, rng, budget, deadline):
+        self.cage, self.rng, self.spacing, self.budget, self.deadline = cage, rng, spacing, budget, deadline
+        facets = cage.facets
+        n_facets = len(facets)
+        corners = cage.vertices[facets]
+        normals = triangle_normals(corners)
+        areas = np.linalg.norm(normals, axis=1)
+        normals = normals / areas[:, None]
+        directed = np.stack([facets, np.roll(facets, -1, axis=1)], axis=2).reshape(-1, 2)  # row 3 f + k
+        edges, inverse = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        # A closed manifold cage: every edge has exactly two facets.
+        edge_facets = np.repeat(np.arange(n_facets), 3)[np.argsort(inverse, kind="stable")].reshape(-1, 2)
+        flat = np.einsum("ij,ij->i", normals[edge_facets[:, 0]], normals[edge_facets[:, 1]]) > np.cos(COPLANAR_ANGLE)
+        links = edge_facets[flat]
+        graph = sp.coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(n_facets, n_facets))
+        _, region = connected_components(graph, directed=False)
+        # Small bends add up along a curved surface: a region whose facets stray from its mean plane is taken
+        # apart into single facets.
+        mean = np.zeros((region.max() + 1, 3))
+        np.add.at(mean, region, normals * areas[:, None])
+        mean = unit(mean)
+        straying = np.unique(region[np.einsum("ij,ij->i", normals, mean[region]) < np.cos(4 * COPLANAR_ANGLE)])
+        if len(straying):
+            apart = np.isin(region, straying)
+            region[apart] = region.max() + 1 + np.arange(np.count_nonzero(apart))
+            region = np.unique(region, return_inverse=True)[1].ravel()
+        self.region = region
+        self.n_regions = region.max() + 1
+        mean = np.zeros((self.n_regions, 3))
+        np.add.at(mean, region, normals * areas[:, None])
+        self.normal = unit(mean)
+        helper = np.eye(3)[np.argmin(np.abs(self.normal), axis=1)]
+        self.axis_u = unit(np.cross(self.normal, helper))
+        self.axis_v = np.cross(self.normal, self.axis_u)  # (u, v, normal) right-handed: outward faces are ccw
+        self.origin = np.zeros((self.n_regions, 3))
+        np.add.at(self.origin, region, corners.mean(axis=1))
+        self.origin /= np.bincount(region)[:, None]
+        self.region_facets = [np.flatnonzero(region == r) for r in range(self.n_regions)]
+        self.region_vertices = [np.unique(facets[f]) for f in self.region_facets]
+        feature = region[edge_facets[:, 0]] != region[edge_facets[:, 1]]
+        self.edges = edges[feature]  # (K, 2) feature edges, low index first
+        self.edge_facet = edge_facets[feature, 0]
+        self.edge_regions = region[edge_facets[feature]]  # (K, 2)
+        self.region_edges = [np.flatnonzero(np.any(self.edge_regions == r, axis=1)) for r in range(self.n_regions)]
+        lengths = np.linalg.norm(cage.vertices[self.edges[:, 1]] - cage.vertices[self.edges[:, 0]], axis=1)
+        self.edge_length = lengths
+        self.shell_scale = 1.0 + 0.1 * rng.uniform(-1.0, 1.0, len(lengths))
+        # At least two pieces per edge, slightly uneven: evenly split edges give co-circular samples whose
+        # Delaunay triangulation is ambiguous, and no sample-free sphere may run through a box's corners.
+        counts = np.maximum(2, split_counts(lengths, spacing))
+        self.edge_params = [np.sort((np.arange(1, m) + JITTER * rng.uniform(-1.0, 1.0, m - 1)) / m) for m in counts]
+        self.inner = [self._region_lattice(r) for r in range(self.n_regions)]  # (facet, bary) per region
+        self.triangulations = [None] * self.n_regions  # per region, local numbering; None when out of date
+        self.trouble = np.arange(self.n_regions)  # the regions refinement worked on last, for error messages
+        self._number()
+
+    # --- frames and location ---------------------------------------------------------------------------------
+
+    def to_plane(self, r, points):
+        """2D coordinates (P, 2) of 3D points in region r's frame."""
+        offset = points - self.origin[r]
+        return np.stack([offset @ self.axis_u[r], offset @ self.axis_v[r]], axis=1)
+
+    def locate(self, r, xy):
+        """The facet of region r holding each 2D point and the point's barycentric coordinates there.
+
+        Returns
+        -------
+        facet : (P,) int array
+        bary : (P, 3) float array, clipped to be non-negative and to sum to 1
+        inside : (P,) bool array, False for points outside the region (beyond round-off)
+        """
+        facets = self.region_facets[r]
+        corners = np.stack([self.to_plane(r, self.cage.vertices[self.cage.facets[facets, k]]) for k in range(3)], 1)
+        a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+        area = cross2(b - a, c - a)  # (F,)
+        best_facet = np.zeros(len(xy), dtype=np.int64)
+        best_bary = np.zeros((len(xy), 3))
+        best_low = np.full(len(xy), -np.inf)
+        for chunk in np.array_split(np.arange(len(facets)), max(1, len(facets) * len(xy) // 1_000_000)):
+            p = xy[:, None, :]
+            bary = np.stack([cross2(b[chunk] - p, c[chunk] - p), cross2(c[chunk] - p, a[chunk] - p),
+                             cross2(a[chunk] - p, b[chunk] - p)], axis=2) / area[chunk, None]
+            low = bary.min(axis=2)
+            k = np.argmax(low, axis=1)
+            better = low[np.arange(len(xy)), k] > best_low
+            best_low[better] = low[better, k[better]]
+            best_facet[better] = facets[chunk[k[better]]]
+            best_bary[better] = bary[better, k[better]]
+        inside = best_low > -1e-12
+        bary = np.maximum(best_bary, 0.0)
+        return best_facet, bary / bary.sum(axis=1, keepdims=True), inside
+
+    def _boundary_segments(self, r):
+        """2D start and end points (S, 2) of region r's boundary: its feature edges, unsplit."""
+        ends = self.cage.vertices[self.edges[self.region_edges[r]]]
+        return self.to_plane(r, ends[:, 0]), self.to_plane(r, ends[:, 1])
+
+    def _region_lattice(self, r):
+        """(facet, bary) of jittered hexagonal lattice points in region r, a margin away from its boundary and from
+        the cage vertices in it."""
+        spacing = self.spacing
+        vertices_xy = self.to_plane(r, self.cage.vertices[self.region_vertices[r]])
+        low, high = vertices_xy.min(axis=0), vertices_xy.max(axis=0)
+        rows = np.arange(low[1], high[1] + spacing, spacing * np.sqrt(3.0) / 2.0)
+        cols = np.arange(low[0] - spacing, high[0] + spacing, spacing)
+        x = cols[None, :] + 0.5 * spacing * (np.arange(len(rows)) % 2)[:, None]
+        xy = np.stack([x.ravel(), np.repeat(rows, len(cols))], axis=1)
+        xy += JITTER * spacing * self.rng.uniform(-1.0, 1.0, xy.shape)
+        facet, bary, inside = self.locate(r, xy)
+        keep = inside.copy()
+        starts, ends = self._boundary_segments(r)
+        keep[keep] = distance_to_segments(xy[keep], starts, ends) >= _MARGIN * spacing
+        if keep.any():
+            keep[keep] = cKDTree(vertices_xy).query(xy[keep])[0] >= _MARGIN * spacing
+        return facet[keep], bary[keep]
+
+    # --- samples ---------------------------------------------------------------------------------------------
+
+    def _number(self):
+        """Number the samples: edge_start[k] is the first point of feature edge k, region_start[r] of region r."""
+        n = self.cage.n_control_points
+        self.edge_start = np.cumsum([n] + [len(p) for p in self.edge_params])
+        self.region_start = np.cumsum([self.edge_start[-1]] + [len(f) for f, _ in self.inner])
+        if self.region_start[-1] > self.budget:
+            raise OutOfBudget(f"{self.region_start[-1]} surface samples")
+
+    def _chain(self, k):
+        """Point indices along feature edge k, from its lower to its higher vertex, ends included."""
+        inner = self.edge_start[k] + np.arange(len(self.edge_params[k]))
+        return np.r_[self.edges[k, 0], inner, self.edges[k, 1]]
+
+    def local_points(self, r):
+        """Point indices of region r: its cage vertices, its feature edges' inner samples, its inner samples."""
+        parts = [self.region_vertices[r]]
+        parts += [self._chain(k)[1:-1] for k in self.region_edges[r]]
+        parts.append(self.region_start[r] + np.arange(len(self.inner[r][0])))
+        return np.concatenate(parts)
+
+    def samples(self, steps):
+        """All current samples and the regions' triangulations (boundary pieces missing from a region's 2D
+        triangulation are split first, a bounded number of rounds).
+
+        Returns
+        -------
+        Samples
+        """
+        cage = self.cage
+        n, n_facets = cage.n_control_points, len(cage.facets)
+        for _ in range(_ROUNDS_2D):
+            steps.check()
+            facet_of_vertex = np.empty(n, dtype=np.int64)
+            corner_of_vertex = np.empty(n, dtype=np.int64)
+            facet_of_vertex[cage.facets.ravel()] = np.repeat(np.arange(n_facets), 3)
+            corner_of_vertex[cage.facets.ravel()] = np.tile(np.arange(3), n_facets)
+            facet, bary = [facet_of_vertex], [np.eye(3)[corner_of_vertex]]
+            for k, params in enumerate(self.edge_params):
+                f = self.edge_facet[k]
+                b = np.zeros((len(params), 3))
+                low, high = (np.flatnonzero(cage.facets[f] == v)[0] for v in self.edges[k])
+                b[:, low], b[:, high] = 1.0 - params, params
+                facet.append(np.full(len(params), f))
+                bary.append(b)
+            for f, b in self.inner:
+                facet.append(f)
+                bary.append(b)
+            facet, bary = np.concatenate(facet), np.concatenate(bary)
+            self.points = bary_positions(cage, facet, bary)
+            missing = []
+            for r in range(self.n_regions):
+                steps.check()
+                if time.perf_counter() > self.deadline:
+                    raise OutOfBudget("out of time")
+                if self.triangulations[r] is None:
+                    self.triangulations[r], lost = self._triangulate(r)
+                    missing += lost
+            if not missing:
+                break
+            self.trouble = np.unique(self.edge_regions[[k for k, _ in missing]])
+            for k, piece in set(missing):
+                self._split(k, piece)
+        else:
+            raise OutOfBudget("region boundaries not recovered")
+        triangles = [self.local_points(r)[t] for r, t in enumerate(self.triangulations)]
+        self.triangle_region = np.repeat(np.arange(self.n_regions), [len(t) for t in triangles])
+        self.triangles = np.concatenate(triangles)
+        return Samples(self.points, facet, bary, self.triangles, self.triangle_region, self._incidence())
+
+    def _incidence(self):
+        """(P, R) sparse 0/1 matrix: the regions each sample lies on (vertices and edge samples on several)."""
+        rows, cols = [], []
+        for r in range(self.n_regions):
+            local = self.local_points(r)
+            rows.append(local)
+            cols.append(np.full(len(local), r))
+        rows, cols = np.concatenate(rows), np.concatenate(cols)
+        shape = (len(self.points), self.n_regions)
+        return sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=shape)
+
+    def _pieces(self, r):
+        """Region r's boundary pieces: (K, 2) point index pairs and their (feature edge, piece index) labels."""
+        pairs, labels = [], []
+        for k in self.region_edges[r]:
+            chain = self._chain(k)
+            pairs.append(np.stack([chain[:-1], chain[1:]], axis=1))
+            labels += [(int(k), i) for i in range(len(chain) - 1)]
+        return np.concatenate(pairs), labels
+
+    def _triangulate(self, r):
+        """Region r's 2D Delaunay triangles in local numbering, oriented outward, and the (edge, piece) labels of
+        its boundary pieces missing from them."""
+        local = self.local_points(r)
+        xy = self.to_plane(r, self.points[local])
+        simplices = Delaunay(np.concatenate([xy, far_points(xy)])).simplices
+        simplices = simplices[np.all(simplices < len(xy), axis=1)]
+        corners = xy[simplices]
+        area = 0.5 * cross2(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        simplices = simplices[np.abs(area) > 1e-10 * self.spacing**2]  # collinear boundary samples
+        _, _, inside = self.locate(r, xy[simplices].mean(axis=1))
+        simplices = orient_positive(xy, simplices[inside])
+        pairs, labels = self._pieces(r)
+        position = np.full(len(self.points), -1)
+        position[local] = np.arange(len(local))
+        present = rows_in(np.sort(position[pairs], axis=1), cell_edges(simplices))
+        return simplices, [labels[i] for i in np.flatnonzero(~present)]
+
+    # --- refinement ------------------------------------------------------------------------------------------
+
+    def _split(self, k, piece):
+        """Split piece ``piece`` of feature edge k: at its middle, or, next to a cage vertex, at a power-of-two
+        distance from it (concentric shells: the splits around a vertex where edges meet at a small angle land on
+        common spheres, so they stop encroaching on each other, as in Ruppert's algorithm)."""
+        params = np.r_[0.0, self.edge_params[k], 1.0]
+        t0, t1 = params[piece], params[piece + 1]
+        t = 0.5 * (t0 + t1)
+        length = self.edge_length[k]
+        if (t0 == 0.0) != (t1 == 1.0):
+            from_end = t * length if t0 == 0.0 else (1.0 - t) * length
+            # Each edge's shells are scaled by its own factor near 1: equal radii on two edges through one vertex
+            # would put four samples on a circle in a common plane, a flat tetrahedron qhull may keep.
+            shell = 2.0 ** np.round(np.log2(from_end)) * self.shell_scale[k]
+            candidate = shell / length if t0 == 0.0 else 1.0 - shell / length
+            if t0 + 0.25 * (t1 - t0) <= candidate <= t1 - 0.25 * (t1 - t0):
+                t = candidate
+        self.edge_params[k] = np.sort(np.append(self.edge_params[k], t))
+        for r in self.edge_regions[k]:
+            self.triangulations[r] = None
+        self._number()
+
+    def refine(self, missing, steps):
+        """Refine around the given missing triangles (indices into the last ``samples()`` output).
+
+        Ruppert's rules: a piece of a feature edge whose diametral sphere holds another sample is split (no
+        triangle through that piece could have an empty protecting sphere otherwise). A missing triangle with no
+        such piece gets its circumcentre added to its region, unless the circumcentre lies outside the region or
+        in the diametral circle of a piece of the region's boundary: then that piece is split instead.
+        """
+        sides = {}
+        self.trouble = np.unique(self.triangle_region[missing])
+        for r in self.trouble:
+            pairs, labels = self._pieces(r)
+            sides.update({tuple(sorted(map(int, pair))): label for pair, label in zip(pairs, labels)})
+        split = set()
+        triangle_pieces = []
+        for s in missing:
+            t = self.triangles[s]
+            triangle_pieces.append({sides[key] for key in (tuple(sorted((int(p), int(q))))
+                                                           for p, q in zip(t, np.roll(t, -1))) if key in sides})
+        split.update(self._encroached_by_samples(set().union(*triangle_pieces)))
+        inserted = {}
+        for s, pieces in zip(missing, triangle_pieces):
+            steps.check()
+            if time.perf_counter() > self.deadline:
+                raise OutOfBudget("out of time")
+            if split & pieces:
+                continue
+            r = self.triangle_region[s]
+            centre, radius = circumcircles(self.to_plane(r, self.points[self.triangles[s]])[None])
+            centre, radius = centre[0], radius[0]
+            encroached = self._encroached_pieces(r, centre)
+            _, _, inside = self.locate(r, centre[None])
+            if encroached or not inside[0] or not np.isfinite(radius):
+                split.update(encroached or [self._nearest_piece(r, centre)])
+                continue
+            accepted = inserted.setdefault(r, [])  # missing neighbours can share a circumcircle: insert it once
+            if all(np.linalg.norm(centre - c) > 0.5 * radius for c in accepted):
+                accepted.append(centre)
+        for r, centres in inserted.items():
+            facet, bary, _ = self.locate(r, np.array(centres))
+            self.inner[r] = (np.r_[self.inner[r][0], facet], np.concatenate([self.inner[r][1], bary]))
+            self.triangulations[r] = None
+        for k, piece in split:
+            self._split(k, piece)
+        self._number()
+
+    def _encroached_by_samples(self, pieces):
+        """The (edge, piece) labels among ``pieces`` whose diametral sphere holds a sample."""
+        pieces = list(pieces)
+        if not pieces:
+            return []
+        ends = np.array([self._chain(k)[[i, i + 1]] for k, i in pieces])
+        a, b = self.points[ends[:, 0]], self.points[ends[:, 1]]
+        near = cKDTree(self.points).query_ball_point(0.5 * (a + b), 0.5 * np.linalg.norm(b - a, axis=1) * (1 - 1e-9))
+        return [piece for piece, found, own in zip(pieces, near, ends) if set(found) - set(own)]
+
+    def _piece_ends_2d(self, r):
+        pairs, labels = self._pieces(r)
+        return self.to_plane(r, self.points[pairs[:, 0]]), self.to_plane(r, self.points[pairs[:, 1]]), labels
+
+    def _encroached_pieces(self, r, centre):
+        """(edge, piece) labels of region r's boundary pieces whose diametral circle holds the 2D point ``centre``."""
+        start, end, labels = self._piece_ends_2d(r)
+        middle, half = 0.5 * (start + end), 0.5 * np.linalg.norm(end - start, axis=1)
+        return [labels[i] for i in np.flatnonzero(np.linalg.norm(centre - middle, axis=1) < half)]
+
+    def _nearest_piece(self, r, centre):
+        """(edge, piece) label of region r's boundary piece nearest to the 2D point ``centre``."""
+        start, end, labels = self._piece_ends_2d(r)
+        distance = [distance_to_segments(centre[None], start[i:i + 1], end[i:i + 1])[0] for i in range(len(start))]
+        return labels[int(np.argmin(distance))]

@@ -1,0 +1,366 @@
+"""3D backend: a conforming Delaunay tetrahedralisation of the cage, on scipy's qhull.
+
+Samples on the cage's planar regions and feature edges (:mod:`.surface`) are triangulated region by region; a
+body-centred cubic (BCC) lattice fills space, except for a band along the surface and the protecting spheres of the
+surface triangles (the sphere centred in the triangle's plane through its corners: if it holds no other sample, that
+triangle is a face of the 3D Delaunay tetrahedralisation). Surface triangles missing from the tetrahedralisation are
+refined (circumcentre insertion, or the split of the feature-edge piece it encroaches, as in Ruppert's algorithm)
+until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
+the cage's winding number around it is 1. The lattice points then take two optimal-Delaunay smoothing steps and one
+sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming tetrahedralisation. When the cell count
+misses the target by more than 15 % (thin or small cages), everything is done once more with a corrected size.
+
+Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells),
+and a cancel check in each round. When recovery
+runs out of its budget (feature edges meeting at very small angles can make Ruppert-style refinement cascade), the
+last conforming tetrahedralisation of the smoothing rounds is kept if there is one; else the mesh is made again
+with fresh jitter and a coarser surface, and only then is the cage refused, naming the faces where it failed.
+"""
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import Delaunay, cKDTree
+
+from ..errors import CageError
+from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, signed_measures
+from ..geometry import winding_numbers
+from .common import far_points, on_common, raw_mesh, rows_in
+from .surface import JITTER, OutOfBudget, Surface
+
+# Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
+# along the surface and the smoothing, the meshes of the test cages have 7.9 to 11.4 per a^3 at 4k, 8.4 to 9.8 at 10k.
+_TETS_PER_CUBE = 8.5
+_COUNT_TOLERANCE = 0.15  # beyond this relative miss of the target cell count, mesh again with a corrected size
+_SURFACE_SPACING = 1.0  # surface sample spacing, × the lattice cube side
+_BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage surface
+_ODT_SWEEPS = 2  # optimal-Delaunay smoothing steps of the lattice points
+_SLIVER_ROUNDS = 1  # then rounds of random moves of the lattice corners of slivers ...
+_SLIVER_RATIO = 0.15  # ... tetrahedra with a radius ratio below this
+_PERTURBATION = 0.15  # the largest move per coordinate, × the lattice cube side
+_RECOVERY_ROUNDS = 40  # rounds of surface refinement per tetrahedralisation
+# Refinement may make at most this many times the initial surface samples (plus a few thousand for small cages).
+_SAMPLE_BUDGET = 6
+_ATTEMPTS = 3  # fresh jitter and a coarser surface (× 1.5 spacing each time) before a cage is refused
+# Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells): nearly touching parts
+# of a cage need samples as close as the gap, which can take minutes to reach or never fit the sample budget. The
+# slowest corpus mesh takes 8 s at 8000 cells, 33 s at 64000, on the loaded 2-core test machine.
+_SECONDS = 10.0
+_SECONDS_PER_1000 = 2.0
+
+
+class _NotConforming(Exception):
+    """The tetrahedralisation could not be made to follow the surface; carries the cage facets where it failed."""
+
+    def __init__(self, facets):
+        super().__init__(facets)
+        self.facets = facets
+
+
+def mesh(cage, cells, steps):
+    """Tetrahedra filling the cage (in the meshing frame): a DomainMesh before the final check."""
+    side = (_TETS_PER_CUBE * cage.measure / cells) ** (1.0 / 3.0)
+    deadline = time.perf_counter() + _SECONDS + _SECONDS_PER_1000 * cells / 1000.0
+    surface, vertices, tets = _attempts(cage, side, deadline, steps.part(0.0, 0.6))
+    ratio = len(tets) / cells
+    if abs(ratio - 1.0) > _COUNT_TOLERANCE:  # thin or small cages: mostly surface band, fewer tetrahedra per volume
+        try:
+            surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), deadline, steps.part(0.6, 0.95))
+        except CageError:
+            pass  # the first mesh conforms: keep it, with its cell count off target
+    steps(0.95, "checking the tetrahedralisation")
+    samples = surface.last
+    return raw_mesh(vertices, tets, np.arange(len(samples.points)), samples.facet, samples.bary)
+
+
+def _attempts(cage, side, deadline, steps):
+    """The smoothed conforming tetrahedralisation at lattice side ``side``, retried with fresh jitter and a coarser
+    surface when refinement runs out of budget; CageError after the last attempt or past the deadline."""
+    for attempt in range(_ATTEMPTS):
+        try:
+            return _tetrahedralise(cage, side, 1.5**attempt, attempt, deadline,
+                                   steps.part(attempt / _ATTEMPTS, (attempt + 1) / _ATTEMPTS))
+        except _NotConforming as failure:
+            facets = failure.facets
+        if time.perf_counter() > deadline:
+            break
+    raise CageError(_diagnose(cage, facets))
+
+
+def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
+    """The conforming Delaunay tetrahedralisation for a lattice of cube side ``side``, smoothed.
+
+    Returns
+    -------
+    surface : Surface, its ``last`` samples being the mesh's first vertices
+    vertices : (N, 3) float array
+    tets : (T, 4) int array, positively oriented
+    """
+    rng = np.random.default_rng(seed)  # fixed: the same cage always gives the same mesh
+    steps(0.0, "sampling the cage surface")
+    spacing = _SURFACE_SPACING * side * coarsening
+    budget = int(_SAMPLE_BUDGET * (_initial_count(cage, spacing)) + 5000)
+    surface = Surface(cage, spacing, rng, budget, deadline)
+    try:
+        samples = surface.samples(steps)
+    except OutOfBudget:
+        raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
+    lattice = _bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
+    far = far_points(cage.vertices)
+    rounds = _ODT_SWEEPS + _SLIVER_ROUNDS + 1
+    best = None
+    for round_ in range(rounds):
+        steps((round_ + 1) / (rounds + 1), "tetrahedralising (Delaunay)")
+        try:
+            samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
+        except _NotConforming:
+            if best is None:
+                raise
+            break  # a smoothing round lost conformity: keep the last conforming mesh
+        n_surface = len(samples.points)
+        vertices = np.concatenate([samples.points, lattice, far])
+        tets = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, steps)
+        used = np.unique(tets)
+        if len(np.setdiff1d(np.arange(n_surface), used)) or not _conforms(tets, samples.triangles):
+            if best is None:
+                raise _NotConforming(np.arange(len(cage.facets)))
+            break
+        renumber = np.full(len(vertices), -1)
+        renumber[used] = np.arange(len(used))  # the surface samples keep their numbers
+        surface.last = samples
+        best = (vertices[used], orient_positive(vertices[used], renumber[tets]))
+        if round_ < _ODT_SWEEPS:
+            # Lattice points outside the cage are dropped; the inside ones move to improve the tetrahedra.
+            lattice = _odt_positions(vertices, tets, used[used >= n_surface])
+        elif round_ < rounds - 1:
+            # Sliver perturbation: Delaunay keeps slivers (flat tetrahedra with well-spaced corners) when their
+            # corners are nearly co-spherical; moving a lattice corner a little makes most of them go away.
+            bad = tets[radius_ratios(vertices, tets) < _SLIVER_RATIO]
+            movable = np.unique(bad[bad >= n_surface]) - n_surface
+            if len(movable) == 0:
+                break
+            lattice = lattice.copy()
+            lattice[movable] += _PERTURBATION * side * rng.uniform(-1.0, 1.0, (len(movable), 3))
+    return surface, *best
+
+
+def _initial_count(cage, spacing):
+    """About how many surface samples a spacing gives: area over the area per sample of a hexagonal lattice."""
+    corners = cage.vertices[cage.facets]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1).sum()
+    return area / (np.sqrt(3.0) / 2.0 * spacing**2) + cage.n_control_points
+
+
+def _conforming_delaunay(surface, lattice, far, deadline, steps):
+    """Refine the surface samples until every surface triangle is a face of the Delaunay tetrahedralisation.
+
+    Returns
+    -------
+    samples : surface.Samples
+    lattice : (I, 3) float array, the lattice points kept (outside the protecting spheres)
+    delaunay : scipy.spatial.Delaunay of the samples' points, lattice and far, in that order
+    """
+    try:
+        for _ in range(_RECOVERY_ROUNDS):
+            if time.perf_counter() > deadline:
+                break
+            samples = surface.samples(steps)
+            lattice = _outside_protecting_spheres(lattice, samples.points, samples.triangles)
+            steps.check()
+            delaunay = Delaunay(np.concatenate([samples.points, lattice, far]))
+            is_face = rows_in(np.sort(samples.triangles, axis=1), _cell_faces(delaunay.simplices))
+            if is_face.all():
+                return samples, lattice, delaunay
+            surface.refine(np.flatnonzero(~is_face), steps)
+    except OutOfBudget:
+        pass
+    raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble)))
+
+
+def _conforms(tets, triangles):
+    """Whether the tetrahedra's boundary triangles (faces of one tetrahedron) are exactly the surface triangles."""
+    base = int(tets.max()) + 1  # a sorted face (i, j, k) is the number (i base + j) base + k: exact below 2^63
+    faces = _cell_faces(tets).astype(np.int64)
+    keys, counts = np.unique((faces[:, 0] * base + faces[:, 1]) * base + faces[:, 2], return_counts=True)
+    boundary = keys[counts == 1]
+    triangles = np.sort(triangles, axis=1).astype(np.int64)
+    expected = (triangles[:, 0] * base + triangles[:, 1]) * base + triangles[:, 2]
+    return len(boundary) == len(expected) and np.isin(expected, boundary).all()
+
+
+def _odt_positions(vertices, tets, movable):
+    """One optimal-Delaunay-triangulation smoothing step (Chen 2004): each movable vertex goes to the
+    volume-weighted mean of the circumcentres of its tetrahedra.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array
+    tets : (T, 4) int array
+    movable : (M,) int array, vertices not on the cage
+
+    Returns
+    -------
+    (M, 3) float array, their new positions
+    """
+    corners = vertices[tets]
+    edges = corners[:, 1:] - corners[:, :1]  # (T, 3, 3)
+    volume = np.abs(np.linalg.det(edges)) / 6.0
+    # The circumcentre c solves 2 (p_k - p_0) . (c - p_0) = |p_k - p_0|^2; a flat tetrahedron has weight 0.
+    flat = volume <= 1e-12 * np.einsum("tkd,tkd->t", edges, edges) ** 1.5
+    edges[flat] = np.eye(3)
+    centres = corners[:, 0] + np.linalg.solve(2.0 * edges, np.einsum("tkd,tkd->tk", edges, edges)[..., None])[..., 0]
+    volume[flat] = 0.0
+    weight = np.bincount(tets.ravel(), np.repeat(volume, 4), minlength=len(vertices))
+    moved = np.stack([np.bincount(tets.ravel(), np.repeat(volume * centres[:, d], 4), minlength=len(vertices))
+                      for d in range(3)], axis=1)
+    return moved[movable] / weight[movable, None]
+
+
+def _outside_protecting_spheres(lattice, points, triangles):
+    """Drop the lattice points inside (or on) the protecting sphere of any surface triangle."""
+    if len(lattice) == 0:
+        return lattice
+    centres, radii = circumspheres(points, triangles)
+    near = cKDTree(lattice).query_ball_point(centres, radii * (1.0 + 1e-6))
+    drop = np.unique(np.concatenate([np.asarray(i, dtype=np.int64) for i in near] + [np.zeros(0, np.int64)]))
+    return np.delete(lattice, drop, axis=0)
+
+
+def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
+    """Jittered body-centred cubic lattice points of cube side ``side`` inside the cage, except those closer than
+    ``band`` to the cage surface.
+
+    Returns
+    -------
+    (I, 3) float array
+    """
+    low = cage.vertices.min(axis=0) - side
+    shape = np.ceil((cage.vertices.max(axis=0) + side - low) / side).astype(np.int64) + 1
+    index = np.stack(np.meshgrid(*[np.arange(m) for m in shape], indexing="ij"), axis=-1).reshape(-1, 3)
+    # Corners (i, j, k) then cube centres (i, j, k) + 1/2, numbered alike.
+    points = low + side * np.concatenate([index, index + 0.5])
+    points += JITTER * side * rng.uniform(-1.0, 1.0, points.shape)
+    # The nearest surface sample is at most one circumradius farther than the surface itself: only the points in
+    # between need the exact distance.
+    nearest, _ = cKDTree(surface_points).query(points)
+    cover = circumspheres(surface_points, triangles)[1].max()
+    keep = nearest >= band
+    unsure = np.flatnonzero(keep & (nearest < band + cover))
+    keep[unsure] = _surface_distance(cage, points[unsure], band, steps) >= band
+    # A lattice edge (centre to one of its cube's corners) between two kept points stays within its half length
+    # (at most 0.52 side with the jitter; band = 0.7 side) of one of them, so it cannot cross the surface: the kept
+    # points connected by lattice edges are all inside or all outside, which one winding number per piece decides.
+    centre = np.flatnonzero(np.all(index < shape - 1, axis=1))
+    offsets = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
+    corner = np.ravel_multi_index((index[centre][:, None, :] + offsets[None]).reshape(-1, 3).T, shape)
+    centre = np.repeat(centre + len(index), len(offsets))
+    linked = keep[centre] & keep[corner]
+    inside = _inside_pieces(cage, points, keep, centre[linked], corner[linked], steps)
+    return points[keep & inside]
+
+
+def _inside_pieces(cage, points, keep, ends_a, ends_b, steps, priority=None):
+    """Whether each point lies inside the cage, for graphs whose connected pieces are all inside or all outside.
+
+    Parameters
+    ----------
+    points : (P, 3) float array
+    keep : (P,) bool array, the points to classify (the others come out False)
+    ends_a, ends_b : (L,) int arrays, the graph's links between kept points
+    priority : (P,) float array or None
+        The winding number is evaluated at the point of highest priority of each piece (default: any point).
+
+    Returns
+    -------
+    (P,) bool array
+    """
+    graph = sp.coo_matrix((np.ones(len(ends_a)), (ends_a, ends_b)), shape=(len(points),) * 2)
+    _, piece = connected_components(graph, directed=False)
+    candidates = np.flatnonzero(keep)
+    if priority is not None:
+        candidates = candidates[np.argsort(-priority[candidates], kind="stable")]
+    pieces, first = np.unique(piece[candidates], return_index=True)
+    winding = winding_numbers(cage.vertices, cage.facets, points[candidates[first]], steps.check)
+    _check_winding(winding)
+    inside = np.zeros(piece.max() + 1, dtype=bool)
+    inside[pieces] = winding > 0.5
+    return keep & inside[piece]
+
+
+def _check_winding(winding):
+    """Raise CageError unless every winding number (at points off the surface) is 0 or 1."""
+    if np.any(np.abs(winding - np.round(winding)) > 0.1) or np.any((winding > 1.5) | (winding < -0.5)):
+        raise CageError(
+            "the cage surface overlaps itself (some space is enclosed twice or with the wrong orientation): "
+            "make sure the cage does not pass through itself and that no part is inside-out"
+        )
+
+
+def _surface_distance(cage, points, reach, steps):
+    """Distance from each point to the cage surface, where it is below ``reach`` (inf beyond).
+
+    Returns
+    -------
+    (P,) float array
+    """
+    corners = cage.vertices[cage.facets]
+    centres = corners.mean(axis=1)
+    radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
+    # Only the (point, facet) pairs closer than `reach` + the facet's radius to the facet's centre can be in reach.
+    near = cKDTree(centres).query_ball_point(points, reach + radii.max())
+    point = np.repeat(np.arange(len(points)), [len(n) for n in near])
+    facet = np.concatenate([np.asarray(n, dtype=np.int64) for n in near] + [np.zeros(0, np.int64)])
+    best = np.full(len(points), np.inf)
+    for chunk in np.array_split(np.arange(len(point)), max(1, len(point) // 500_000)):
+        steps.check()
+        squared, _ = closest_on_triangles(points[point[chunk]], *corners[facet[chunk]].transpose(1, 0, 2))
+        np.minimum.at(best, point[chunk], np.sqrt(squared))
+    return best
+
+
+def _cell_faces(tets):
+    """The four faces of each tetrahedron, each sorted, face k opposite corner k of every tetrahedron in turn.
+
+    Returns
+    -------
+    (4 T, 3) int array
+    """
+    return np.sort(np.concatenate([np.delete(tets, k, axis=1) for k in range(4)]), axis=1)
+
+
+def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, steps):
+    """The tetrahedra inside the cage, once every surface triangle is a face of the tetrahedralisation.
+
+    The surface triangles cut the tetrahedra into connected pieces, each inside or outside as a whole.
+    Tetrahedra with all four corners on one planar region are flat and belong to neither.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array, the surface samples first
+    tets, neighbours : (T, 4) int arrays, as scipy.spatial.Delaunay's simplices and neighbors
+    samples : surface.Samples
+
+    Returns
+    -------
+    (T', 4) int array
+    """
+    cut = rows_in(_cell_faces(tets), np.sort(samples.triangles, axis=1)).reshape(4, len(tets)).T
+    flat = on_common(samples.incidence, tets)
+    link = (neighbours >= 0) & ~cut & ~flat[:, None]
+    link[link] = ~flat[neighbours[link]]
+    owner = np.repeat(np.arange(len(tets))[:, None], 4, axis=1)
+    # The winding number is evaluated at the centroid of each piece's largest tetrahedron, well off the surface.
+    inside = _inside_pieces(cage, vertices[tets].mean(axis=1), ~flat, owner[link], neighbours[link], steps,
+                            priority=np.abs(signed_measures(vertices, tets)))
+    return tets[inside]
+
+
+def _diagnose(cage, facets):
+    """The error message when the tetrahedra cannot be made to follow the cage near the given facets."""
+    faces = np.unique(cage.facet_face[facets])
+    listed = ", ".join(str(f) for f in faces[:10]) + (" ..." if len(faces) > 10 else "")
+    return (f"could not make the tetrahedra follow the cage surface near its faces {listed} (numbered from 0 in "
+            "input order): faces meeting at very sharp angles or nearly touching parts there are the usual cause; "
+            "widen those angles or move the parts apart, or try a different cell count")

@@ -1,0 +1,25 @@
+"""A new user's first cage: Blender's Cylinder as it comes (32 sides, n-gon caps) around a mesh, bound with the
+add-on's operator at the default resolution. This cage used to hang the 3D mesher (issue 11)."""
+
+import bpy
+import numpy as np
+
+from blender_scenes import bind, evaluated_positions, positions, reset
+
+
+def test_blender_cylinder_cage_binds_and_deforms():
+    reset()
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6)
+    mesh = bpy.context.active_object
+    bpy.ops.mesh.primitive_cylinder_add()
+    cage = bpy.context.active_object
+    assert max(len(p.vertices) for p in cage.data.polygons) == 32  # the n-gon caps, as Blender makes them
+    assert bind(mesh, cage) == {"FINISHED"}
+    assert mesh.lbc.is_bound
+    rest = positions(mesh.data)
+    np.testing.assert_allclose(evaluated_positions(mesh), rest, atol=1e-5)
+    for vertex in cage.data.vertices:  # move the cage up by 0.5: the mesh follows
+        vertex.co.z += 0.5
+    cage.data.update()
+    moved = evaluated_positions(mesh)
+    np.testing.assert_allclose(moved, rest + [0.0, 0.0, 0.5], atol=1e-4)
