@@ -1,6 +1,7 @@
 """Binding: the whole pipeline from a cage and points to sparse coordinates, deformation, and files.
 
-    cage → domain mesh → boundary values → geodesic TV weights → ADMM → interpolation to the points → reduction
+    cage → domain mesh → boundary values → geodesic TV weights → ADMM → smooth interpolation to the points →
+    reduction
 """
 
 import json
@@ -23,6 +24,7 @@ from .io import writing
 from .meshing import DomainMesh, mesh_domain
 from .options import DEFAULT_CELLS, BindOptions
 from .reduction import interpolate_and_reduce
+from .smoothing import SmoothInterpolation
 from .parallel import thread_map, worker_count
 from .progress import Progress
 from .solver import check_memory, solve_forecast, solve_on_mesh
@@ -444,9 +446,11 @@ def bind(
     )
     timings["interpolation"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    weights = interpolate_and_reduce(located, result.weights, unit_cage.vertices, unit_domain.vertices, threshold,
-                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal,
-                                     progress=progress.part(*_STAGES["reduction"]))
+    reduction = progress.part(*_STAGES["reduction"])
+    weights = interpolate_and_reduce(SmoothInterpolation(unit_domain.vertices, unit_domain.cells, located,
+                                                         progress=reduction),
+                                     result.weights, unit_cage.vertices, unit_domain.vertices, threshold,
+                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
     timings["reduction"] = time.perf_counter() - clock
     progress(1.0, "bound")
     options = dict(solver_options, cells=len(unit_domain.cells), threshold=threshold, method=method)

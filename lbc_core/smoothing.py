@@ -1,0 +1,155 @@
+"""Smooth evaluation of the coordinates at the points: a moving least-squares fit of the solver's P1 solution.
+
+The solver's coordinates are linear inside each cell, so a deformed smooth surface creases where it crosses a cell
+face. Here a point's coordinates are instead the value at the point of the linear function that best fits, by
+least squares weighted with a smooth compactly supported kernel, the coordinates at the domain vertices within a
+radius of it (moving least squares). The fit is a fixed linear map of the vertex values, smooth in the point, and it
+reproduces any linear function of the vertices exactly; the coordinates at the vertices sum to 1 and reproduce the
+vertices, so the fitted coordinates sum to 1 and reproduce the point, before any correction. What the fit can lose,
+non-negativity where a coordinate's support ends, the reduction restores on each point's support
+(:mod:`lbc_core.reduction`).
+
+Near the cage the fit fades into the plain P1 interpolation, which takes the boundary values: a point on a cage
+face gets the face's linear coordinates, and a point on a cage vertex is that vertex's alone (Lagrange).
+"""
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from .interpolation import _FacetSearch
+from .progress import Progress
+
+# The fit's radius in median cell edges: wider is smoother and costs more influences per point (bench/RESULTS.md).
+RADIUS_EDGES = 2.5
+# Distance from the cage, in median cell edges, over which the fit fades into the P1 interpolation.
+FADE_EDGES = 1.0
+# A fit whose moment matrix is this ill-conditioned (too few or coplanar vertices in reach) is not used.
+MAX_CONDITION = 1e8
+_CHUNK = 1 << 14  # points fitted at a time: bounds the (point, vertex) pairs held
+
+
+class SmoothInterpolation:
+    """The (m, N) interpolation matrix from a domain's vertices to points, rows computed on demand.
+
+    Row i is (1 - β_i) times the point's P1 barycentric row plus β_i times its moving least-squares row, where β
+    rises smoothly from 0 on the cage to 1 at ``fade`` from it. Every row sums to 1 and reproduces the point (or,
+    for a point outside the cage, the domain point it is bound to). Used like a CSR matrix by
+    :func:`lbc_core.reduction.interpolate_and_reduce`: ``shape`` and row slices.
+
+    Parameters
+    ----------
+    vertices : (N, d) float array
+        Domain mesh vertices.
+    cells : (F, d+1) int array
+        Domain mesh cells (their boundary is the cage).
+    located : (m, N) scipy.sparse.csr_matrix
+        The points' P1 barycentric rows (:func:`lbc_core.interpolation.interpolation_matrix`).
+    radius_edges, fade_edges : float
+        The fit's radius and the fade's width, in median cell edge lengths.
+    progress : Progress, optional
+        Checked for cancellation before each chunk of rows (:class:`~lbc_core.errors.Cancelled`).
+    """
+
+    def __init__(self, vertices, cells, located, radius_edges=RADIUS_EDGES, fade_edges=FADE_EDGES, progress=None):
+        self.vertices = np.asarray(vertices, dtype=float)
+        self.located = sp.csr_matrix(located)
+        self.shape = self.located.shape
+        self.progress = Progress.of(progress)
+        edge = median_edge(self.vertices, cells)
+        self.radius = radius_edges * edge
+        self.fade = fade_edges * edge
+        self.tree = cKDTree(self.vertices)
+        # The fade follows the P1 interpolation of the vertices' distances to the cage: exactly 0 on it, and found
+        # for N vertices instead of m points.
+        boundary = _FacetSearch(self.vertices, np.asarray(cells))
+        self.cage_distance = np.sqrt(boundary.closest(self.vertices, self.progress.check).squared)
+
+    def __getitem__(self, rows):
+        """Rows ``rows`` (a slice) of the matrix, as CSR."""
+        linear = self.located[rows]
+        blocks = []
+        for start in range(0, linear.shape[0], _CHUNK):
+            self.progress.check()
+            blocks.append(self._rows(linear[start:start + _CHUNK]))
+        return sp.vstack(blocks, format="csr") if blocks else linear
+
+    def _rows(self, linear):
+        points = linear @ self.vertices
+        blend = fade_in(linear @ self.cage_distance / self.fade)
+        fitted, fits = moving_least_squares(self.vertices, self.tree, points, self.radius)
+        blend = np.where(fits, blend, 0.0)
+        return (sp.diags(1.0 - blend) @ linear + sp.diags(blend) @ fitted).tocsr()
+
+
+def moving_least_squares(vertices, tree, points, radius):
+    """Moving least-squares rows: the value at each point of the kernel-weighted least-squares linear fit.
+
+    Parameters
+    ----------
+    vertices : (N, d) float array
+    tree : scipy.spatial.cKDTree of ``vertices``
+    points : (k, d) float array
+    radius : float
+        The kernel's support radius (length units).
+
+    Returns
+    -------
+    rows : (k, N) scipy.sparse.csr_matrix
+        Row i applied to values at the vertices gives the fit's value at point i; it sums to 1 and reproduces the
+        point (``rows @ vertices == points`` up to rounding). Rows of points with no usable fit are empty.
+    fits : (k,) bool array
+        Points whose neighbourhood holds enough vertices, not all in a plane, for a well-conditioned fit.
+    """
+    k, d = points.shape
+    pairs = cKDTree(points).sparse_distance_matrix(tree, radius, output_type="coo_matrix").tocsr()
+    # sparse_distance_matrix leaves out pairs at distance 0: a point on a vertex gets that vertex back.
+    _, on_vertex = tree.query(points, distance_upper_bound=0.0)
+    hit = np.flatnonzero(on_vertex < len(vertices))
+    kernel = sp.csr_matrix((wendland(pairs.data / radius), pairs.indices, pairs.indptr), shape=(k, len(vertices)))
+    kernel = (kernel + sp.csr_matrix((np.ones(len(hit)), (hit, on_vertex[hit])), shape=kernel.shape)).tocsr()
+    # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ.
+    local = vertices / radius
+    centre = points / radius
+    upper = [(a, b) for a in range(d) for b in range(a, d)]
+    sums = kernel @ np.c_[np.ones(len(vertices)), local, np.stack([local[:, a] * local[:, b] for a, b in upper], 1)]
+    mass, first = sums[:, 0], sums[:, 1:d + 1] - centre * sums[:, :1]  # Σ K, Σ K (v - p)
+    second = np.empty((k, d, d))
+    for column, (a, b) in enumerate(upper):
+        # Σ K (v_a - p_a)(v_b - p_b) = Σ K v_a v_b - p_a Σ K v_b - p_b Σ K v_a + p_a p_b Σ K
+        second[:, a, b] = second[:, b, a] = (sums[:, 1 + d + column] - centre[:, a] * sums[:, 1 + b]
+                                             - centre[:, b] * sums[:, 1 + a] + centre[:, a] * centre[:, b] * mass)
+    moments = np.empty((k, d + 1, d + 1))
+    moments[:, 0, 0], moments[:, 0, 1:], moments[:, 1:, 0], moments[:, 1:, 1:] = mass, first, first, second
+    eigenvalues = np.linalg.eigvalsh(moments)
+    fits = eigenvalues[:, 0] > eigenvalues[:, -1] / MAX_CONDITION
+    # Value at the point of the fit = e₀ᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e₀ (M is symmetric).
+    solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
+                             np.broadcast_to(np.eye(d + 1)[:, :1], (k, d + 1, 1)))[:, :, 0]
+    row = np.repeat(np.arange(k), np.diff(kernel.indptr))
+    slope = solved[:, 1:]
+    factor = solved[row, 0] + np.einsum("pj,pj->p", local[kernel.indices] - centre[row], slope[row])
+    rows = sp.csr_matrix((kernel.data * factor * fits[row], kernel.indices, kernel.indptr), shape=kernel.shape)
+    rows.eliminate_zeros()
+    return rows, fits
+
+
+def wendland(r):
+    """Wendland's C² kernel (1 - r)⁴ (4 r + 1) on [0, 1], 0 beyond; r is a distance over the support radius."""
+    r = np.clip(r, 0.0, 1.0)
+    return (1.0 - r) ** 4 * (4.0 * r + 1.0)
+
+
+def fade_in(t):
+    """Smootherstep: 0 at t ≤ 0, 1 at t ≥ 1, with zero first and second derivatives at both ends."""
+    t = np.clip(t, 0.0, 1.0)
+    return t ** 3 * (t * (6.0 * t - 15.0) + 10.0)
+
+
+def median_edge(vertices, cells):
+    """Median edge length of a simplicial mesh (length units)."""
+    cells = np.asarray(cells)
+    corners = cells.shape[1]
+    lengths = [np.linalg.norm(vertices[cells[:, a]] - vertices[cells[:, b]], axis=1)
+               for a in range(corners) for b in range(a + 1, corners)]
+    return float(np.median(np.concatenate(lengths)))

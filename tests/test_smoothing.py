@@ -1,0 +1,108 @@
+"""Smooth evaluation of the coordinates at the points (lbc_core.smoothing), and what a bind guarantees with it."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import lbc_core
+from bench import capsule
+from lbc_core.errors import Cancelled
+from lbc_core.interpolation import interpolation_matrix
+from lbc_core.progress import Progress
+from lbc_core.reduction import interpolate_and_reduce
+from lbc_core.smoothing import SmoothInterpolation, fade_in, median_edge, moving_least_squares, wendland
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_moving_least_squares_rows_sum_to_one_and_reproduce_the_points(d):
+    rng = np.random.default_rng(d)
+    vertices = rng.random((2000, d))
+    points = np.vstack([0.2 + 0.6 * rng.random((300, d)), vertices[:5]])
+    rows, fits = moving_least_squares(vertices, cKDTree(vertices), points, radius=0.25)
+    assert fits.all()
+    assert np.abs(np.asarray(rows.sum(axis=1)).ravel() - 1.0).max() < 1e-12
+    assert np.abs(rows @ vertices - points).max() < 1e-12
+
+
+def test_a_point_on_a_vertex_keeps_that_vertex_in_its_fit():
+    # The kd-tree's pair search leaves out pairs at distance 0; the vertex under the point has the kernel's peak.
+    rng = np.random.default_rng(0)
+    vertices = rng.random((2000, 3))
+    rows, _ = moving_least_squares(vertices, cKDTree(vertices), vertices[:3], radius=0.3)
+    for point in range(3):
+        assert rows[point, point] == rows[point].max() > 0
+
+
+def test_a_flat_neighbourhood_is_not_fitted():
+    grid = np.stack(np.meshgrid(np.linspace(0, 1, 10), np.linspace(0, 1, 10), [0.0]), axis=-1).reshape(-1, 3)
+    rows, fits = moving_least_squares(grid, cKDTree(grid), np.array([[0.5, 0.5, 0.0]]), radius=0.3)
+    assert not fits.any() and rows.nnz == 0
+
+
+def test_kernel_and_fade_ends():
+    assert wendland(np.array([0.0, 1.0, 2.0])).tolist() == [1.0, 0.0, 0.0]
+    assert fade_in(np.array([-1.0, 0.0, 1.0, 2.0])).tolist() == [0.0, 0.0, 1.0, 1.0]
+    step = 1e-6  # flat at both ends: the blend adds no crease where it starts or ends
+    assert fade_in(np.array([step]))[0] < 1e-15 and 1 - fade_in(np.array([1 - step]))[0] < 1e-15
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """The capsule scene, small: 1346 mesh vertices, then the cage's vertices and its cap faces' centroids."""
+    mesh, faces = capsule.capsule(around=32, rows=42)
+    cage, cage_faces = capsule.cage()
+    caps = [face for face in cage_faces if len(face) == 3]
+    centroids = np.array([cage[face].mean(axis=0) for face in caps])
+    binding = lbc_core.bind(cage, cage_faces, np.vstack([mesh, cage, centroids]), cells=3000)
+    return dict(mesh=mesh, faces=faces, cage=cage, caps=caps, binding=binding)
+
+
+def test_smooth_rows_sum_to_one_reproduce_and_keep_p1_on_the_cage(scene):
+    domain = scene["binding"].domain
+    points = scene["binding"].points
+    located, _, _ = interpolation_matrix(domain.vertices, domain.cells, points)
+    smooth = SmoothInterpolation(domain.vertices, domain.cells, located)
+    rows = smooth[0:len(points)]
+    assert np.abs(np.asarray(rows.sum(axis=1)).ravel() - 1.0).max() < 1e-12
+    assert np.abs(rows @ domain.vertices - points).max() < 1e-12
+    on_cage = slice(len(scene["mesh"]), len(points))
+    assert abs(rows[on_cage] - located[on_cage]).max() < 1e-15
+
+
+def test_bind_keeps_every_guarantee_at_the_points(scene):
+    binding, mesh, cage = scene["binding"], scene["mesh"], scene["cage"]
+    weights = binding.weights
+    assert weights.data.min() >= 0
+    assert np.abs(np.asarray(weights.sum(axis=1)).ravel() - 1.0).max() <= 1e-9
+    miss = np.linalg.norm(weights @ binding.rest_cage_vertices - binding.points, axis=1)
+    assert miss.max() <= 1e-9 * binding.cage.bbox_diagonal
+    at_vertices = weights[len(mesh):len(mesh) + len(cage)].toarray()
+    assert np.array_equal(at_vertices, np.eye(len(cage)))  # Lagrange (the scene's cage has no welded vertices)
+    on_caps = weights[len(mesh) + len(cage):].toarray()
+    for row, face in zip(on_caps, scene["caps"]):  # a point on a cage face gets the face's linear coordinates
+        assert np.allclose(row[face], 1 / 3, atol=1e-12) and np.count_nonzero(row) == 3
+
+
+def test_smoothing_halves_the_bent_capsules_kinks(scene):
+    binding, mesh, faces, cage = scene["binding"], scene["mesh"], scene["faces"], scene["cage"]
+    displacement = capsule.bend(cage) - cage
+    smooth = capsule.kink_figures(mesh, mesh + binding.weights[:len(mesh)] @ displacement, faces)
+    domain = binding.domain
+    located, _, _ = interpolation_matrix(domain.vertices, domain.cells, mesh)
+    linear = interpolate_and_reduce(located, binding.domain_weights, binding.cage.vertices, domain.vertices,
+                                    binding.options["threshold"], 1e-9 * binding.cage.bbox_diagonal)
+    piecewise = capsule.kink_figures(mesh, mesh + linear @ displacement, faces)
+    # Measured: p99 2.9° against 5.8°, max 4.2° against 10.8° (3000 cells).
+    assert smooth["p99"] < 0.6 * piecewise["p99"] and smooth["max"] < 0.6 * piecewise["max"]
+
+
+def test_rows_poll_cancel(scene):
+    domain = scene["binding"].domain
+    located, _, _ = interpolation_matrix(domain.vertices, domain.cells, scene["mesh"])
+    with pytest.raises(Cancelled):
+        SmoothInterpolation(domain.vertices, domain.cells, located, progress=Progress(cancel=lambda: True))[0:10]
+
+
+def test_median_edge_of_a_unit_tetrahedron():
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    assert median_edge(vertices, np.array([[0, 1, 2, 3]])) == pytest.approx((1 + np.sqrt(2)) / 2)
