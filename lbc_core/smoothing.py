@@ -21,7 +21,7 @@ from .interpolation import _FacetSearch
 from .progress import Progress
 
 # The fit's radius in median cell edges: wider is smoother and costs more influences per point (bench/RESULTS.md).
-RADIUS_EDGES = 2.5
+RADIUS_EDGES = 2.0
 # Distance from the cage, in median cell edges, over which the fit fades into the P1 interpolation.
 FADE_EDGES = 1.0
 # A fit whose moment matrix is this ill-conditioned (too few or coplanar vertices in reach) is not used.
@@ -106,13 +106,13 @@ def moving_least_squares(vertices, tree, points, radius):
     # sparse_distance_matrix leaves out pairs at distance 0: a point on a vertex gets that vertex back.
     _, on_vertex = tree.query(points, distance_upper_bound=0.0)
     hit = np.flatnonzero(on_vertex < len(vertices))
-    kernel = sp.csr_matrix((wendland(pairs.data / radius), pairs.indices, pairs.indptr), shape=(k, len(vertices)))
-    kernel = (kernel + sp.csr_matrix((np.ones(len(hit)), (hit, on_vertex[hit])), shape=kernel.shape)).tocsr()
+    weight = sp.csr_matrix((kernel(pairs.data / radius), pairs.indices, pairs.indptr), shape=(k, len(vertices)))
+    weight = (weight + sp.csr_matrix((np.ones(len(hit)), (hit, on_vertex[hit])), shape=weight.shape)).tocsr()
     # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ.
     local = vertices / radius
     centre = points / radius
     upper = [(a, b) for a in range(d) for b in range(a, d)]
-    sums = kernel @ np.c_[np.ones(len(vertices)), local, np.stack([local[:, a] * local[:, b] for a, b in upper], 1)]
+    sums = weight @ np.c_[np.ones(len(vertices)), local, np.stack([local[:, a] * local[:, b] for a, b in upper], 1)]
     mass, first = sums[:, 0], sums[:, 1:d + 1] - centre * sums[:, :1]  # Σ K, Σ K (v - p)
     second = np.empty((k, d, d))
     for column, (a, b) in enumerate(upper):
@@ -126,18 +126,20 @@ def moving_least_squares(vertices, tree, points, radius):
     # Value at the point of the fit = e₀ᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e₀ (M is symmetric).
     solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
                              np.broadcast_to(np.eye(d + 1)[:, :1], (k, d + 1, 1)))[:, :, 0]
-    row = np.repeat(np.arange(k), np.diff(kernel.indptr))
+    row = np.repeat(np.arange(k), np.diff(weight.indptr))
     slope = solved[:, 1:]
-    factor = solved[row, 0] + np.einsum("pj,pj->p", local[kernel.indices] - centre[row], slope[row])
-    rows = sp.csr_matrix((kernel.data * factor * fits[row], kernel.indices, kernel.indptr), shape=kernel.shape)
+    factor = solved[row, 0] + np.einsum("pj,pj->p", local[weight.indices] - centre[row], slope[row])
+    rows = sp.csr_matrix((weight.data * factor * fits[row], weight.indices, weight.indptr), shape=weight.shape)
     rows.eliminate_zeros()
     return rows, fits
 
 
-def wendland(r):
-    """Wendland's C² kernel (1 - r)⁴ (4 r + 1) on [0, 1], 0 beyond; r is a distance over the support radius."""
+def kernel(r):
+    """The fit's weight (1 - r²)² at r = distance / radius, 0 beyond 1: continuously differentiable, so the fitted
+    coordinates are, and a deformed smooth surface keeps continuous normals; flatter than Wendland's C² kernel, so
+    a smaller radius (fewer vertices per point) smooths as much (bench/RESULTS.md)."""
     r = np.clip(r, 0.0, 1.0)
-    return (1.0 - r) ** 4 * (4.0 * r + 1.0)
+    return (1.0 - r * r) ** 2
 
 
 def fade_in(t):

@@ -1,0 +1,268 @@
+"""Issue 12's figures, measured in one process: smoothness on the bent capsule, and where speed and locality stand.
+
+    .venv/bin/python bench/smoothness.py [--capsule] [--speed] [--l08] [--iterations]     (no flag: --capsule)
+
+--capsule     the issue's table on the capsule scene (bench/capsule.py): LBC at 8000 cells (the default, smoothed)
+              and the same solve evaluated piecewise linearly, LBC at 32000 cells both ways, Mesh Deform precision 5
+              through bpy, mean value coordinates; bind seconds, kinks, influences per point.
+--speed       item 2: default bind of the demo gargoyle (subdivided to 64k vertices, cage L10) and of Suzanne
+              subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process.
+--l08         item 3: gargoyle cage L08 (168 control points) at 8000 and 32000 cells.
+--iterations  item 4: iterations of every gargoyle cage at the default resolution.
+--picture P   renders the bent capsule with LBC (smooth), Mesh Deform and LBC evaluated piecewise linearly side by
+              side into the PNG file P (Workbench, smooth shading, a striped reflection that bends at every crease).
+"""
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import lbc_core  # noqa: E402
+from bench import capsule  # noqa: E402
+from lbc_core.baselines import bind_mvc  # noqa: E402
+from lbc_core.interpolation import interpolation_matrix  # noqa: E402
+from lbc_core.io import read_cage, read_mesh  # noqa: E402
+from lbc_core.reduction import interpolate_and_reduce  # noqa: E402
+
+GARGOYLE = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
+
+
+def load():
+    return f"load average {os.getloadavg()[0]:.1f}"
+
+
+def piecewise_linear(binding):
+    """The binding's own solve evaluated at its points by P1 interpolation (the evaluation before smoothing).
+
+    Returns
+    -------
+    weights : (m, n) scipy.sparse.csr_matrix
+    seconds : float
+        The time of that evaluation.
+    """
+    start = time.perf_counter()
+    domain = binding.domain
+    located, _, _ = interpolation_matrix(domain.vertices, domain.cells, binding.points)
+    weights = interpolate_and_reduce(located, binding.domain_weights, binding.cage.vertices, domain.vertices,
+                                     binding.options["threshold"], 1e-9 * binding.cage.bbox_diagonal)
+    return weights, time.perf_counter() - start
+
+
+def row(name, seconds, figures, influences):
+    print(f"| {name} | {seconds:.2f} s | {figures['mean']:.2f}° / {figures['p99']:.2f}° / {figures['max']:.2f}° "
+          f"| {figures['creased']:.2f} % | {influences} |", flush=True)
+
+
+def bench_capsule(cells_list=(8000, 32000)):
+    mesh, faces = capsule.capsule()
+    cage, cage_faces = capsule.cage()
+    posed = capsule.bend(cage)
+    print(f"capsule: {len(mesh)} vertices; cage: {len(cage)} vertices; bent 90°; {load()}")
+    print("| scheme | bind | kink mean / p99 / max | edges creased > 2° | influences per point, mean / max |")
+    print("| --- | --- | --- | --- | --- |")
+    for cells in cells_list:
+        start = time.perf_counter()
+        binding = lbc_core.bind(cage, cage_faces, mesh, cells=cells)
+        seconds = time.perf_counter() - start
+        counts = np.diff(binding.weights.indptr)
+        row(f"LBC, {cells} cells, smooth", seconds, capsule.kink_figures(mesh, binding.deform(posed), faces),
+            f"{counts.mean():.1f} / {counts.max()}")
+        linear, linear_seconds = piecewise_linear(binding)
+        counts = np.diff(linear.indptr)
+        displacement = binding.cage.control_points_from_input(posed) - binding.rest_cage_vertices
+        row(f"LBC, {cells} cells, piecewise linear", seconds - binding.timings["reduction"] + linear_seconds,
+            capsule.kink_figures(mesh, mesh + linear @ displacement, faces), f"{counts.mean():.1f} / {counts.max()}")
+        print(f"  ({len(binding.domain.cells)} tets, {binding.iterations} iterations, stages "
+              + ", ".join(f"{k} {v:.2f}" for k, v in binding.timings.items()) + f"; {load()})", flush=True)
+    seconds, moved = capsule.mesh_deform(mesh, faces, cage, cage_faces, posed, precision=5)
+    row("Mesh Deform, precision 5", seconds, capsule.kink_figures(mesh, moved, faces), "—")
+    start = time.perf_counter()
+    mvc = bind_mvc(cage, cage_faces, mesh)
+    row("mean value coordinates", time.perf_counter() - start, capsule.kink_figures(mesh, mvc.deform(posed), faces),
+        f"{len(cage)} (dense)")
+    print(f"  ({load()})")
+
+
+def mesh_deform_bind_seconds(bpy, mesh_obj, cage_obj, precision=5):
+    modifier = mesh_obj.modifiers.new("Mesh Deform", "MESH_DEFORM")
+    modifier.object = cage_obj
+    modifier.precision = precision
+    start = time.perf_counter()
+    with bpy.context.temp_override(object=mesh_obj, active_object=mesh_obj):
+        bpy.ops.object.meshdeform_bind(modifier=modifier.name)
+    return time.perf_counter() - start
+
+
+def vertices_of(obj):
+    values = np.empty(len(obj.data.vertices) * 3, dtype=np.float32)
+    obj.data.vertices.foreach_get("co", values)
+    return values.reshape(-1, 3).astype(float)
+
+
+def faces_of(obj):
+    return [list(polygon.vertices) for polygon in obj.data.polygons]
+
+
+def bench_speed():
+    import bpy
+
+    def compare(name, mesh_obj, cage_obj):
+        points, cage, cage_faces = vertices_of(mesh_obj), vertices_of(cage_obj), faces_of(cage_obj)
+        bpy.context.view_layer.update()
+        md = mesh_deform_bind_seconds(bpy, mesh_obj, cage_obj)
+        start = time.perf_counter()
+        binding = lbc_core.bind(cage, cage_faces, points)
+        seconds = time.perf_counter() - start
+        counts = np.diff(binding.weights.indptr)
+        print(f"| {name} | {len(points)} | {len(cage)} | {seconds:.2f} s | {md:.2f} s | {seconds / md:.1f}× | "
+              f"{binding.iterations} | {counts.mean():.1f} / {counts.max()} | " + ", ".join(f"{k} {v:.2f}" for k, v in binding.timings.items())
+              + f" | {load()} |", flush=True)
+
+    print("| scene | mesh vertices | cage vertices | LBC default bind | Mesh Deform p5 bind | ratio | iterations "
+          "| influences mean / max | LBC stages (s) | load |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mesh_obj = blender_object(bpy, "Gargoyle", *read_mesh(GARGOYLE / "mesh.off"))
+    cage_obj = blender_object(bpy, "Cage", *read_mesh(GARGOYLE / "cage_L10.obj"))
+    apply_modifier(bpy, mesh_obj, "SUBSURF", levels=2)
+    compare("gargoyle, Catmull-Clark 2 levels, cage L10", mesh_obj, cage_obj)
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_monkey_add()
+    suzanne = bpy.context.active_object
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="SELECT")
+    bpy.ops.mesh.subdivide(number_cuts=9)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    lo, hi = vertices_of(suzanne).min(axis=0), vertices_of(suzanne).max(axis=0)
+    bpy.ops.mesh.primitive_cube_add()
+    box = bpy.context.active_object
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="SELECT")
+    bpy.ops.mesh.subdivide(number_cuts=2)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    box_vertices = vertices_of(box)  # the cube spans ±1: scale it to Suzanne's box plus 10 % on every side
+    box_vertices = (lo + hi) / 2 + box_vertices * (hi - lo) / 2 * 1.2
+    box.data.vertices.foreach_set("co", box_vertices.astype(np.float32).ravel())
+    box.data.update()
+    compare("Suzanne, 9 cuts, cube with 2 cuts", suzanne, box)
+
+
+def blender_object(bpy, name, vertices, faces):
+    data = bpy.data.meshes.new(name)
+    data.from_pydata(np.asarray(vertices, dtype=float).tolist(), [], [[int(i) for i in f] for f in faces])
+    data.update()
+    obj = bpy.data.objects.new(name, data)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def apply_modifier(bpy, obj, kind, **settings):
+    modifier = obj.modifiers.new(kind.title(), kind)
+    for key, value in settings.items():
+        setattr(modifier, key, value)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.modifier_apply(modifier=modifier.name)
+
+
+def bench_l08(cells_list=(8000, 32000)):
+    cage, faces = read_cage(GARGOYLE / "cage_L08.obj")
+    points, _ = read_mesh(GARGOYLE / "mesh.off")
+    for cells in cells_list:
+        start = time.perf_counter()
+        binding = lbc_core.bind(cage, faces, points, cells=cells)
+        print(f"L08 ({binding.cage.n_control_points} control points), {len(binding.domain.cells)} tets: "
+              f"{time.perf_counter() - start:.1f} s, {binding.iterations} iterations; "
+              + ", ".join(f"{k} {v:.2f}" for k, v in binding.timings.items()) + f"; {load()}", flush=True)
+
+
+def bench_iterations():
+    points, _ = read_mesh(GARGOYLE / "mesh.off")
+    found = {}
+    for path in sorted(GARGOYLE.glob("cage_L*.obj")):
+        cage, faces = read_cage(path)
+        start = time.perf_counter()
+        binding = lbc_core.bind(cage, faces, points)
+        found[path.stem] = binding.iterations
+        print(f"{path.stem}: {binding.cage.n_control_points} control points, {binding.iterations} iterations, "
+              f"{time.perf_counter() - start:.1f} s, converged {binding.converged}; {load()}", flush=True)
+    median = float(np.median(list(found.values())))
+    worst = max(found, key=found.get)
+    print(f"median {median:.0f} iterations; most: {worst} with {found[worst]} ({found[worst] / median:.2f}× the median)")
+
+
+def render_picture(path):
+    """The bent capsule deformed by the three evaluations side by side, rendered with a striped matcap."""
+    import bpy
+
+    mesh, faces = capsule.capsule()
+    cage, cage_faces = capsule.cage()
+    posed = capsule.bend(cage)
+    _, mesh_deformed = capsule.mesh_deform(mesh, faces, cage, cage_faces, posed, precision=5)
+    binding = lbc_core.bind(cage, cage_faces, mesh)
+    linear, _ = piecewise_linear(binding)
+    displacement = binding.cage.control_points_from_input(posed) - binding.rest_cage_vertices
+    shown = [("LBC, smooth (default)", binding.deform(posed)), ("Mesh Deform, precision 5", mesh_deformed),
+             ("LBC, piecewise linear", mesh + linear @ displacement)]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    spacing = 4.2
+    for slot, (label, vertices) in enumerate(shown):
+        obj = blender_object(bpy, label, vertices + [slot * spacing, 0, 0], faces)
+        obj.data.polygons.foreach_set("use_smooth", np.ones(len(faces), dtype=bool))
+        obj.data.update()
+        text = bpy.data.curves.new(label, "FONT")
+        text.body, text.align_x, text.size = label, "CENTER", 0.32
+        caption = bpy.data.objects.new(label + " caption", text)
+        caption.location = (slot * spacing + 1.4, 0, -2.9)
+        caption.rotation_euler = (np.pi / 2, 0, 0)
+        scene.collection.objects.link(caption)
+    scene.world = bpy.data.worlds.new("World")
+    scene.world.color = (1.0, 1.0, 1.0)
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.render.resolution_x, scene.render.resolution_y = 1500, 620
+    scene.display.shading.light = "MATCAP"
+    scene.display.shading.studio_light = "reflection_check_horizontal.exr"
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    camera.data.type = "ORTHO"
+    camera.data.ortho_scale = 3 * spacing + 0.2
+    camera.location = (spacing + 1.4, -10.0, -0.7)
+    camera.rotation_euler = (np.pi / 2, 0, 0)  # looking along +y, z up: the bend is in the picture's plane
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    print(f"wrote {path}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    for flag in ("capsule", "speed", "l08", "iterations"):
+        parser.add_argument(f"--{flag}", action="store_true")
+    parser.add_argument("--picture", type=Path)
+    args = parser.parse_args(argv)
+    if args.picture:
+        render_picture(args.picture)
+    elif not (args.speed or args.l08 or args.iterations):
+        args.capsule = True
+    if args.capsule:
+        bench_capsule()
+    if args.speed:
+        bench_speed()
+    if args.l08:
+        bench_l08()
+    if args.iterations:
+        bench_iterations()
+
+
+if __name__ == "__main__":
+    main()
+    sys.stdout.flush()
+    os._exit(0)  # the bpy 4.5.4 module can deadlock in a static destructor at exit; everything is written
