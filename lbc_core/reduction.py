@@ -146,8 +146,9 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
 
     Parameters
     ----------
-    located : (m, N) scipy.sparse.csr_matrix
-        Barycentric interpolation from the domain's N vertices to the points.
+    located : (m, N) scipy.sparse.csr_matrix, or any object with ``shape`` whose row slices are one
+        Interpolation from the domain's N vertices to the points (barycentric, or
+        :class:`lbc_core.smoothing.SmoothInterpolation`).
     domain_weights : (N, n) float array
         Coordinates at the domain's vertices.
     controls : (n, d) float array
@@ -163,9 +164,13 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     # entries (the solver's faint tails) before the product, keeping what a support may need to grow into.
     sparse_domain = sp.csr_matrix(np.where(domain_weights >= threshold / 10, domain_weights, 0.0))
     progress = Progress.of(progress, cancel)
-    return _by_chunks(located.shape[0], controls.shape[0], lambda rows: _reduce_rows(
-        located[rows] @ sparse_domain, controls, located[rows] @ domain_vertices, threshold, tolerance,
-        progress.check), progress)
+
+    def reduce_chunk(rows):
+        block = located[rows]  # once: a smooth interpolation computes its rows on demand
+        return _reduce_rows(block @ sparse_domain, controls, block @ domain_vertices, threshold, tolerance,
+                            progress.check)
+
+    return _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
 
 
 def _by_chunks(m, n, reduce_chunk, progress):
