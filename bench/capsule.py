@@ -152,21 +152,12 @@ def mesh_deform(mesh_vertices, mesh_faces, cage_vertices, cage_faces, posed_cage
     bind_seconds : float
     posed : (m, 3) float array
     """
-    import time
-
     import bpy
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    mesh = _blender_object(bpy, "Capsule", mesh_vertices, mesh_faces)
-    cage_object = _blender_object(bpy, "Cage", cage_vertices, cage_faces)
-    modifier = mesh.modifiers.new("Mesh Deform", "MESH_DEFORM")
-    modifier.object = cage_object
-    modifier.precision = precision
-    bpy.context.view_layer.update()
-    start = time.perf_counter()
-    with bpy.context.temp_override(object=mesh, active_object=mesh):
-        bpy.ops.object.meshdeform_bind(modifier=modifier.name)
-    seconds = time.perf_counter() - start
+    mesh = blender_object(bpy, "Capsule", mesh_vertices, mesh_faces)
+    cage_object = blender_object(bpy, "Cage", cage_vertices, cage_faces)
+    seconds = bind_mesh_deform(bpy, mesh, cage_object, precision)
     cage_object.data.vertices.foreach_set("co", np.asarray(posed_cage, dtype=np.float32).ravel())
     cage_object.data.update()
     evaluated = mesh.evaluated_get(bpy.context.evaluated_depsgraph_get())
@@ -179,7 +170,22 @@ def mesh_deform(mesh_vertices, mesh_faces, cage_vertices, cage_faces, posed_cage
     return seconds, values.reshape(-1, 3).astype(float)
 
 
-def _blender_object(bpy, name, vertices, faces):
+def bind_mesh_deform(bpy, mesh_object, cage_object, precision=5):
+    """Add a Mesh Deform modifier to ``mesh_object`` following ``cage_object`` and bind it; returns the seconds."""
+    import time
+
+    modifier = mesh_object.modifiers.new("Mesh Deform", "MESH_DEFORM")
+    modifier.object = cage_object
+    modifier.precision = precision
+    bpy.context.view_layer.update()
+    start = time.perf_counter()
+    with bpy.context.temp_override(object=mesh_object, active_object=mesh_object):
+        bpy.ops.object.meshdeform_bind(modifier=modifier.name)
+    return time.perf_counter() - start
+
+
+def blender_object(bpy, name, vertices, faces):
+    """A Blender mesh object from arrays, linked to the scene."""
     data = bpy.data.meshes.new(name)
     data.from_pydata(np.asarray(vertices, dtype=float).tolist(), [], [[int(i) for i in f] for f in faces])
     data.update()

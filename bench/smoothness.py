@@ -90,16 +90,6 @@ def bench_capsule(cells_list=(8000, 32000)):
     print(f"  ({load()})")
 
 
-def mesh_deform_bind_seconds(bpy, mesh_obj, cage_obj, precision=5):
-    modifier = mesh_obj.modifiers.new("Mesh Deform", "MESH_DEFORM")
-    modifier.object = cage_obj
-    modifier.precision = precision
-    start = time.perf_counter()
-    with bpy.context.temp_override(object=mesh_obj, active_object=mesh_obj):
-        bpy.ops.object.meshdeform_bind(modifier=modifier.name)
-    return time.perf_counter() - start
-
-
 def vertices_of(obj):
     values = np.empty(len(obj.data.vertices) * 3, dtype=np.float32)
     obj.data.vertices.foreach_get("co", values)
@@ -116,7 +106,7 @@ def bench_speed():
     def compare(name, mesh_obj, cage_obj):
         points, cage, cage_faces = vertices_of(mesh_obj), vertices_of(cage_obj), faces_of(cage_obj)
         bpy.context.view_layer.update()
-        md = mesh_deform_bind_seconds(bpy, mesh_obj, cage_obj)
+        md = capsule.bind_mesh_deform(bpy, mesh_obj, cage_obj)
         start = time.perf_counter()
         binding = lbc_core.bind(cage, cage_faces, points)
         seconds = time.perf_counter() - start
@@ -129,25 +119,17 @@ def bench_speed():
           "| influences mean / max | LBC stages (s) | load |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    mesh_obj = blender_object(bpy, "Gargoyle", *read_mesh(GARGOYLE / "mesh.off"))
-    cage_obj = blender_object(bpy, "Cage", *read_mesh(GARGOYLE / "cage_L10.obj"))
+    mesh_obj = capsule.blender_object(bpy, "Gargoyle", *read_mesh(GARGOYLE / "mesh.off"))
+    cage_obj = capsule.blender_object(bpy, "Cage", *read_mesh(GARGOYLE / "cage_L10.obj"))
     apply_modifier(bpy, mesh_obj, "SUBSURF", levels=2)
     compare("gargoyle, Catmull-Clark 2 levels, cage L10", mesh_obj, cage_obj)
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.mesh.primitive_monkey_add()
-    suzanne = bpy.context.active_object
-    bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.select_all(action="SELECT")
-    bpy.ops.mesh.subdivide(number_cuts=9)
-    bpy.ops.object.mode_set(mode="OBJECT")
+    suzanne = subdivided(bpy, bpy.context.active_object, cuts=9)
     lo, hi = vertices_of(suzanne).min(axis=0), vertices_of(suzanne).max(axis=0)
     bpy.ops.mesh.primitive_cube_add()
-    box = bpy.context.active_object
-    bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.select_all(action="SELECT")
-    bpy.ops.mesh.subdivide(number_cuts=2)
-    bpy.ops.object.mode_set(mode="OBJECT")
+    box = subdivided(bpy, bpy.context.active_object, cuts=2)
     box_vertices = vertices_of(box)  # the cube spans ±1: scale it to Suzanne's box plus 10 % on every side
     box_vertices = (lo + hi) / 2 + box_vertices * (hi - lo) / 2 * 1.2
     box.data.vertices.foreach_set("co", box_vertices.astype(np.float32).ravel())
@@ -155,12 +137,12 @@ def bench_speed():
     compare("Suzanne, 9 cuts, cube with 2 cuts", suzanne, box)
 
 
-def blender_object(bpy, name, vertices, faces):
-    data = bpy.data.meshes.new(name)
-    data.from_pydata(np.asarray(vertices, dtype=float).tolist(), [], [[int(i) for i in f] for f in faces])
-    data.update()
-    obj = bpy.data.objects.new(name, data)
-    bpy.context.scene.collection.objects.link(obj)
+def subdivided(bpy, obj, cuts):
+    """``obj`` (the active object) with every edge cut ``cuts`` times (Edit Mode's Subdivide)."""
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="SELECT")
+    bpy.ops.mesh.subdivide(number_cuts=cuts)
+    bpy.ops.object.mode_set(mode="OBJECT")
     return obj
 
 
@@ -215,7 +197,7 @@ def render_picture(path):
     scene = bpy.context.scene
     spacing = 4.2
     for slot, (label, vertices) in enumerate(shown):
-        obj = blender_object(bpy, label, vertices + [slot * spacing, 0, 0], faces)
+        obj = capsule.blender_object(bpy, label, vertices + [slot * spacing, 0, 0], faces)
         obj.data.polygons.foreach_set("use_smooth", np.ones(len(faces), dtype=bool))
         obj.data.update()
         text = bpy.data.curves.new(label, "FONT")
@@ -227,15 +209,16 @@ def render_picture(path):
     scene.world = bpy.data.worlds.new("World")
     scene.world.color = (1.0, 1.0, 1.0)
     scene.render.engine = "BLENDER_WORKBENCH"
-    scene.render.resolution_x, scene.render.resolution_y = 1500, 620
+    scene.view_settings.view_transform = "Standard"  # a white background stays white
+    scene.render.resolution_x, scene.render.resolution_y = 1500, 560
     scene.display.shading.light = "MATCAP"
     scene.display.shading.studio_light = "reflection_check_horizontal.exr"
     camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     scene.collection.objects.link(camera)
     scene.camera = camera
     camera.data.type = "ORTHO"
-    camera.data.ortho_scale = 3 * spacing + 0.2
-    camera.location = (spacing + 1.4, -10.0, -0.7)
+    camera.data.ortho_scale = 3 * spacing - 0.4
+    camera.location = (spacing + 1.3, -10.0, -1.0)
     camera.rotation_euler = (np.pi / 2, 0, 0)  # looking along +y, z up: the bend is in the picture's plane
     scene.render.filepath = str(path)
     bpy.ops.render.render(write_still=True)
