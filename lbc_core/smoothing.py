@@ -9,8 +9,8 @@ vertices, so the fitted coordinates sum to 1 and reproduce the point, before any
 non-negativity where a coordinate's support ends, the reduction restores on each point's support
 (:mod:`lbc_core.reduction`).
 
-Near the cage the fit fades into the plain P1 interpolation, which takes the boundary values: a point on a cage
-face gets the face's linear coordinates, and a point on a cage vertex is that vertex's alone (Lagrange).
+Near the cage the fit fades into the plain P1 interpolation: a point on the cage gets the interpolated boundary
+values, and a point on a cage vertex is that vertex's alone (Lagrange).
 """
 
 import numpy as np

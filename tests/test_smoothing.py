@@ -49,13 +49,14 @@ def test_kernel_and_fade_ends():
 
 @pytest.fixture(scope="module")
 def scene():
-    """The capsule scene, small: 1346 mesh vertices, then the cage's vertices and its cap faces' centroids."""
+    """The capsule scene, small: 1346 mesh vertices, then the cage's vertices and its cap faces' centroids (points on
+    the cage, where the smooth rows must be the P1 rows)."""
     mesh, faces = capsule.capsule(around=32, rows=42)
     cage, cage_faces = capsule.cage()
     caps = [face for face in cage_faces if len(face) == 3]
     centroids = np.array([cage[face].mean(axis=0) for face in caps])
     binding = lbc_core.bind(cage, cage_faces, np.vstack([mesh, cage, centroids]), cells=3000)
-    return dict(mesh=mesh, faces=faces, cage=cage, caps=caps, binding=binding)
+    return dict(mesh=mesh, faces=faces, cage=cage, binding=binding)
 
 
 def test_smooth_rows_sum_to_one_reproduce_and_keep_p1_on_the_cage(scene):
@@ -79,9 +80,6 @@ def test_bind_keeps_every_guarantee_at_the_points(scene):
     assert miss.max() <= 1e-9 * binding.cage.bbox_diagonal
     at_vertices = weights[len(mesh):len(mesh) + len(cage)].toarray()
     assert np.array_equal(at_vertices, np.eye(len(cage)))  # Lagrange (the scene's cage has no welded vertices)
-    on_caps = weights[len(mesh) + len(cage):].toarray()
-    for row, face in zip(on_caps, scene["caps"]):  # a point on a cage face gets the face's linear coordinates
-        assert np.allclose(row[face], 1 / 3, atol=1e-12) and np.count_nonzero(row) == 3
 
 
 def test_smoothing_halves_the_bent_capsules_kinks(scene):
