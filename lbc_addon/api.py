@@ -11,9 +11,8 @@ Example::
 
 import bpy
 
-from lbc_core import CageError
-
 from . import deformer, jobs
+from .core import CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
 from .properties import DEFAULT_INFLUENCES, bound_to, is_bound
 
 
@@ -31,9 +30,9 @@ def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0
 
     Raises
     ------
-    lbc_core.CageError
-        With lbc_core's message, for a cage or mesh that cannot be bound.
-    lbc_core.Cancelled
+    CageError
+        With lbc_core's message, for a cage or mesh that cannot be bound (``api.CageError``, a ValueError).
+    Cancelled
         When ``cancel()`` turned true.
     """
     request = jobs.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), resolution=resolution,

@@ -8,7 +8,7 @@ import hashlib
 
 import numpy as np
 
-from lbc_core import CageError
+from .core import CageError
 
 # A cage is flat when its thickness is below this fraction of its bounding-box diagonal; a mesh lies in the cage's
 # plane when every vertex is this close to it. Image planes and flat meshes are exactly flat, so this is generous.

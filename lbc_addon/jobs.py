@@ -14,10 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-import lbc_core
-from lbc_core import CageError
-
 from . import deformer, geometry, influence, storage
+from .core import CageError, lbc_core
 from .properties import DEFAULT_INFLUENCES, is_bound
 
 

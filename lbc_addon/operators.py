@@ -7,9 +7,8 @@ module) there is no event loop, so it runs synchronously and prints its progress
 
 import bpy
 
-from lbc_core import CageError, Cancelled
-
 from . import influence, jobs
+from .core import CageError, Cancelled
 from .properties import BindOptions, bound_to, is_bound
 
 _running = []  # the Worker of the bind in progress: one at a time, so two binds never write the same mesh

@@ -5,8 +5,8 @@ Stored as ID properties, so it is saved in the .blend; Unbind removes the whole 
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
-from lbc_core.meshing import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D
-from lbc_core.solver import DEFAULT_TOLERANCE
+
+from .core import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D, DEFAULT_TOLERANCE
 
 # Slots per mesh vertex the deformer evaluates by default: see bench/RESULTS.md, "Blender deformer".
 # No cap by default: keeping only the largest weights lets neighbouring vertices pick different cage vertices, which

@@ -9,7 +9,7 @@ such attributes from the attribute lists and keeps them through deform modifiers
 
 import numpy as np
 
-from lbc_core.reduction import ROWS_PER_CHUNK, constraint_residuals, restore_constraints
+from .core import ROWS_PER_CHUNK, constraint_residuals, restore_constraints
 
 INDEX_PREFIX = ".lbc_index_"
 WEIGHT_PREFIX = ".lbc_weight_"

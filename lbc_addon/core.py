@@ -1,0 +1,25 @@
+"""The one place the add-on imports ``lbc_core`` (the bpy-free solver) from; every other module takes it from here.
+
+In the extension, lbc_core is bundled as a sub-package of the add-on (``bl_ext.<repository>.lbc.lbc_core``), so that
+every bundled wheel is one from PyPI, unmodified; in the project's tree (tests, the project's environments) it is the
+top-level package beside ``lbc_addon``.
+"""
+
+import importlib
+import importlib.util
+
+_BUNDLED = f"{__package__}.lbc_core"
+
+lbc_core = importlib.import_module(_BUNDLED if importlib.util.find_spec(_BUNDLED) else "lbc_core")
+_meshing = importlib.import_module(f"{lbc_core.__name__}.meshing")
+_solver = importlib.import_module(f"{lbc_core.__name__}.solver")
+_reduction = importlib.import_module(f"{lbc_core.__name__}.reduction")
+
+CageError = lbc_core.CageError
+Cancelled = lbc_core.Cancelled
+DEFAULT_CELLS_2D = _meshing.DEFAULT_CELLS_2D
+DEFAULT_CELLS_3D = _meshing.DEFAULT_CELLS_3D
+DEFAULT_TOLERANCE = _solver.DEFAULT_TOLERANCE
+ROWS_PER_CHUNK = _reduction.ROWS_PER_CHUNK
+constraint_residuals = _reduction.constraint_residuals
+restore_constraints = _reduction.restore_constraints

@@ -1,0 +1,24 @@
+"""The add-on takes lbc_core from one place: the bundled sub-package in the extension, the top-level package here."""
+
+import ast
+from pathlib import Path
+
+import lbc_core
+from lbc_addon import api, core, jobs
+
+ADDON = Path(core.__file__).parent
+
+
+def test_in_the_project_tree_the_add_on_uses_the_top_level_lbc_core():
+    assert core.lbc_core is lbc_core
+    assert jobs.lbc_core is lbc_core and api.CageError is lbc_core.CageError
+
+
+def test_no_other_add_on_module_imports_lbc_core_itself():
+    # An absolute import would fail in the extension, where lbc_core is a sub-package of the add-on.
+    for path in sorted(ADDON.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module]
+            assert not any(name.split(".")[0] == "lbc_core" for name in names) or path.name == "core.py", path.name
