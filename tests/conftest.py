@@ -9,10 +9,11 @@ import pytest
 class _ExitPastBlenderTeardown:
     """Ends the pytest process with its exit status once pytest is done, skipping C-level teardown.
 
-    The bpy 4.5.4 module can deadlock at process exit: a static destructor in its sound code destroys a condition
-    variable that its "delayed close" thread still waits on (gdb: ``GlobalState::~GlobalState`` in
-    ``pthread_cond_destroy`` against ``delayed_close_thread_run``). It happens now and then, after everything has
-    run and passed, and would leave the test run (and CI) hanging.
+    The bpy module can fail at process exit once an add-on's classes are registered: 4.5.4 can deadlock (a static
+    destructor in its sound code destroys a condition variable that its "delayed close" thread still waits on; gdb:
+    ``GlobalState::~GlobalState`` in ``pthread_cond_destroy`` against ``delayed_close_thread_run``), 4.2.0 crashes
+    with SIGSEGV. Both happen after everything has run and passed, and would leave the test run (and CI) hanging or
+    failing; 5.0 to 5.2 exit cleanly (test_addon_install.py checks a background script's exit on every line).
     """
 
     status = 0

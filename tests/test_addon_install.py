@@ -1,13 +1,17 @@
-"""The extension as users get it: the manifest lists the pinned wheels, the zip for this machine builds with
-Blender's builder, installs into a fresh Blender session through the Extensions system, enables, and binds with
-the lbc_core it bundles."""
+"""The extension as users get it: the manifest lists the pinned wheels and the tested Blender range; the zip for this
+machine and this Python builds and validates with this Blender's builder, installs into a fresh user directory
+through Blender's installer, in a Python holding only what Blender ships, and works there end to end (see
+extension_session.py); the session, a background script, then exits."""
 
+import importlib.metadata
 import json
 import platform
 import subprocess
 import sys
-import textwrap
+import sysconfig
+import time
 import tomllib
+from pathlib import Path
 
 import pytest
 
@@ -19,77 +23,107 @@ import build_extension  # noqa: E402
 BLENDER_PLATFORM = {("Linux", "x86_64"): "linux-x64", ("Windows", "AMD64"): "windows-x64",
                     ("Darwin", "arm64"): "macos-arm64", ("Darwin", "x86_64"): "macos-x64"}.get(
     (platform.system(), platform.machine()))
+PYTHON = f"{sys.version_info.major}.{sys.version_info.minor}"
+BPY = tuple(int(part) for part in importlib.metadata.version("bpy").split(".")[:2])
 
 
-def test_manifest_lists_each_pinned_wheel_for_every_platform_and_python():
+def test_manifest_lists_each_pinned_wheel_and_the_tested_blender_range():
     manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
-    assert manifest["blender_version_min"] == "4.2.0" and manifest["license"] == ["SPDX:GPL-3.0-or-later"]
+    ranges = [build_extension.PYTHON_LINES[python][:2] for python in sorted(build_extension.PYTHON_LINES)]
+    assert (manifest["blender_version_min"], manifest["blender_version_max"]) == (ranges[0][0], ranges[-1][1])
+    assert all(earlier[1] == later[0] for earlier, later in zip(ranges, ranges[1:]))  # no gap, no overlap
+    assert manifest["license"] == ["SPDX:GPL-3.0-or-later"]
     assert set(manifest["platforms"]) == set(build_extension.PLATFORM_TAGS)
     wheels = [path.removeprefix("./wheels/") for path in manifest["wheels"]]
     assert wheels == sorted(wheels) and len(set(wheels)) == len(wheels)
-    assert not any(name.startswith(("numpy-", "triangle-")) for name in wheels)
     names = [build_extension.normalise(name.split("-")[0]) for name in wheels]
-    for dependency in build_extension.dependencies():
-        assert names.count(dependency) == len(build_extension.PLATFORM_TAGS) * len(build_extension.PYTHON_VERSIONS)
-        assert all(name.split("-")[1] == build_extension.PINS[dependency]
-                   for name in wheels if build_extension.normalise(name.split("-")[0]) == dependency)
-    import lbc_core
-
-    assert f"lbc_core-{lbc_core.__version__}-py3-none-any.whl" in wheels
+    # Only PyPI's own wheels: numpy is Blender's, Triangle never bundled, lbc_core a sub-package, not a wheel.
+    assert set(names) == set(build_extension.dependencies())
+    for dependency, version in build_extension.pins().items():
+        assert names.count(dependency) == len(build_extension.PLATFORM_TAGS) * len(build_extension.PYTHON_LINES)
+        assert all(name.split("-")[1] == version for name in wheels if name.startswith(f"{dependency}-"))
 
 
-INSTALL_AND_BIND = textwrap.dedent("""
-    import json, os, sys
-    # Only the extension may provide lbc_core and the add-on: hide the project's editable install.
-    sys.meta_path[:] = [f for f in sys.meta_path
-                        if not (f.__module__ if isinstance(f, type) else type(f).__module__).startswith("__editable__")]
-    sys.path[:] = [p for p in sys.path if p not in ("", os.getcwd(), {root!r})]
-    import bpy
-    result = {{}}
+def _blender_like_site(directory):
+    """A site-packages with this environment's bpy, numpy and the rest, less lbc and the libraries the extension
+    bundles: what a Blender without the extension has. Returns its path."""
+    hidden = {file.parts[0] for name in [*build_extension.pins(), "lbc"]
+              for file in importlib.metadata.distribution(name).files}
+    directory.mkdir()
+    for entry in sorted(Path(sysconfig.get_paths()["purelib"]).iterdir()):
+        if entry.name not in hidden:
+            (directory / entry.name).symlink_to(entry)
+    return directory
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    """Build this platform's zip for this Python and run extension_session.py with it; returns (result, exit).
+
+    ``exit`` is the session's exit status, or "hung" when it had not exited 30 s after writing its result.
+    """
+    if BLENDER_PLATFORM is None:
+        pytest.skip("not one of the extension's four platforms")
+    directory = tmp_path_factory.mktemp("install")
+    (archive,) = build_extension.main(["--platform", BLENDER_PLATFORM, "--python", PYTHON,
+                                       "--output", str(directory / "dist")])
+    result = directory / "result.json"
+    environment = {"BLENDER_USER_RESOURCES": str(directory / "user"), "PATH": "/usr/bin:/bin",
+                   "PYTHONPATH": str(_blender_like_site(directory / "site-packages"))}
+    # -S: no site-packages but the Blender-like one, no .pth files (the project's editable install).
+    command = [sys.executable, "-S", str(ROOT / "tests" / "extension_session.py"), str(archive), str(result),
+               str(directory / "session.blend")]
+    log = (directory / "session.log").open("w")
+    process = subprocess.Popen(command, cwd=directory, env=environment, stdout=log, stderr=subprocess.STDOUT)
+    deadline = time.monotonic() + 600
+    while process.poll() is None and not result.exists() and time.monotonic() < deadline:
+        time.sleep(0.5)
     try:
-        import lbc_core
-        result["before"] = lbc_core.__file__
-    except ImportError:
-        result["before"] = None
-    result["install"] = sorted(bpy.ops.extensions.package_install_files(
-        filepath={zip!r}, repo="user_default", enable_on_install=True))
-    result["enabled"] = "bl_ext.user_default.lbc" in bpy.context.preferences.addons
-    import lbc_core
-    result["lbc_core"] = lbc_core.__file__
-    result["site_packages"] = sorted(os.listdir(os.path.dirname(os.path.dirname(lbc_core.__file__))))
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.7)
-    mesh = bpy.context.active_object
-    bpy.ops.mesh.primitive_cube_add(size=2.0)
-    cage = bpy.context.active_object
-    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[mesh, cage]):
-        result["bind"] = sorted(bpy.ops.object.lbc_bind(resolution=1000))
-    cage.location.x += 0.5
-    evaluated = mesh.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    moved = [v.co.x - w.co.x for v, w in zip(evaluated.to_mesh().vertices, mesh.data.vertices)]
-    result["moved"] = [min(moved), max(moved)]
-    with open({out!r}, "w") as handle:
-        json.dump(result, handle)
-    sys.stdout.flush()
-    os._exit(0)  # bpy 4.5.4 can deadlock in its teardown at exit (see tests/conftest.py)
-""")
+        status = process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+        status = "hung"
+    log.close()
+    output = (directory / "session.log").read_text()[-3000:]
+    assert result.exists(), f"the session ended without a result (exit {status}):\n{output}"
+    return json.loads(result.read_text()), status, output, directory
 
 
-@pytest.mark.skipif(BLENDER_PLATFORM is None, reason="not one of the extension's four platforms")
-def test_built_zip_installs_into_a_fresh_blender_and_binds(tmp_path):
-    build_extension.main(["--platform", BLENDER_PLATFORM, "--output", str(tmp_path / "dist")])
-    archive = tmp_path / "dist" / f"lbc-0.1.0-{BLENDER_PLATFORM.replace('-', '_')}.zip"
-    out = tmp_path / "result.json"
-    script = INSTALL_AND_BIND.format(root=str(ROOT), zip=str(archive), out=str(out))
-    environment = {"BLENDER_USER_RESOURCES": str(tmp_path / "user"), "PATH": "/usr/bin:/bin"}
-    process = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=environment, timeout=600,
-                             capture_output=True, text=True)
-    assert process.returncode == 0, process.stdout[-2000:] + process.stderr[-2000:]
-    result = json.loads(out.read_text())
-    assert result["before"] is None
+def test_built_zip_installs_in_a_fresh_blender_and_works_end_to_end(session):
+    result, _, _, directory = session
+    assert result["importable_before"] == []  # nothing of lbc's came from this environment
     assert result["install"] == ["FINISHED"] and result["enabled"]
-    assert result["lbc_core"].startswith(str(tmp_path / "user" / "extensions"))
-    # The bundled wheels were installed beside it (numpy is Blender's own, Triangle is never bundled).
+    extension = str(directory / "user" / "extensions")
+    assert result["lbc_core"].startswith(str(directory / "user" / "extensions" / "user_default" / "lbc" / "lbc_core"))
+    assert all(path.startswith(extension) for path in result["bundled"].values())
+    # Only this Python's wheels were installed: Blender 4.2.0 puts every wheel of the zip into site-packages.
+    assert result["other_abi"] == []
     assert {"scipy", "potpourri3d", "cholespy"} <= set(result["site_packages"])
-    assert not {"numpy", "triangle"} & set(result["site_packages"])
-    assert result["bind"] == ["FINISHED"]
-    assert result["moved"] == pytest.approx([0.5, 0.5], abs=1e-5)
+    assert not {"numpy", "triangle", "lbc_core"} & set(result["site_packages"])
+
+    assert result["bind_operator"] == ["FINISHED"] and result["bind_api"] == 8
+    assert result["moved"][0] == pytest.approx([0.5, 0.5], abs=1e-5)
+    assert result["moved"][1] == pytest.approx([0.5, 0.5], abs=1e-5)
+    assert "not closed" in result["bad_cage"] and result["bad_cage_untouched"]
+    assert "not closed" in result["bad_cage_operator"] and result["bad_cage_operator_untouched"]
+    # The saved file deforms without the extension, and with it the binding is live again.
+    enabled, moved = result["reopened_without"]
+    assert not enabled and moved == pytest.approx([0.5, 0.5], abs=1e-5)
+    (ok, message), moved = result["reopened_with"]
+    assert ok and moved == pytest.approx([0.5, 0.5], abs=1e-5), message
+    assert result["rebind"] == ["FINISHED"]
+    assert result["rest_after_rebind"] == pytest.approx([0.0, 0.0], abs=1e-5)
+    assert result["moved_after_rebind"] == pytest.approx([0.25, 0.25], abs=1e-5)
+    assert result["unbind"] == ["FINISHED"] and result["unbound_exactly"]
+    assert result["modifiers_after_api_unbind"] == [] and result["node_groups_left"] == []
+
+
+# Measured: the bpy module of Blender 4.2.0 crashes (SIGSEGV) and that of 4.5.4 hangs at interpreter exit once any
+# class with a Python method was registered (any add-on's operator will do; lbc's add-on included); 5.0.1, 5.1.2
+# and 5.2.3 exit cleanly. In 4.5.4 disabling the add-on before exit avoids it, in 4.2.0 not even that.
+@pytest.mark.xfail(BPY == (4, 2), strict=True,
+                   reason="the bpy module of Blender 4.2 crashes and 4.5 hangs at exit after registering add-on classes")
+def test_background_script_exits_cleanly(session):
+    _, status, output, _ = session
+    assert status == 0, output
