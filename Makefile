@@ -1,14 +1,30 @@
-# Everything installs into .venv at the repo root from this project's own files.
-PYTHON ?= python3
+# Everything installs from this project's own files. .venv (Python 3.11, bpy 4.5.4) runs the whole suite; each other
+# supported Blender line gets its own environment, .venv-blender-X.Y (pyproject.toml's blender-X-Y extra), for the
+# add-on tests. Interpreters are found by tools/find_python.sh; name one with e.g. make test PYTHON313=/path.
+PYTHON311 ?= $$(tools/find_python.sh 3.11)
+PYTHON313 ?= $$(tools/find_python.sh 3.13)
 VENV := .venv
 BIN := $(VENV)/bin
+# The other supported lines and the Python each one's bpy module is built for.
+LINES := 4.2 5.0 5.1 5.2
+PYTHON_4.2 = $(PYTHON311)
+PYTHON_5.0 = $(PYTHON311)
+PYTHON_5.1 = $(PYTHON313)
+PYTHON_5.2 = $(PYTHON313)
+LINE_VENVS := $(LINES:%=.venv-blender-%)
 
 .PHONY: demo blender-demo test bench extension clean
 
 $(BIN)/.installed: pyproject.toml
-	$(PYTHON) -m venv $(VENV)
+	python=$(PYTHON311) && "$$python" -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[dev]'
+	touch $@
+
+.venv-blender-%/.installed: pyproject.toml
+	python=$(PYTHON_$*) && "$$python" -m venv --clear .venv-blender-$*
+	.venv-blender-$*/bin/pip install -q --upgrade pip
+	.venv-blender-$*/bin/pip install -q -e '.[blender-$(subst .,-,$*)]'
 	touch $@
 
 demo: $(BIN)/.installed
@@ -18,8 +34,10 @@ demo: $(BIN)/.installed
 blender-demo: $(BIN)/.installed
 	$(BIN)/python demo_blender.py
 
-test: $(BIN)/.installed
-	$(BIN)/python -m pytest -q
+# The whole suite on .venv, then the add-on tests on every other line; a summary of each line at the end, and the
+# exit status of the first line that failed.
+test: $(BIN)/.installed $(LINE_VENVS:%=%/.installed)
+	$(BIN)/python tools/test_lines.py $(VENV) $(LINE_VENVS)
 
 bench: $(BIN)/.installed
 	$(BIN)/python bench/run.py
@@ -29,4 +47,4 @@ extension: $(BIN)/.installed
 	$(BIN)/python tools/build_extension.py
 
 clean:
-	rm -rf $(VENV)
+	rm -rf $(VENV) $(LINE_VENVS)
