@@ -3,7 +3,9 @@ ships (bpy, numpy): install the zip through Blender's installer, enable, bind (o
 cage, refuse a bad cage, save, reopen without and with the extension, rebind, unbind. It ends with a plain
 interpreter exit, as a background script does.
 
-    python -S extension_session.py ZIP RESULT_JSON BLEND_FILE
+    python -S extension_session.py ZIP OTHER_ZIP RESULT_JSON BLEND_FILE
+
+OTHER_ZIP is the zip built for the other Python ABI, whose Blender range excludes this Blender: it must be refused.
 """
 
 import importlib
@@ -17,7 +19,7 @@ import sys
 import bpy
 import numpy as np
 
-ARCHIVE, RESULT, BLEND = sys.argv[1:4]
+ARCHIVE, OTHER_ARCHIVE, RESULT, BLEND = sys.argv[1:5]
 MODULE = "bl_ext.user_default.lbc"
 BUNDLED = ("scipy", "potpourri3d", "cholespy")
 result = {}
@@ -52,6 +54,9 @@ def run_operator(operator, active, selected):
 
 
 result["importable_before"] = [name for name in (*BUNDLED, "lbc_core", "lbc_addon") if importlib.util.find_spec(name)]
+# Blender 4.2.0 reports the refusal as an error message but returns FINISHED: look for the installed package.
+bpy.ops.extensions.package_install_files(filepath=OTHER_ARCHIVE, repo="user_default", enable_on_install=True)
+result["other_installed"] = os.path.exists(os.path.join(bpy.utils.user_resource("EXTENSIONS"), "user_default", "lbc"))
 result["install"] = sorted(bpy.ops.extensions.package_install_files(filepath=ARCHIVE, repo="user_default",
                                                                     enable_on_install=True))
 result["enabled"] = MODULE in bpy.context.preferences.addons

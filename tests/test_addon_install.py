@@ -1,7 +1,7 @@
-"""The extension as users get it: the manifest lists the pinned wheels and the tested Blender range; the zip for this
-machine and this Python builds and validates with this Blender's builder, installs into a fresh user directory
-through Blender's installer, in a Python holding only what Blender ships, and works there end to end (see
-extension_session.py); the session, a background script, then exits."""
+"""The extension as users get it: the manifest lists the pinned wheels and the tested Blender range; this machine's
+zips build and validate with this Blender's builder; the other Python's zip is refused, and the one for this Python
+installs into a fresh user directory through Blender's installer, in a Python holding only what Blender ships, and
+works there end to end (see extension_session.py); the session, a background script, then exits."""
 
 import importlib.metadata
 import json
@@ -58,21 +58,22 @@ def _blender_like_site(directory):
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):
-    """Build this platform's zip for this Python and run extension_session.py with it; returns (result, exit).
+    """Build this platform's zips and run extension_session.py with the one for this Python; returns (result, exit).
 
     ``exit`` is the session's exit status, or "hung" when it had not exited 30 s after writing its result.
     """
     if BLENDER_PLATFORM is None:
         pytest.skip("not one of the extension's four platforms")
     directory = tmp_path_factory.mktemp("install")
-    (archive,) = build_extension.main(["--platform", BLENDER_PLATFORM, "--python", PYTHON,
-                                       "--output", str(directory / "dist")])
+    archives = build_extension.main(["--platform", BLENDER_PLATFORM, "--output", str(directory / "dist")])
+    (archive,) = [path for path in archives if build_extension.PYTHON_LINES[PYTHON][2] in path.name]
+    (other,) = [path for path in archives if path != archive]
     result = directory / "result.json"
     environment = {"BLENDER_USER_RESOURCES": str(directory / "user"), "PATH": "/usr/bin:/bin",
                    "PYTHONPATH": str(_blender_like_site(directory / "site-packages"))}
     # -S: no site-packages but the Blender-like one, no .pth files (the project's editable install).
-    command = [sys.executable, "-S", str(ROOT / "tests" / "extension_session.py"), str(archive), str(result),
-               str(directory / "session.blend")]
+    command = [sys.executable, "-S", str(ROOT / "tests" / "extension_session.py"), str(archive), str(other),
+               str(result), str(directory / "session.blend")]
     log = (directory / "session.log").open("w")
     process = subprocess.Popen(command, cwd=directory, env=environment, stdout=log, stderr=subprocess.STDOUT)
     deadline = time.monotonic() + 600
@@ -93,6 +94,7 @@ def session(tmp_path_factory):
 def test_built_zip_installs_in_a_fresh_blender_and_works_end_to_end(session):
     result, _, _, directory = session
     assert result["importable_before"] == []  # nothing of lbc's came from this environment
+    assert not result["other_installed"]  # the other Python's zip says it is not for this Blender
     assert result["install"] == ["FINISHED"] and result["enabled"]
     extension = str(directory / "user" / "extensions")
     assert result["lbc_core"].startswith(str(directory / "user" / "extensions" / "user_default" / "lbc" / "lbc_core"))
