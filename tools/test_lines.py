@@ -72,7 +72,7 @@ def main(argv):
         for word, number in counts(closing).items():
             total[word] += number
     failures = total["failed"] + total["errors"] + total["error"]
-    print(f"all lines: {total['passed']} passed, {failures} failed, {total['skipped']} skipped")
+    print(f"total: {total['passed']} passed, {failures} failed, {total['skipped']} skipped")
     return next((status for _, _, status, _, _ in results if status != 0), 0)
 
 
