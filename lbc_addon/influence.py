@@ -98,7 +98,7 @@ def hide(mesh_obj):
     attribute = mesh.color_attributes.get(ATTRIBUTE_NAME)
     if attribute is not None:
         mesh.color_attributes.remove(attribute)
-    # By name: Blender 5.2 keeps a removed attribute's name as the active color unless told otherwise.
+    # By name: Blender 5.1 and 5.2 keep a removed attribute's name as the active color unless told otherwise.
     previous = settings.previous_color
     mesh.color_attributes.active_color_name = previous if previous in mesh.color_attributes else ""
     if settings.previous_color_type:
