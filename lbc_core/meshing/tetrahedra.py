@@ -248,7 +248,9 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     cover = circumspheres(surface_points, triangles)[1].max()
     keep = nearest >= band
     unsure = np.flatnonzero(keep & (nearest < band + cover))
-    keep[unsure] = _surface_distance(cage, points[unsure], band, steps) >= band
+    # The regions' triangles tile the surface the tetrahedra will follow; being small (about the spacing), each
+    # unsure point meets only a few of them, where a cage's large facets would meet every point.
+    keep[unsure] = _surface_distance(surface_points[triangles], points[unsure], band, steps) >= band
     # A lattice edge (centre to one of its cube's corners) between two kept points stays within its half length
     # (at most 0.52 side with the jitter; band = 0.7 side) of one of them, so it cannot cross the surface: the kept
     # points connected by lattice edges are all inside or all outside, which one winding number per piece decides.
@@ -298,14 +300,19 @@ def _check_winding(winding):
         )
 
 
-def _surface_distance(cage, points, reach, steps):
-    """Distance from each point to the cage surface, where it is below ``reach`` (inf beyond).
+def _surface_distance(corners, points, reach, steps):
+    """Distance from each point to a triangulated surface, where it is below ``reach`` (inf beyond).
+
+    Parameters
+    ----------
+    corners : (F, 3, 3) float array, the surface's triangles
+    points : (P, 3) float array
+    reach : float, length
 
     Returns
     -------
     (P,) float array
     """
-    corners = cage.vertices[cage.facets]
     centres = corners.mean(axis=1)
     radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
     # Only the (point, facet) pairs closer than `reach` + the facet's radius to the facet's centre can be in reach.
