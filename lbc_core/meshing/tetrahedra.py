@@ -7,15 +7,17 @@ triangle is a face of the 3D Delaunay tetrahedralisation). Surface triangles mis
 refined (circumcentre insertion, or the split of the feature-edge piece it encroaches, as in Ruppert's algorithm)
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
 the cage's winding number around it is 1. The lattice points then take two optimal-Delaunay smoothing steps and one
-sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming tetrahedralisation. When the cell count
-misses the target by more than 15 % (thin or small cages), everything is done once more with a corrected size.
+sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming
+tetrahedralisation. When the cell count misses the target by more than 15 % (thin or small cages), everything is
+done once more with a corrected size.
 
-Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells),
-and a cancel check in each round. Refinement whose missing triangles keep growing on course to pass the sample
-budget (parts of the cage nearly touching, far closer than the sampling) is refused at once, naming the faces. When
-recovery runs out of its budget (feature edges meeting at very small angles can make Ruppert-style refinement cascade), the
-last conforming tetrahedralisation of the smoothing rounds is kept if there is one; else the mesh is made again
-with fresh jitter and a coarser surface, and only then is the cage refused, naming the faces where it failed.
+Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells,
+the last guard), and a cancel check in each round. Refinement whose missing triangles keep growing, on course to
+pass the sample budget (parts of the cage nearly touching, far closer than the sampling), is refused at once,
+naming the faces. When recovery runs out of its budget (feature edges meeting at very small angles can make
+Ruppert-style refinement cascade), the last conforming tetrahedralisation of the smoothing rounds is kept if there
+is one; else the mesh is made again with fresh jitter and a coarser surface, and only then is the cage refused,
+naming the faces where it failed.
 """
 
 import time
@@ -405,8 +407,7 @@ def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, steps):
 
 def _diagnose(cage, facets):
     """The error message when the tetrahedra cannot be made to follow the cage near the given facets."""
-    faces = np.unique(cage.facet_face[facets])
-    listed = ", ".join(str(f) for f in faces[:10]) + (" ..." if len(faces) > 10 else "")
+    listed = _listed_faces(cage, facets)
     return (f"could not make the tetrahedra follow the cage surface near its faces {listed} (numbered from 0 in "
             "input order): faces meeting at very sharp angles or nearly touching parts there are the usual cause; "
             "widen those angles or move the parts apart, or try a different cell count")
@@ -414,9 +415,14 @@ def _diagnose(cage, facets):
 
 def _diagnose_gap(cage, facets, spacing):
     """The error message when refinement near the given facets runs away: a gap far below the sample spacing."""
-    faces = np.unique(cage.facet_face[facets])
-    listed = ", ".join(str(f) for f in faces[:10]) + (" ..." if len(faces) > 10 else "")
+    listed = _listed_faces(cage, facets)
     return (f"parts of the cage nearly touch near its faces {listed} (numbered from 0 in input order): the gap "
             f"there is far narrower than the cells (about {spacing:.3g} across in the cage's unit-diagonal frame), "
             "so the tetrahedra cannot follow the surface; widen the gap, close it (merge the parts), or raise the "
             "cell count a lot")
+
+
+def _listed_faces(cage, facets):
+    """The input faces holding the given facets, as a short list for a message."""
+    faces = np.unique(cage.facet_face[facets])
+    return ", ".join(str(f) for f in faces[:10]) + (" ..." if len(faces) > 10 else "")
