@@ -146,12 +146,22 @@ def slotted_prism(gap):
     return make_cage(vertices, faces)  # the intersection check passes: the slot's walls do not touch
 
 
-def test_nearly_touching_parts_are_refused_in_bounded_time_naming_them():
-    """A slot 1e-4 wide: conforming refinement would need samples 1e-4 apart on its walls. The mesher stops at its
-    deadline (10 s + 2 s per 1000 cells) and names the slot's faces, without blaming self-intersection (measured:
-    a 1e-2 slot meshes in 8 s, a 1e-3 one in 27 s at 8000 cells; 1e-4 is refused after 26 s)."""
+@pytest.mark.parametrize("cells", [2000, 8000])
+def test_nearly_touching_parts_are_refused_when_refinement_runs_away(cells):
+    """A slot 1e-4 wide: conforming refinement would need samples 1e-4 apart near its walls, far beyond the sample
+    budget. The missing surface triangles grow round after round; the mesher sees it is on course to pass its budget
+    and refuses (in 3 s, measured, at 2000 and 8000 cells), naming the slot's faces, never blaming
+    self-intersection. The message is the run-away one, not the deadline's ("could not make ... follow"): the
+    refusal does not depend on the machine's load. The clock bound only guards against a hang."""
     clock = time.perf_counter()
-    with pytest.raises(CageError, match=r"near its faces [0-9, ]*\b5\b") as refused:
-        meshing.mesh_domain(slotted_prism(1e-4), cells=2000)
+    with pytest.raises(CageError, match=r"nearly touch near its faces [0-9, ]*\b5\b") as refused:
+        meshing.mesh_domain(slotted_prism(1e-4), cells=cells)
     assert time.perf_counter() - clock < 30.0
     assert "intersect" not in str(refused.value)
+
+
+def test_a_narrow_valid_slot_still_meshes():
+    """A 1e-2 slot: the missing triangles first grow, then fall; the run-away check must let it mesh (a 1e-3 slot
+    meshes too, in 26 s at 8000 cells, too slow for the suite)."""
+    cage = slotted_prism(1e-2)
+    check_contract(cage, meshing.mesh_domain(cage, cells=8000))

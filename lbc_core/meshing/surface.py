@@ -185,20 +185,25 @@ class Surface:
         n = self.cage.n_control_points
         self.edge_start = np.cumsum([n] + [len(p) for p in self.edge_params])
         self.region_start = np.cumsum([self.edge_start[-1]] + [len(f) for f, _ in self.inner])
+        self._local = {}  # local_points per region, valid until the next numbering
         if self.region_start[-1] > self.budget:
             raise OutOfBudget(f"{self.region_start[-1]} surface samples")
 
     def _chain(self, k):
         """Point indices along feature edge k, from its lower to its higher vertex, ends included."""
-        inner = self.edge_start[k] + np.arange(len(self.edge_params[k]))
-        return np.r_[self.edges[k, 0], inner, self.edges[k, 1]]
+        chain = np.empty(len(self.edge_params[k]) + 2, dtype=np.int64)  # np.r_ costs more than this on many edges
+        chain[0], chain[-1] = self.edges[k]
+        chain[1:-1] = self.edge_start[k] + np.arange(len(self.edge_params[k]))
+        return chain
 
     def local_points(self, r):
         """Point indices of region r: its cage vertices, its feature edges' inner samples, its inner samples."""
-        parts = [self.region_vertices[r]]
-        parts += [self._chain(k)[1:-1] for k in self.region_edges[r]]
-        parts.append(self.region_start[r] + np.arange(len(self.inner[r][0])))
-        return np.concatenate(parts)
+        if r not in self._local:
+            parts = [self.region_vertices[r]]
+            parts += [self._chain(k)[1:-1] for k in self.region_edges[r]]
+            parts.append(self.region_start[r] + np.arange(len(self.inner[r][0])))
+            self._local[r] = np.concatenate(parts)
+        return self._local[r]
 
     def samples(self, steps):
         """All current samples and the regions' triangulations (boundary pieces missing from a region's 2D

@@ -7,14 +7,17 @@ triangle is a face of the 3D Delaunay tetrahedralisation). Surface triangles mis
 refined (circumcentre insertion, or the split of the feature-edge piece it encroaches, as in Ruppert's algorithm)
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
 the cage's winding number around it is 1. The lattice points then take two optimal-Delaunay smoothing steps and one
-sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming tetrahedralisation. When the cell count
-misses the target by more than 15 % (thin or small cages), everything is done once more with a corrected size.
+sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming
+tetrahedralisation. When the cell count misses the target by more than 15 % (thin or small cages), everything is
+done once more with a corrected size.
 
-Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells),
-and a cancel check in each round. When recovery
-runs out of its budget (feature edges meeting at very small angles can make Ruppert-style refinement cascade), the
-last conforming tetrahedralisation of the smoothing rounds is kept if there is one; else the mesh is made again
-with fresh jitter and a coarser surface, and only then is the cage refused, naming the faces where it failed.
+Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells,
+the last guard), and a cancel check in each round. Refinement whose missing triangles keep growing, on course to
+pass the sample budget (parts of the cage nearly touching, far closer than the sampling), is refused at once,
+naming the faces. When recovery runs out of its budget (feature edges meeting at very small angles can make
+Ruppert-style refinement cascade), the last conforming tetrahedralisation of the smoothing rounds is kept if there
+is one; else the mesh is made again with fresh jitter and a coarser surface, and only then is the cage refused,
+naming the faces where it failed.
 """
 
 import time
@@ -43,10 +46,15 @@ _PERTURBATION = 0.15  # the largest move per coordinate, × the lattice cube sid
 _RECOVERY_ROUNDS = 40  # rounds of surface refinement per tetrahedralisation
 # Refinement may make at most this many times the initial surface samples (plus a few thousand for small cages).
 _SAMPLE_BUDGET = 6
+# Refinement whose missing triangles grew this many rounds in a row, on course to pass the sample budget, is
+# running away. A 1e-3 slot (valid, it meshes) grows 3 rounds in a row and stays within budget by a factor 1.5;
+# a 1e-4 slot passes it after 2 (measured at 2000 and 8000 cells).
+_GROWING_ROUNDS = 2
 _ATTEMPTS = 3  # fresh jitter and a coarser surface (× 1.5 spacing each time) before a cage is refused
-# Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells): nearly touching parts
-# of a cage need samples as close as the gap, which can take minutes to reach or never fit the sample budget. The
-# slowest corpus mesh takes 8 s at 8000 cells, 33 s at 64000, on the loaded 2-core test machine.
+# Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells), the last guard: nearly
+# touching parts are refused earlier, when refinement runs away. The slowest valid mesh measured, a 1e-3 slot, takes
+# 26 s at 8000 cells, at the deadline's edge (its first attempt fails, the second conforms), so a more loaded
+# machine may refuse it; the corpus's slowest takes 33 s at 64000 cells.
 _SECONDS = 10.0
 _SECONDS_PER_1000 = 2.0
 
@@ -57,6 +65,15 @@ class _NotConforming(Exception):
     def __init__(self, facets):
         super().__init__(facets)
         self.facets = facets
+
+
+class _RunsAway(_NotConforming):
+    """Refinement near some facets grows without converging (parts of the cage nearly touch there): no retry with
+    another jitter or a coarser surface can help."""
+
+    def __init__(self, facets, spacing):
+        super().__init__(facets)
+        self.spacing = spacing
 
 
 def mesh(cage, cells, steps):
@@ -82,6 +99,8 @@ def _attempts(cage, side, deadline, steps):
         try:
             return _tetrahedralise(cage, side, 1.5**attempt, attempt, deadline,
                                    steps.part(attempt / _ATTEMPTS, (attempt + 1) / _ATTEMPTS))
+        except _RunsAway as failure:
+            raise CageError(_diagnose_gap(cage, failure.facets, failure.spacing)) from None
         except _NotConforming as failure:
             facets = failure.facets
         if time.perf_counter() > deadline:
@@ -162,6 +181,7 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
     lattice : (I, 3) float array, the lattice points kept (outside the protecting spheres)
     delaunay : scipy.spatial.Delaunay of the samples' points, lattice and far, in that order
     """
+    missing = []  # missing triangles per round
     try:
         for _ in range(_RECOVERY_ROUNDS):
             if time.perf_counter() > deadline:
@@ -173,10 +193,31 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
             is_face = rows_in(np.sort(samples.triangles, axis=1), _cell_faces(delaunay.simplices))
             if is_face.all():
                 return samples, lattice, delaunay
+            missing.append(np.count_nonzero(~is_face))
+            if _runs_away(missing, len(samples.points), surface.budget):
+                regions = np.unique(samples.triangle_region[~is_face])
+                raise _RunsAway(np.flatnonzero(np.isin(surface.region, regions)), surface.spacing)
             surface.refine(np.flatnonzero(~is_face), steps)
     except OutOfBudget:
         pass
     raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble)))
+
+
+def _runs_away(missing, n_samples, budget):
+    """Whether refinement is running away: the missing triangles grew _GROWING_ROUNDS rounds in a row, and two more
+    rounds growing alike (each missing triangle costing about one sample) would pass the sample budget.
+
+    Parameters
+    ----------
+    missing : list of int, missing surface triangles per round so far
+    n_samples : int, surface samples in the last round
+    budget : int, the most samples refinement may make
+    """
+    recent = missing[-_GROWING_ROUNDS - 1:]
+    if len(recent) <= _GROWING_ROUNDS or not all(b > a for a, b in zip(recent, recent[1:])):
+        return False
+    growth = missing[-1] / missing[-2]
+    return n_samples + missing[-1] * (1.0 + growth) > budget
 
 
 def _conforms(tets, triangles):
@@ -248,7 +289,9 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     cover = circumspheres(surface_points, triangles)[1].max()
     keep = nearest >= band
     unsure = np.flatnonzero(keep & (nearest < band + cover))
-    keep[unsure] = _surface_distance(cage, points[unsure], band, steps) >= band
+    # The regions' triangles tile the surface the tetrahedra will follow; being small (about the spacing), each
+    # unsure point meets only a few of them, where a cage's large facets would meet every point.
+    keep[unsure] = _surface_distance(surface_points[triangles], points[unsure], band, steps) >= band
     # A lattice edge (centre to one of its cube's corners) between two kept points stays within its half length
     # (at most 0.52 side with the jitter; band = 0.7 side) of one of them, so it cannot cross the surface: the kept
     # points connected by lattice edges are all inside or all outside, which one winding number per piece decides.
@@ -298,14 +341,19 @@ def _check_winding(winding):
         )
 
 
-def _surface_distance(cage, points, reach, steps):
-    """Distance from each point to the cage surface, where it is below ``reach`` (inf beyond).
+def _surface_distance(corners, points, reach, steps):
+    """Distance from each point to a triangulated surface, where it is below ``reach`` (inf beyond).
+
+    Parameters
+    ----------
+    corners : (F, 3, 3) float array, the surface's triangles
+    points : (P, 3) float array
+    reach : float, length
 
     Returns
     -------
     (P,) float array
     """
-    corners = cage.vertices[cage.facets]
     centres = corners.mean(axis=1)
     radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
     # Only the (point, facet) pairs closer than `reach` + the facet's radius to the facet's centre can be in reach.
@@ -359,8 +407,22 @@ def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, steps):
 
 def _diagnose(cage, facets):
     """The error message when the tetrahedra cannot be made to follow the cage near the given facets."""
-    faces = np.unique(cage.facet_face[facets])
-    listed = ", ".join(str(f) for f in faces[:10]) + (" ..." if len(faces) > 10 else "")
+    listed = _listed_faces(cage, facets)
     return (f"could not make the tetrahedra follow the cage surface near its faces {listed} (numbered from 0 in "
             "input order): faces meeting at very sharp angles or nearly touching parts there are the usual cause; "
             "widen those angles or move the parts apart, or try a different cell count")
+
+
+def _diagnose_gap(cage, facets, spacing):
+    """The error message when refinement near the given facets runs away: a gap far below the sample spacing."""
+    listed = _listed_faces(cage, facets)
+    return (f"parts of the cage nearly touch near its faces {listed} (numbered from 0 in input order): the gap "
+            f"there is far narrower than the cells (about {spacing:.3g} across in the cage's unit-diagonal frame), "
+            "so the tetrahedra cannot follow the surface; widen the gap, close it (merge the parts), or raise the "
+            "cell count a lot")
+
+
+def _listed_faces(cage, facets):
+    """The input faces holding the given facets, as a short list for a message."""
+    faces = np.unique(cage.facet_face[facets])
+    return ", ".join(str(f) for f in faces[:10]) + (" ..." if len(faces) > 10 else "")
