@@ -292,6 +292,12 @@ def _duration(seconds):
     return f"{seconds / 3600:.1f} h"
 
 
+def _remaining(seconds):
+    """'under 1 s left', 'about 7 s left': the time left, for progress messages."""
+    duration = _duration(seconds)
+    return f"{duration} left" if duration.startswith("under") else f"about {duration} left"
+
+
 def check_memory(n_control_points, n_cells, dim, n_vertices=None):
     """Raise CageError, with the estimate, if a solve would need more memory than the machine has available."""
     needed = estimate_memory(n_control_points, n_cells, dim, n_vertices)
@@ -795,7 +801,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
                        min(0.99, np.log(first_distance / distance) / np.log(first_distance)))
         # The time left, from the seconds per iteration so far and the share of the way done.
         elapsed = time.perf_counter() - started
-        left = f", about {_duration(elapsed * (1 - fraction) / fraction)} left" if fraction > 0 else ""
+        left = f", {_remaining(elapsed * (1 - fraction) / fraction)}" if fraction > 0 else ""
         progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
     # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries faint
     # tails there until full convergence. Both go back unscaled.
