@@ -14,6 +14,7 @@ import dataclasses
 import numpy as np
 
 from .meshing import DomainMesh
+from .meshing.common import bary_positions
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,11 +61,7 @@ class UnitFrame:
         their facet's corners and control vertices copied, so the mesh keeps :class:`DomainMesh`'s contract bitwise.
         """
         vertices = self.from_unit(domain.vertices)
-        corners = cage.vertices[cage.facets[domain.boundary_facet]]  # (B, d, d)
-        on_cage = domain.boundary_bary[:, 0, None] * corners[:, 0]
-        for k in range(1, corners.shape[1]):  # summed from k = 0 upward, as the contract says
-            on_cage = on_cage + domain.boundary_bary[:, k, None] * corners[:, k]
-        vertices[domain.boundary_vertices] = on_cage
+        vertices[domain.boundary_vertices] = bary_positions(cage, domain.boundary_facet, domain.boundary_bary)
         vertices[domain.control_vertices] = cage.vertices
         return DomainMesh(vertices, domain.cells, domain.boundary_vertices, domain.boundary_facet,
                           domain.boundary_bary, domain.control_vertices)
