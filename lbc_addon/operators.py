@@ -146,6 +146,14 @@ def _busy_message(context, label):
     return None
 
 
+def _allowed(operator_class, message):
+    """A poll() result: True when ``message`` (why the operator cannot run) is None, else False with the message
+    shown on the greyed-out button."""
+    if message:
+        operator_class.poll_message_set(message)
+    return message is None
+
+
 def _bind_poll_message(context):
     """Why Bind cannot run now, or None when it can."""
     busy = _busy_message(context, "Bind")
@@ -168,10 +176,7 @@ class OBJECT_OT_lbc_bind(_Binder, BindOptions, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        message = _bind_poll_message(context)
-        if message:
-            cls.poll_message_set(message)
-        return message is None
+        return _allowed(cls, _bind_poll_message(context))
 
     def targets(self, context):
         cage = context.active_object
@@ -197,9 +202,7 @@ class OBJECT_OT_lbc_rebind(_Binder, bpy.types.Operator):
         message = _busy_message(context, cls.bl_label)
         if message is None and not _bound_selection(context):
             message = "Select a bound mesh"
-        if message:
-            cls.poll_message_set(message)
-        return message is None
+        return _allowed(cls, message)
 
     def targets(self, context):
         triples = []
@@ -223,9 +226,7 @@ class OBJECT_OT_lbc_rebind_all(_Binder, bpy.types.Operator):
         if message is None and (context.active_object is None
                                 or not bound_to(context.active_object, context.scene.objects)):
             message = "Make a cage with bound meshes active"
-        if message:
-            cls.poll_message_set(message)
-        return message is None
+        return _allowed(cls, message)
 
     def targets(self, context):
         cage = context.active_object
