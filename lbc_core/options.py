@@ -15,8 +15,10 @@ import numpy as np
 
 from .errors import CageError
 
-# About how many triangles / tetrahedra fill the cage by default: the reference solver's 2D resolution, and the 3D
-# one at which the discretisation error halves against 4000 (README, Benchmark).
+# About how many triangles / tetrahedra fill the cage by default. 2D: the reference solver's resolution for the paper's
+# figures. 3D, chosen by fidelity and time: the clothing garment posed with its shipped cage pose moves by up to 48 %
+# of its size; against a 16k-tetrahedra binding it is off by up to 1.3 % of its size at 4k tetrahedra and 0.8 % at
+# 8k, while a bind of the 168-control-point gargoyle cage_L08 on the 2-core test machine took 10 s at 4k, 21 s at 8k.
 DEFAULT_CELLS = {2: 3000, 3: 8000}
 MIN_CELLS = 10
 # ρ of the geodesic TV weights ω = ρ(D) (lbc_core.geodesics.WEIGHTINGS holds the functions), the paper's first.

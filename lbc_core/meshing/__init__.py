@@ -37,15 +37,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..options import DEFAULT_CELLS, METHODS
 from ..progress import Progress
 
-DEFAULT_CELLS_2D = 3000  # the reference solver's resolution for the paper's 2D figures
-# Chosen by fidelity and time. The clothing garment posed with its shipped cage pose moves by up to 48 % of its size;
-# against a 16k-tetrahedra binding it is off by up to 1.3 % of its size at 4k tetrahedra and 0.8 % at 8k. A whole
-# bind of the 168-control-point gargoyle cage_L08 on the 2-core test machine takes 10 s at 4k, 21 s at 8k, 33 s at
-# 12k (the target is 60 s; meshing and geodesics stay under 10 % of it).
-DEFAULT_CELLS_3D = 8000
-METHODS = {2: ("auto", "triangle", "delaunay"), 3: ("auto", "delaunay")}
+# The defaults and the method names live with the other bind options (lbc_core.options); named here as well for the
+# callers of mesh_domain.
+DEFAULT_CELLS_2D = DEFAULT_CELLS[2]
+DEFAULT_CELLS_3D = DEFAULT_CELLS[3]
 # Facets whose normals differ by less than this (radians) along a shared edge form one planar region: n-gon splits,
 # quads, and planes dented by round-off or by an artist's nudge. 1e-3 rad bends a boundary triangle of side h off
 # the cage by at most about 2.5e-4 h.
