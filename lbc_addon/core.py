@@ -14,6 +14,7 @@ lbc_core = importlib.import_module(_BUNDLED if importlib.util.find_spec(_BUNDLED
 _meshing = importlib.import_module(f"{lbc_core.__name__}.meshing")
 _solver = importlib.import_module(f"{lbc_core.__name__}.solver")
 _reduction = importlib.import_module(f"{lbc_core.__name__}.reduction")
+_constraints = importlib.import_module(f"{lbc_core.__name__}.constraints")
 
 CageError = lbc_core.CageError
 Cancelled = lbc_core.Cancelled
@@ -21,5 +22,5 @@ DEFAULT_CELLS_2D = _meshing.DEFAULT_CELLS_2D
 DEFAULT_CELLS_3D = _meshing.DEFAULT_CELLS_3D
 DEFAULT_TOLERANCE = _solver.DEFAULT_TOLERANCE
 ROWS_PER_CHUNK = _reduction.ROWS_PER_CHUNK
-constraint_residuals = _reduction.constraint_residuals
-restore_constraints = _reduction.restore_constraints
+constraint_residuals = _constraints.constraint_residuals
+restore_constraints = _constraints.restore_constraints

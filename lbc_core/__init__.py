@@ -5,15 +5,15 @@
     deformed = b.deform(new_cage_vertices)
 """
 
-__version__ = "0.1.0"
-
-from .errors import CageError, Cancelled  # noqa: E402
-from .cage import Cage, make_cage  # noqa: E402
-from .options import BindOptions  # noqa: E402
-from .solver import SolveResult, solve_on_mesh  # noqa: E402
-from .binding import Binding, bind, load_binding  # noqa: E402
-from .baselines import bind_bbw, bind_harmonic, bind_mvc, mean_value_coordinates  # noqa: E402
-from .io import read_cage, read_mesh, write_mesh  # noqa: E402
+from .version import __version__
+from .errors import CageError, Cancelled
+from .cage import Cage, make_cage
+from .options import BindOptions
+from .solver import SolveResult, solve_on_mesh
+from .binding import Binding, load_binding
+from .pipeline import bind
+from .baselines import bind_bbw, bind_harmonic, bind_mvc, mean_value_coordinates
+from .io import read_cage, read_mesh, write_mesh
 
 __all__ = [
     "BindOptions", "Binding", "Cage", "CageError", "Cancelled", "SolveResult", "bind", "bind_bbw", "bind_harmonic", "bind_mvc",

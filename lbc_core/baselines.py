@@ -18,13 +18,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .binding import Binding, check_points
+from .binding import Binding
 from .boundary import boundary_weights
-from .cage import make_cage
 from .fem import stiffness_matrix
 from .frame import UnitFrame
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain
+from .pipeline import check_cage_and_points
 from .progress import Progress
 
 # A point closer than this fraction of the cage's bounding-box diagonal to a vertex, edge or face is on it.
@@ -290,8 +290,7 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
     timings = {}
     clock = time.perf_counter()
     progress = Progress.of(progress, cancel)
-    cage = make_cage(cage_vertices, cage_faces)
-    points = check_points(cage, points)
+    cage, points = check_cage_and_points(cage_vertices, cage_faces, points)
     # As in lbc_core.bind, every stage computes in the unit frame.
     frame = UnitFrame.of(cage)
     unit_cage, unit_points = frame.cage_to_unit(cage), frame.to_unit(points)

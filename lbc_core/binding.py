@@ -1,11 +1,9 @@
-"""Binding: the whole pipeline from a cage and points to sparse coordinates, deformation, and files.
+"""Binding: the record of a bind (sparse coordinates of points with respect to a cage), deformation, and files.
 
-    cage → domain mesh → boundary values → geodesic TV weights → ADMM → smooth interpolation to the points →
-    reduction
+:func:`lbc_core.pipeline.bind` makes one; :meth:`Binding.save` and :func:`load_binding` write and read it.
 """
 
 import json
-import time
 import zipfile
 from dataclasses import dataclass, field
 from functools import cached_property, partial
@@ -14,32 +12,20 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from . import __version__
-from .boundary import boundary_weights
-from .cage import Cage, make_cage, real_array
+from .cage import Cage, make_cage
 from .errors import CageError
-from .frame import UnitFrame
-from .interpolation import interpolation_matrix
 from .io import writing
-from .meshing import DomainMesh, mesh_domain
-from .options import DEFAULT_CELLS, BindOptions
-from .reduction import interpolate_and_reduce
-from .smoothing import SmoothInterpolation
+from .meshing import DomainMesh
 from .parallel import thread_map, worker_count
-from .progress import Progress
-from .solver import check_memory, solve_forecast, solve_on_mesh
+from .version import __version__
 
 # Deforming fewer points than this is faster on one thread.
 PARALLEL_MIN_POINTS = 50_000
-# Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
-REPRODUCTION_TOLERANCE = 1e-9
-# Share of the progress bar each stage gets (the solve dominates).
-_STAGES = {"meshing": (0.0, 0.08), "solve": (0.08, 0.92), "interpolation": (0.92, 0.97), "reduction": (0.97, 1.0)}
 
 
 @dataclass
 class Binding:
-    """Coordinates of a set of points with respect to a cage, ready to deform them.
+    """Coordinates of a set of points with respect to a cage, ready to deform them (made by :func:`lbc_core.bind`).
 
     Attributes
     ----------
@@ -364,179 +350,3 @@ def _json_record(arrays, key, damaged):
     if not isinstance(record, dict):
         damaged(f"its {key} record is not a JSON object")
     return record
-
-
-def bind(
-    cage_vertices,
-    cage_faces,
-    points,
-    *,
-    cells=None,
-    weighting=None,
-    epsilon=None,
-    threshold=None,
-    method=None,
-    tolerance=None,
-    max_iterations=None,
-    options=None,
-    progress=None,
-    cancel=None,
-):
-    """Local barycentric coordinates of ``points`` with respect to a cage.
-
-    Parameters
-    ----------
-    cage_vertices : (n_input, 2) or (n_input, 3) float array
-    cage_faces : None or sequence of index sequences
-        None: a 2D polygon, vertices in boundary order. Else the faces of a closed 3D cage.
-    points : (m, d) float array
-        The points to bind (a mesh's vertices). 2D points may be given with a constant z.
-    cells, weighting, epsilon, threshold, method, tolerance, max_iterations : optional
-        The fields of :class:`lbc_core.options.BindOptions` (None: the default): about how many triangles /
-        tetrahedra fill the cage (3000 in 2D, 8000 in 3D; more is finer and slower), ρ of the geodesic TV weights
-        ("quadratic", the paper's default, "linear", "sqrt", "constant" or a function), the C¹ relaxation width
-        (0: plain total variation), the reduction threshold (1e-3 / n), the domain mesher ("auto"), the ADMM
-        stopping tolerance (the solver's) and its iteration limit (10000).
-    options : BindOptions, optional
-        The same options as one object; keywords given besides it override its fields.
-    progress : callable(fraction, message), optional
-    cancel : callable() -> bool, optional
-        Returning True stops the bind with :class:`lbc_core.Cancelled`; every stage polls it at least every few tenths
-        of a second.
-
-    Returns
-    -------
-    Binding
-
-    Raises
-    ------
-    CageError
-        For any bad option, cage or points, before any meshing or solving.
-    """
-    timings = {}
-    clock = time.perf_counter()
-    progress = Progress.of(progress, cancel)
-    request = BindOptions.of(options, cells=cells, weighting=weighting, epsilon=epsilon, threshold=threshold,
-                             method=method, tolerance=tolerance, max_iterations=max_iterations)
-    cage, points = check_request(cage_vertices, cage_faces, points, request, progress)
-    cells, weighting, epsilon, method = request.cells, request.weighting, request.epsilon, request.method
-    tolerance, max_iterations = request.tolerance, request.max_iterations
-    threshold = request.threshold_for(cage.n_control_points)
-    # Every stage computes in the unit frame; the weights are the same in any frame.
-    frame = UnitFrame.of(cage)
-    unit_cage = frame.cage_to_unit(cage)
-
-    unit_domain = mesh_domain(unit_cage, cells, method, progress=progress.part(*_STAGES["meshing"]))
-    timings["meshing"] = time.perf_counter() - clock
-
-    solver_options = {"weighting": weighting, "epsilon": epsilon, "max_iterations": max_iterations}
-    if tolerance is not None:
-        solver_options["tolerance"] = tolerance
-    result = solve_on_mesh(
-        unit_domain.vertices, unit_domain.cells, unit_domain.boundary_vertices,
-        boundary_weights(unit_domain, unit_cage), unit_cage.vertices,
-        progress=progress.part(*_STAGES["solve"]), **solver_options,
-    )
-    timings.update(result.seconds)
-
-    clock = time.perf_counter()
-    located, outside, _ = interpolation_matrix(
-        unit_domain.vertices, unit_domain.cells, frame.to_unit(points),
-        progress=progress.part(*_STAGES["interpolation"]),
-    )
-    timings["interpolation"] = time.perf_counter() - clock
-    clock = time.perf_counter()
-    reduction = progress.part(*_STAGES["reduction"])
-    weights = interpolate_and_reduce(SmoothInterpolation(unit_domain.vertices, unit_domain.cells, located,
-                                                         progress=reduction),
-                                     result.weights, unit_cage.vertices, unit_domain.vertices, threshold,
-                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
-    timings["reduction"] = time.perf_counter() - clock
-    progress(1.0, "bound")
-    options = dict(solver_options, cells=len(unit_domain.cells), threshold=threshold, method=method)
-    return Binding(
-        cage=cage,
-        rest_cage_vertices=cage.vertices.copy(),
-        weights=weights,
-        domain=frame.domain_from_unit(unit_domain, cage),
-        domain_weights=result.weights,
-        outside=outside,
-        points=points,
-        scheme="lbc",
-        options=options,
-        timings=timings,
-        iterations=result.iterations,
-        converged=result.converged,
-        objective=result.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
-    )
-
-
-def check_request(cage_vertices, cage_faces, points, options, progress=None):
-    """Everything a bind is given, checked before any long work: options, cage, points and the memory it needs.
-
-    Parameters
-    ----------
-    cage_vertices, cage_faces, points
-        As for :func:`bind`.
-    options : BindOptions
-    progress : callable(fraction, message), optional
-        Told, at 0, how much memory and (roughly) time the solve will take.
-
-    Returns
-    -------
-    cage : Cage
-    points : (m, d) float array
-
-    Raises
-    ------
-    CageError
-    """
-    cage = make_cage(cage_vertices, cage_faces)
-    options.check_for_cage(cage.n_control_points, cage.dim)
-    plane_z = None
-    if cage_faces is None and np.shape(cage_vertices)[1:] == (3,):
-        plane_z = float(np.asarray(cage_vertices, dtype=float)[0, 2])
-    points = check_points(cage, points, plane_z)
-    n_cells = options.cells or DEFAULT_CELLS[cage.dim]
-    # Refuse a resolution the machine cannot hold before meshing it, not after the OS kills the process.
-    check_memory(cage.n_control_points, n_cells, cage.dim)
-    if progress is not None:
-        progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim))
-    return cage, points
-
-
-def check_points(cage, points, plane_z=None):
-    """Points as an (m, d) float array for a d-dimensional cage.
-
-    2D points may come as (m, 3) with a constant z (file data).
-
-    Parameters
-    ----------
-    cage : Cage
-    points : (m, 2) or (m, 3) array-like
-    plane_z : float, optional
-        The z of a 2D cage given with a constant z: 2D points given with a z must lie in that plane.
-
-    Raises
-    ------
-    CageError
-        Wrong shape, dimension mismatch, another plane than the cage's, or NaN/inf coordinates.
-    """
-    points = real_array(points, "points", "(m, 2) or (m, 3)")
-    if points.ndim != 2 or points.shape[1] not in (2, 3):
-        raise CageError(f"points must be an (m, 2) or (m, 3) array, got shape {points.shape}")
-    if cage.dim == 2 and points.shape[1] == 3:
-        tolerance = 1e-9 * cage.bbox_diagonal
-        if len(points) and np.ptp(points[:, 2]) > tolerance:
-            raise CageError("the cage is 2D but the points' z varies: bind 2D points (or a z = constant plane)")
-        if len(points) and plane_z is not None and abs(points[0, 2] - plane_z) > tolerance:
-            raise CageError(
-                f"the 2D cage lies in the plane z = {plane_z:g} but the points in z = {points[0, 2]:g}: move them "
-                "into the cage's plane (or give both as 2D arrays)"
-            )
-        points = points[:, :2]
-    if points.shape[1] != cage.dim:
-        raise CageError(f"the cage is {cage.dim}D but the points are {points.shape[1]}D")
-    if not np.all(np.isfinite(points)):
-        raise CageError("some points have NaN or infinite coordinates: fix or delete them")
-    return points

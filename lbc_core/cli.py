@@ -288,7 +288,7 @@ def _run_table1(args):
 def _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=None):
     """One binding with the command's options; the baselines reuse ``domain`` when given."""
     if scheme == "lbc":
-        from .binding import bind
+        from .pipeline import bind
 
         return bind(cage_vertices, cage_faces, points, options=args.options, progress=progress)
     from . import baselines

@@ -38,7 +38,7 @@ from .objective import tv_objective
 from .parallel import thread_map, worker_count
 from .errors import CageError
 from .progress import Progress
-from .reduction import constraint_residuals, grow_support, restore_constraints
+from .constraints import project_onto_constraints
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
@@ -66,6 +66,7 @@ class SolveResult:
     objective : float
         Σ_cells Σ_i ω A |∇w_i| of ``weights``, in the input's units (length^(d-1)).
     tv_weights : (F, n) float array
+        The ω the solve was given.
     history : list of dict
         At each scheduled check (every ``check_every`` iterations) the iteration and the relative primal residual;
         where the primal test passed, a full check adds the relative dual residual and the objective of the
@@ -89,9 +90,8 @@ def solve_on_mesh(
     boundary_vertices,
     boundary_weights,
     control_points,
-    tv_weights=None,
+    tv_weights,
     *,
-    weighting="quadratic",
     epsilon=0.0,
     tolerance=None,
     max_iterations=10000,
@@ -115,11 +115,8 @@ def solve_on_mesh(
     boundary_weights : (B, n) float array
         Their weights; each row sums to 1 and reproduces the vertex's position.
     control_points : (n, d) float array
-    tv_weights : (F, n) float array, optional
-        ω per cell and coordinate; None computes them from heat-method geodesic distances from the control points,
-        which must then be mesh vertices.
-    weighting : str or callable
-        ρ for computing ``tv_weights`` (see :func:`lbc_core.geodesics.tv_weights`).
+    tv_weights : (F, n) float array
+        ω per cell and coordinate (:func:`lbc_core.geodesics.tv_weights` of the geodesic distances).
     epsilon : float
         C¹ relaxation width: |∇w| is replaced by its Huber smoothing (quadratic below ε, in 1/length units of the
         unit-diagonal cage, linear above), which makes the coordinates smoother at the cost of some locality.
@@ -146,7 +143,7 @@ def solve_on_mesh(
         to round-off either way.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
-        Polled between the steps of every stage (geodesics, factorisation, each ADMM iteration, projection); when it
+        Polled between the steps of every stage (factorisation, each ADMM iteration, projection); when it
         returns True the solve raises :class:`lbc_core.Cancelled`.
 
     Returns
@@ -163,17 +160,8 @@ def solve_on_mesh(
     n_vertices, d = vertices.shape
     n = len(control_points)
     _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
-    check_memory(n, len(cells), d, n_vertices)
     if tolerance is None:
         tolerance = DEFAULT_TOLERANCE[d]
-
-    if tv_weights is None:
-        from .geodesics import geodesic_distances, tv_weights as make_tv_weights
-
-        sources = _control_vertices(vertices, control_points)
-        distances = geodesic_distances(vertices, cells, sources, progress.part(0.0, _GEODESICS_END))
-        tv_weights = make_tv_weights(cells, distances, weighting)
-        timer.lap("geodesics")
     tv_weights = np.asarray(tv_weights, dtype=float)
 
     # Work on the cage scaled to unit diagonal, so that penalty and tolerances are scale-free.
@@ -188,7 +176,7 @@ def solve_on_mesh(
     iterations, converged, history = 0, True, []
     if len(interior):
         dtype = np.float32 if single_precision else np.float64
-        progress(_GEODESICS_END, "factorising the solver's matrix")
+        progress(0.0, "factorising the solver's matrix")
         problem = _Problem(unit_vertices, cells, boundary_vertices, boundary_weights, unit_controls, interior,
                            BETA[d], dtype, progress)
         timer.lap("factorisation")
@@ -206,7 +194,7 @@ def solve_on_mesh(
                     record["objective"] *= scale ** (d - 1)
         timer.lap("solve")
         progress(_ADMM_END, "projecting onto the constraints")
-        weights[interior] = _project(Z, W, unit_controls, unit_vertices[interior], progress)
+        weights[interior] = project_onto_constraints(W, Z, unit_controls, unit_vertices[interior], progress.check)
         progress.check()
     if len(interior):
         # From the operators at hand, in float64: TV scales with length^(d-1).
@@ -218,7 +206,7 @@ def solve_on_mesh(
 
 
 # Where each part of the solve ends on its progress range (the ADMM iterations take most of the time).
-_GEODESICS_END, _FACTORISATION_END, _ADMM_END = 0.1, 0.15, 0.98
+_FACTORISATION_END, _ADMM_END = 0.06, 0.98
 
 
 # Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (107-115; float32 loop,
@@ -325,22 +313,6 @@ def _available_memory():
         return None
 
 
-def _project(Z, W, controls, positions, progress):
-    """The output: W's exact zeros kept, partition of unity and reproduction restored on W's support.
-
-    A vertex whose W support is too small to reproduce it (three control points for a point off their plane) gets
-    Z's next largest weights added, largest first, until it is.
-    """
-    on_support = restore_constraints(W, controls, positions, check=progress.check)
-    unity, reproduction = constraint_residuals(on_support, controls, positions)
-    failed = (unity > 1e-12) | (reproduction > 1e-12) | (on_support < 0).any(axis=1)
-    if failed.any():
-        grown = grow_support(sp.csr_matrix(np.maximum(Z[failed], 0.0)), controls, positions[failed],
-                             np.count_nonzero(W[failed] > 0, axis=1), tolerance=1e-12, check=progress.check)
-        on_support[failed] = grown.toarray()
-    return on_support
-
-
 def _default_penalty(d, n):
     return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
 
@@ -358,18 +330,8 @@ def _check_problem(vertices, cells, boundary_vertices, boundary_weights, control
         )
     if n < d + 1:
         raise CageError(f"a {d}D cage needs at least {d + 1} control points, got {n}")
-    if tv_weights is not None and np.shape(tv_weights) != (len(cells), n):
+    if np.shape(tv_weights) != (len(cells), n):
         raise CageError(f"tv_weights must be (F, n) = ({len(cells)}, {n}), got {np.shape(tv_weights)}")
-
-
-def _control_vertices(vertices, control_points):
-    from scipy.spatial import cKDTree
-
-    distance, index = cKDTree(vertices).query(control_points)
-    diagonal = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
-    if np.any(distance > 1e-9 * diagonal):
-        raise CageError("to compute geodesic TV weights every control point must be a vertex of the mesh")
-    return index
 
 
 class _Problem:

@@ -120,7 +120,7 @@ def test_bind_refuses_bad_options_before_meshing(monkeypatch, options, message):
     def no_meshing(*args, **kwargs):
         raise AssertionError("meshing started with bad options")
 
-    monkeypatch.setattr("lbc_core.binding.mesh_domain", no_meshing)
+    monkeypatch.setattr("lbc_core.pipeline.mesh_domain", no_meshing)
     with pytest.raises(CageError, match=message):
         lbc_core.bind(SQUARE, None, [[0.5, 0.5]], **options)
 

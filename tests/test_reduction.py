@@ -3,7 +3,8 @@
 import numpy as np
 import scipy.sparse as sp
 
-from lbc_core.reduction import constraint_residuals, reduce_weights, restore_constraints
+from lbc_core.constraints import constraint_residuals, restore_constraints
+from lbc_core.reduction import reduce_weights
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 

@@ -1,0 +1,213 @@
+"""Partition of unity and reproduction: the affine constraints every set of coordinates meets, and the projections
+that restore them.
+
+Per point, the weights w on a support S are corrected by the least-norm change that makes Σ w = 1 and Σ w c = x;
+weights the correction pushes below zero are removed from S and the correction repeated. The solver projects its
+output this way (:func:`project_onto_constraints`), the reduction its thresholded weights, the add-on its capped
+slots. Rows travel as padded (m, K) arrays of values and column indices (:func:`padded_rows`).
+"""
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def project_onto_constraints(clamped, unclamped, controls, positions, check=None):
+    """The solver's output: ``clamped``'s exact zeros kept, partition of unity and reproduction restored on its
+    support.
+
+    A vertex whose support is too small to reproduce it (three control points for a point off their plane) gets
+    ``unclamped``'s next largest weights added, largest first, until it is.
+
+    Parameters
+    ----------
+    clamped : (m, n) float array
+        Weights clamped to [0, 1] (the solver's split variable W).
+    unclamped : (m, n) float array
+        The iterate the constraints hold on (the solver's Z), where a support must grow.
+    controls : (n, d) float array
+    positions : (m, d) float array
+    check : callable, optional
+        Called between rounds of corrections (it raises to cancel).
+
+    Returns
+    -------
+    (m, n) float array
+    """
+    on_support = restore_constraints(clamped, controls, positions, check=check)
+    unity, reproduction = constraint_residuals(on_support, controls, positions)
+    failed = (unity > 1e-12) | (reproduction > 1e-12) | (on_support < 0).any(axis=1)
+    if failed.any():
+        grown = grow_support(sp.csr_matrix(np.maximum(unclamped[failed], 0.0)), controls, positions[failed],
+                             np.count_nonzero(clamped[failed] > 0, axis=1), tolerance=1e-12, check=check)
+        on_support[failed] = grown.toarray()
+    return on_support
+
+
+def restore_constraints(weights, controls, positions, columns=None, rounds=20, check=None):
+    """Correct weights on their support so that they sum to 1, reproduce ``positions`` and are non-negative.
+
+    Parameters
+    ----------
+    weights : (m, K) float array
+        Each point's weights on its support (K slots; unused slots hold 0 and column index 0 with ``valid`` false).
+    controls : (n, d) float array
+        Control points.
+    positions : (m, d) float array
+        Positions the weights must reproduce.
+    columns : (m, K) int array, optional
+        The control point of each slot; None means K = n and slot j is control point j.
+    rounds : int
+        Correct-and-clamp rounds; corrections are small, so one or two usually suffice.
+    check : callable, optional
+        Called before each round (it raises to cancel).
+
+    Returns
+    -------
+    (m, K) float array; entries that were 0 stay 0. Rows that cannot be corrected on their support are returned
+    as given with negatives clamped and renormalised (reported by :func:`constraint_residuals`).
+    """
+    weights = np.array(weights, dtype=float)
+    m, K = weights.shape
+    d = controls.shape[1]
+    # Affine rows a_j = [c_j, 1]; targets t = [x, 1]. Per point: A (K, d+1) its slots' rows; the correction of
+    # w on its support S is A_S (A_Sᵀ A_S)⁻¹ (t - Aᵀw).
+    affine_rows = np.c_[controls, np.ones(len(controls))]  # (n, d+1)
+    if columns is None:
+        # Every point has the same slots: the batched products become plain matrix products.
+        outer_products = (affine_rows[:, :, None] * affine_rows[:, None, :]).reshape(K, -1)
+
+        def reproduced(w):
+            return w @ affine_rows
+
+        def gram_on(support):
+            return (support.astype(float) @ outer_products).reshape(m, d + 1, d + 1)
+
+        def spread(correction, support):
+            return support * (correction @ affine_rows.T)
+    else:
+        affine = affine_rows[columns]  # (m, K, d+1)
+
+        def reproduced(w):
+            return (w[:, None, :] @ affine)[:, 0]
+
+        def gram_on(support):
+            return np.swapaxes(support[:, :, None] * affine, 1, 2) @ affine
+
+        def spread(correction, support):
+            return support * (affine @ correction[:, :, None])[:, :, 0]
+    target = np.c_[positions, np.ones(m)]
+    support = weights > 0
+    weights = np.where(support, weights, 0.0)
+    for _ in range(rounds):
+        if check is not None:
+            check()
+        residual = target - reproduced(weights)
+        gram = gram_on(support)
+        # A tiny ridge keeps supports that cannot span the affine constraints from blowing up.
+        ridge = 1e-14 * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(d + 1)
+        weights += spread(np.linalg.solve(gram + ridge, residual[:, :, None])[:, :, 0], support)
+        negative = weights < 0
+        if not negative.any():
+            break
+        support &= ~negative
+        weights[negative] = 0.0
+    return weights
+
+
+def constraint_residuals(weights, controls, positions, columns=None):
+    """Largest violation of partition of unity and of reproduction per point.
+
+    Parameters
+    ----------
+    weights : (m, K) float array
+    controls : (n, d) float array
+    positions : (m, d) float array
+    columns : (m, K) int array, optional (None: K = n)
+
+    Returns
+    -------
+    unity : (m,) float array, |Σ w - 1|
+    reproduction : (m,) float array, |Σ w c - x| in the units of ``positions``
+    """
+    unity = np.abs(weights.sum(axis=1) - 1.0)
+    reproduced = weights @ controls if columns is None else (weights[:, None, :] @ controls[columns])[:, 0]
+    reproduction = np.linalg.norm(reproduced - positions, axis=1)
+    return unity, reproduction
+
+
+def restore_and_check(values, columns, controls, positions, tolerance, check=None):
+    """Padded rows corrected by :func:`restore_constraints`, and which of them meet the constraints: (m, K) float
+    array, (m,) bool array (unity within 1e-9, reproduction within ``tolerance``, non-negative)."""
+    corrected = restore_constraints(values, controls, positions, columns, check=check)
+    unity, reproduction = constraint_residuals(corrected, controls, positions, columns)
+    return corrected, (unity <= 1e-9) & (reproduction <= tolerance) & (corrected >= 0).all(axis=1)
+
+
+def grow_support(full, controls, positions, keep, tolerance, check=None):
+    """Weights on each row's ``keep`` largest entries, plus the next largest, 1, 2, 4, ... at a time, until the
+    constraints can be restored on them exactly.
+
+    Parameters
+    ----------
+    full : (m, n) scipy.sparse matrix
+        Non-negative candidate weights.
+    controls : (n, d) float array
+    positions : (m, d) float array
+    keep : (m,) int array
+        How many of each row's largest entries to start from.
+    tolerance : float
+        Largest reproduction error accepted, in the units of ``positions``.
+    check : callable, optional
+        Called between rounds of corrections (it raises to cancel).
+
+    Returns
+    -------
+    (m, n) scipy.sparse.csr_matrix
+    """
+    n = controls.shape[0]
+    values, columns = padded_rows(full)
+    order = np.argsort(-values, axis=1)
+    values = np.take_along_axis(values, order, axis=1)
+    columns = np.take_along_axis(columns, order, axis=1)
+    reduced = sp.csr_matrix(full.shape)
+    pending = np.arange(full.shape[0])
+    extra = 1
+    while len(pending):
+        size = np.minimum(keep[pending] + extra, values.shape[1])
+        slots = np.where(np.arange(values.shape[1]) < size[:, None], values[pending], 0.0)
+        corrected, done = restore_and_check(slots, columns[pending], controls, positions[pending], tolerance, check)
+        done |= size >= values.shape[1]  # the full support: nothing more to add
+        reduced = scatter_rows(reduced, pending[done], csr_from_padded(corrected[done], columns[pending][done], n))
+        pending = pending[~done]
+        extra *= 2
+    return reduced
+
+
+def scatter_rows(matrix, rows, values):
+    """``matrix``, whose given rows are empty, with those rows filled from ``values`` (CSR, same column count)."""
+    placement = sp.csr_matrix((np.ones(len(rows)), (rows, np.arange(len(rows)))), shape=(matrix.shape[0], len(rows)))
+    return (matrix + placement @ values).tocsr()
+
+
+def padded_rows(matrix):
+    """CSR rows as (m, K) arrays of values and column indices, K = the largest row length."""
+    matrix = sp.csr_matrix(matrix)
+    lengths = np.diff(matrix.indptr)
+    K = max(int(lengths.max(initial=0)), 1)
+    m = matrix.shape[0]
+    slot = np.arange(matrix.nnz) - np.repeat(matrix.indptr[:-1], lengths)
+    row = np.repeat(np.arange(m), lengths)
+    values = np.zeros((m, K))
+    columns = np.zeros((m, K), dtype=np.int64)
+    values[row, slot] = matrix.data
+    columns[row, slot] = matrix.indices
+    return values, columns
+
+
+def csr_from_padded(values, columns, n):
+    """The (m, n) CSR matrix of padded rows (:func:`padded_rows`); zeros are dropped."""
+    m, K = values.shape
+    rows = np.repeat(np.arange(m), K)
+    matrix = sp.csr_matrix((values.ravel(), (rows, columns.ravel())), shape=(m, n))
+    matrix.eliminate_zeros()
+    return matrix

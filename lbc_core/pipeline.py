@@ -1,0 +1,244 @@
+"""The bind pipeline: a cage and points in, a :class:`~lbc_core.binding.Binding` out, every stage called here in order.
+
+    check the request → unit frame → domain mesh → boundary values → geodesic TV weights → solve (ADMM) →
+    interpolation to the points → smooth evaluation and reduction → back to the user's frame
+
+Each stage is a public function of its own module; this module only orders them, gives each its share of the
+progress bar and times it. The baselines (:mod:`lbc_core.baselines`) run the same first stages through
+:func:`check_cage_and_points`.
+"""
+
+import time
+
+import numpy as np
+
+from .binding import Binding
+from .boundary import boundary_weights
+from .cage import make_cage, real_array
+from .errors import CageError
+from .frame import UnitFrame
+from .geodesics import geodesic_distances, tv_weights
+from .interpolation import interpolation_matrix
+from .meshing import mesh_domain
+from .options import DEFAULT_CELLS, BindOptions
+from .progress import Progress
+from .reduction import interpolate_and_reduce
+from .smoothing import SmoothInterpolation
+from .solver import check_memory, solve_forecast, solve_on_mesh
+
+# Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
+REPRODUCTION_TOLERANCE = 1e-9
+# Share of the progress bar each stage gets (the solve dominates).
+STAGES = {"meshing": (0.0, 0.08), "geodesics": (0.08, 0.164), "solve": (0.164, 0.92),
+          "interpolation": (0.92, 0.97), "reduction": (0.97, 1.0)}
+
+
+def bind(
+    cage_vertices,
+    cage_faces,
+    points,
+    *,
+    cells=None,
+    weighting=None,
+    epsilon=None,
+    threshold=None,
+    method=None,
+    tolerance=None,
+    max_iterations=None,
+    options=None,
+    progress=None,
+    cancel=None,
+):
+    """Local barycentric coordinates of ``points`` with respect to a cage.
+
+    Parameters
+    ----------
+    cage_vertices : (n_input, 2) or (n_input, 3) float array
+    cage_faces : None or sequence of index sequences
+        None: a 2D polygon, vertices in boundary order. Else the faces of a closed 3D cage.
+    points : (m, d) float array
+        The points to bind (a mesh's vertices). 2D points may be given with a constant z.
+    cells, weighting, epsilon, threshold, method, tolerance, max_iterations : optional
+        The fields of :class:`lbc_core.options.BindOptions` (None: the default): about how many triangles /
+        tetrahedra fill the cage (3000 in 2D, 8000 in 3D; more is finer and slower), ρ of the geodesic TV weights
+        ("quadratic", the paper's default, "linear", "sqrt", "constant" or a function), the C¹ relaxation width
+        (0: plain total variation), the reduction threshold (1e-3 / n), the domain mesher ("auto"), the ADMM
+        stopping tolerance (the solver's) and its iteration limit (10000).
+    options : BindOptions, optional
+        The same options as one object; keywords given besides it override its fields.
+    progress : callable(fraction, message), optional
+    cancel : callable() -> bool, optional
+        Returning True stops the bind with :class:`lbc_core.Cancelled`; every stage polls it at least every few tenths
+        of a second.
+
+    Returns
+    -------
+    Binding
+
+    Raises
+    ------
+    CageError
+        For any bad option, cage or points, before any meshing or solving.
+    """
+    timings = {}
+    clock = time.perf_counter()
+
+    def lap(stage):
+        nonlocal clock
+        now = time.perf_counter()
+        timings[stage] = now - clock
+        clock = now
+
+    progress = Progress.of(progress, cancel)
+    request = BindOptions.of(options, cells=cells, weighting=weighting, epsilon=epsilon, threshold=threshold,
+                             method=method, tolerance=tolerance, max_iterations=max_iterations)
+    cage, points = check_request(cage_vertices, cage_faces, points, request, progress)
+    threshold = request.threshold_for(cage.n_control_points)
+    # Every stage computes in the unit frame; the weights are the same in any frame.
+    frame = UnitFrame.of(cage)
+    unit_cage = frame.cage_to_unit(cage)
+
+    domain = mesh_domain(unit_cage, request.cells, request.method, progress=progress.part(*STAGES["meshing"]))
+    fixed = boundary_weights(domain, unit_cage)
+    lap("meshing")
+
+    distances = geodesic_distances(domain.vertices, domain.cells, domain.control_vertices,
+                                   progress.part(*STAGES["geodesics"]))
+    omega = tv_weights(domain.cells, distances, request.weighting)
+    lap("geodesics")
+
+    result = solve_on_mesh(domain.vertices, domain.cells, domain.boundary_vertices, fixed, unit_cage.vertices, omega,
+                           epsilon=request.epsilon, tolerance=request.tolerance,
+                           max_iterations=request.max_iterations, progress=progress.part(*STAGES["solve"]))
+    timings.update(result.seconds)
+    clock = time.perf_counter()
+
+    located, outside, _ = interpolation_matrix(domain.vertices, domain.cells, frame.to_unit(points),
+                                               progress=progress.part(*STAGES["interpolation"]))
+    lap("interpolation")
+
+    reduction = progress.part(*STAGES["reduction"])
+    smooth = SmoothInterpolation(domain.vertices, domain.cells, located, progress=reduction)
+    weights = interpolate_and_reduce(smooth, result.weights, unit_cage.vertices, domain.vertices, threshold,
+                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
+    lap("reduction")
+    progress(1.0, "bound")
+    return Binding(
+        cage=cage,
+        rest_cage_vertices=cage.vertices.copy(),
+        weights=weights,
+        domain=frame.domain_from_unit(domain, cage),
+        domain_weights=result.weights,
+        outside=outside,
+        points=points,
+        scheme="lbc",
+        options=_options_record(request, len(domain.cells), threshold),
+        timings=timings,
+        iterations=result.iterations,
+        converged=result.converged,
+        objective=result.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
+    )
+
+
+def _options_record(request, cells, threshold):
+    """What a binding records of its options (JSON-able): the resolved cell count and threshold."""
+    record = {"weighting": request.weighting, "epsilon": request.epsilon, "max_iterations": request.max_iterations}
+    if request.tolerance is not None:
+        record["tolerance"] = request.tolerance
+    return dict(record, cells=cells, threshold=threshold, method=request.method)
+
+
+def check_request(cage_vertices, cage_faces, points, options, progress=None):
+    """Everything a bind is given, checked before any long work: options, cage, points and the memory it needs.
+
+    The one memory check of a bind: a resolution the machine cannot hold is refused before meshing, not after the
+    OS kills the process.
+
+    Parameters
+    ----------
+    cage_vertices, cage_faces, points
+        As for :func:`bind`.
+    options : BindOptions
+    progress : callable(fraction, message), optional
+        Told, at 0, how much memory and (roughly) time the solve will take.
+
+    Returns
+    -------
+    cage : Cage
+    points : (m, d) float array
+
+    Raises
+    ------
+    CageError
+    """
+    cage, points = check_cage_and_points(cage_vertices, cage_faces, points, options)
+    n_cells = options.cells or DEFAULT_CELLS[cage.dim]
+    check_memory(cage.n_control_points, n_cells, cage.dim)
+    if progress is not None:
+        progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim))
+    return cage, points
+
+
+def check_cage_and_points(cage_vertices, cage_faces, points, options=None):
+    """The cage made and the points checked against it, as every bind (LBC or baseline) starts.
+
+    Parameters
+    ----------
+    cage_vertices, cage_faces, points
+        As for :func:`bind`.
+    options : BindOptions, optional
+        Checked against the cage (e.g. a threshold for its number of control points).
+
+    Returns
+    -------
+    cage : Cage
+    points : (m, d) float array
+
+    Raises
+    ------
+    CageError
+    """
+    cage = make_cage(cage_vertices, cage_faces)
+    if options is not None:
+        options.check_for_cage(cage.n_control_points, cage.dim)
+    plane_z = None
+    if cage_faces is None and np.shape(cage_vertices)[1:] == (3,):
+        plane_z = float(np.asarray(cage_vertices, dtype=float)[0, 2])
+    return cage, check_points(cage, points, plane_z)
+
+
+def check_points(cage, points, plane_z=None):
+    """Points as an (m, d) float array for a d-dimensional cage.
+
+    2D points may come as (m, 3) with a constant z (file data).
+
+    Parameters
+    ----------
+    cage : Cage
+    points : (m, 2) or (m, 3) array-like
+    plane_z : float, optional
+        The z of a 2D cage given with a constant z: 2D points given with a z must lie in that plane.
+
+    Raises
+    ------
+    CageError
+        Wrong shape, dimension mismatch, another plane than the cage's, or NaN/inf coordinates.
+    """
+    points = real_array(points, "points", "(m, 2) or (m, 3)")
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise CageError(f"points must be an (m, 2) or (m, 3) array, got shape {points.shape}")
+    if cage.dim == 2 and points.shape[1] == 3:
+        tolerance = 1e-9 * cage.bbox_diagonal
+        if len(points) and np.ptp(points[:, 2]) > tolerance:
+            raise CageError("the cage is 2D but the points' z varies: bind 2D points (or a z = constant plane)")
+        if len(points) and plane_z is not None and abs(points[0, 2] - plane_z) > tolerance:
+            raise CageError(
+                f"the 2D cage lies in the plane z = {plane_z:g} but the points in z = {points[0, 2]:g}: move them "
+                "into the cage's plane (or give both as 2D arrays)"
+            )
+        points = points[:, :2]
+    if points.shape[1] != cage.dim:
+        raise CageError(f"the cage is {cage.dim}D but the points are {points.shape[1]}D")
+    if not np.all(np.isfinite(points)):
+        raise CageError("some points have NaN or infinite coordinates: fix or delete them")
+    return points
