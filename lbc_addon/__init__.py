@@ -3,18 +3,26 @@
 The weights come from ``lbc_core`` (bundled as a wheel in the extension); this package holds only the Blender side:
 properties, operators, the Geometry Nodes deformer, panels and a script API. ``register()`` also works from a plain
 Python with the ``bpy`` module (tests, background scripts).
+
+Three parts: what reads Blender (``geometry``: the scene into a bind request), what runs without ``bpy`` (``jobs``:
+the request, the solve on a worker thread, the result; importable and tested without Blender, so this file imports
+the Blender modules only when the add-on is registered), and what writes Blender (``writing``, ``storage``,
+``deformer``, ``influence``); ``properties``, ``operators``, ``ui`` and ``api`` are the user's side.
 """
 
-from . import deformer, operators, properties, ui
 
-_MODULES = (properties, operators, ui, deformer)
+def _modules():
+    """The modules with a register(), in registration order."""
+    from . import deformer, operators, properties, ui
+
+    return (properties, operators, ui, deformer)
 
 
 def register():
-    for module in _MODULES:
+    for module in _modules():
         module.register()
 
 
 def unregister():
-    for module in reversed(_MODULES):
+    for module in reversed(_modules()):
         module.unregister()

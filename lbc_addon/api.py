@@ -11,7 +11,7 @@ Example::
 
 import bpy
 
-from . import deformer, jobs
+from . import deformer, geometry, jobs, writing
 from .core import CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
 from .properties import DEFAULT_INFLUENCES, bound_to, is_bound
 
@@ -35,11 +35,11 @@ def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0
     Cancelled
         When ``cancel()`` turned true.
     """
-    request = jobs.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), resolution=resolution,
-                            weighting=weighting, epsilon=epsilon, tolerance=tolerance, threshold=threshold,
-                            influences=influences, mode=mode)
+    request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), resolution=resolution,
+                                weighting=weighting, epsilon=epsilon, tolerance=tolerance, threshold=threshold,
+                                influences=influences, mode=mode)
     result = jobs.solve(request, progress, cancel)
-    bound = jobs.apply(request, result)
+    bound = writing.apply(request, result)
     settings = bound.lbc
     return {
         "dimension": settings.dimension,
@@ -61,7 +61,7 @@ def unbind(mesh_obj):
         The bound objects sharing the mesh data (linked duplicates), for which the weights stay in it; empty when
         they were removed with the binding.
     """
-    return jobs.remove(mesh_obj) if is_bound(mesh_obj) else []
+    return writing.remove(mesh_obj) if is_bound(mesh_obj) else []
 
 
 def rebind_all(cage_obj, progress=None, cancel=None):

@@ -11,16 +11,18 @@ import importlib.util
 _BUNDLED = f"{__package__}.lbc_core"
 
 lbc_core = importlib.import_module(_BUNDLED if importlib.util.find_spec(_BUNDLED) else "lbc_core")
-_meshing = importlib.import_module(f"{lbc_core.__name__}.meshing")
+_options = importlib.import_module(f"{lbc_core.__name__}.options")
+_planar = importlib.import_module(f"{lbc_core.__name__}.planar")
 _solver = importlib.import_module(f"{lbc_core.__name__}.solver")
 _reduction = importlib.import_module(f"{lbc_core.__name__}.reduction")
 _constraints = importlib.import_module(f"{lbc_core.__name__}.constraints")
 
 CageError = lbc_core.CageError
 Cancelled = lbc_core.Cancelled
-DEFAULT_CELLS_2D = _meshing.DEFAULT_CELLS_2D
-DEFAULT_CELLS_3D = _meshing.DEFAULT_CELLS_3D
+DEFAULT_CELLS_2D = _options.DEFAULT_CELLS[2]
+DEFAULT_CELLS_3D = _options.DEFAULT_CELLS[3]
 DEFAULT_TOLERANCE = _solver.DEFAULT_TOLERANCE
 ROWS_PER_CHUNK = _reduction.ROWS_PER_CHUNK
 constraint_residuals = _constraints.constraint_residuals
 restore_constraints = _constraints.restore_constraints
+flatten = _planar.flatten

@@ -1,18 +1,17 @@
-"""Reading meshes and cages out of Blender into numpy arrays, on the main thread.
+"""Reading the scene out of Blender into numpy arrays, on the main thread: a bind's request, and meshes' topology.
 
-Everything the solve needs is copied here, so the worker thread never touches ``bpy``. Positions are expressed in
-the bound mesh's local space, the space the Geometry Nodes deformer works in (Object Info in relative mode).
+Everything the solve needs is copied here (:func:`snapshot`), so the worker thread never touches ``bpy``. Positions
+are expressed in the bound mesh's local space, the space the Geometry Nodes deformer works in (Object Info in
+relative mode).
 """
 
 import hashlib
 
 import numpy as np
 
-from .core import CageError
-
-# A cage is flat when its thickness is below this fraction of its bounding-box diagonal; a mesh lies in the cage's
-# plane when every vertex is this close to it. Image planes and flat meshes are exactly flat, so this is generous.
-FLAT_TOLERANCE = 1e-5
+from .core import CageError, flatten
+from .jobs import BindRequest
+from .properties import DEFAULT_INFLUENCES
 
 
 def vertex_positions(mesh):
@@ -67,69 +66,55 @@ def cage_to_mesh_matrix(cage_obj, mesh_obj):
     return mesh_obj.matrix_world.inverted_safe() @ cage_obj.matrix_world
 
 
-def flat_frame(cage_points, mesh_points):
-    """The plane of a flat cage when the mesh lies in it too, else None.
-
-    Returns
-    -------
-    None or (origin (3,), axes (2, 3))
-        ``(points - origin) @ axes.T`` gives 2D coordinates in the plane.
-    """
-    origin = cage_points.mean(axis=0)
-    diagonal = np.linalg.norm(np.ptp(cage_points, axis=0))
-    if diagonal == 0:
-        return None
-    _, singular, basis = np.linalg.svd(cage_points - origin, full_matrices=False)
-    normal = basis[2]
-    if np.abs((cage_points - origin) @ normal).max() > FLAT_TOLERANCE * diagonal:
-        return None
-    if len(mesh_points) and np.abs((mesh_points - origin) @ normal).max() > FLAT_TOLERANCE * diagonal:
-        return None
-    return origin, basis[:2]
-
-
-def boundary_loop(mesh):
-    """The vertices of a flat cage's outline in order, for a 2D bind.
-
-    The outline is the edges used by exactly one face (every edge when the cage has no faces, a wire polygon). It
-    must be one closed loop; vertices off it (inside a filled grid) do not control anything.
-
-    Raises
-    ------
-    CageError
-        When the outline is not a single closed loop.
-    """
-    edges = edge_pairs(mesh)
-    faces = polygon_faces(mesh)
-    if faces:
-        face_edges = np.concatenate([np.stack([f, np.roll(f, -1)], axis=1) for f in faces])
-        face_edges.sort(axis=1)
-        unique, counts = np.unique(face_edges, axis=0, return_counts=True)
-        edges = unique[counts == 1]
-    if len(edges) < 3:
-        raise CageError("the flat cage has no outline: give it a face, or edges forming one closed loop")
-    vertices, degree = np.unique(edges, return_counts=True)
-    if np.any(degree != 2):
+def snapshot(mesh_obj, cage_obj, depsgraph, resolution=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
+             threshold=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
+    """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
+    if mesh_obj.type != "MESH":
+        raise CageError(f"'{mesh_obj.name}' is not a mesh: only meshes can be bound")
+    if cage_obj.type != "MESH":
+        raise CageError(f"the cage '{cage_obj.name}' is not a mesh object: use a mesh as the cage")
+    if mesh_obj == cage_obj:
+        raise CageError("a mesh cannot be its own cage: select the mesh, then the cage last (active)")
+    if mesh_obj.data.users > 1:
         raise CageError(
-            f"the flat cage's outline is not one closed loop ({int(np.count_nonzero(degree != 2))} vertices where it "
-            "branches or ends): make its border a single closed polygon"
+            f"the mesh data of '{mesh_obj.name}' is shared by {mesh_obj.data.users} objects and the weights are "
+            "stored in it: make it single user first (Object > Relations > Make Single User)"
         )
-    neighbours = {int(v): [] for v in vertices}
-    for a, b in edges:
-        neighbours[int(a)].append(int(b))
-        neighbours[int(b)].append(int(a))
-    loop = [int(edges[0, 0])]
-    previous, current = None, loop[0]
-    while True:
-        a, b = neighbours[current]
-        following = b if a == previous else a
-        if following == loop[0]:
-            break
-        loop.append(following)
-        previous, current = current, following
-    if len(loop) != len(vertices):
-        raise CageError(
-            f"the flat cage's outline has several loops ({len(vertices)} outline vertices, {len(loop)} in the first "
-            "loop): keep one closed outline"
-        )
-    return np.array(loop, dtype=np.int64)
+    points = vertex_positions(mesh_obj.data)
+    cage_eval = cage_obj.evaluated_get(depsgraph)
+    cage_mesh = cage_eval.to_mesh()
+    try:
+        matrix = cage_to_mesh_matrix(cage_eval, mesh_obj.evaluated_get(depsgraph))
+        cage_points = to_local(matrix, vertex_positions(cage_mesh))
+        cage_faces = polygon_faces(cage_mesh)
+        cage_topology = topology_fingerprint(cage_mesh)
+        flat = None if mode == "3D" else flatten(cage_points, cage_faces, points, edge_pairs(cage_mesh))
+        if mode == "2D" and flat is None:
+            raise CageError(
+                "2D binding needs a flat cage with the mesh lying in its plane: flatten them, or bind in 3D"
+            )
+    finally:
+        cage_eval.to_mesh_clear()
+    return BindRequest(
+        mesh_uid=mesh_obj.session_uid,
+        cage_uid=cage_obj.session_uid,
+        mesh_name=mesh_obj.name,
+        points=points,
+        cage_points=cage_points,
+        cage_faces=cage_faces,
+        flat=flat,
+        options={"resolution": resolution, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
+                 "threshold": threshold, "influences": influences, "mode": mode},
+        cage_topology=cage_topology,
+        mesh_topology=topology_fingerprint(mesh_obj.data),
+    )
+
+
+def find_object(uid):
+    """The object with this ``session_uid``, or None once it was deleted."""
+    import bpy
+
+    for obj in bpy.data.objects:
+        if obj.session_uid == uid:
+            return obj
+    return None

@@ -7,7 +7,7 @@ module) there is no event loop, so it runs synchronously and prints its progress
 
 import bpy
 
-from . import influence, jobs
+from . import geometry, influence, jobs, writing
 from .core import CageError, Cancelled
 from .properties import BindOptions, bound_to, is_bound
 
@@ -39,7 +39,7 @@ def _apply_all(operator, pairs):
     bound = []
     for request, result in pairs:
         try:
-            bound.append(jobs.apply(request, result))
+            bound.append(writing.apply(request, result))
         except CageError as error:
             operator.report({"ERROR"}, str(error))
         except Exception as error:  # a write Blender refused: apply took everything back
@@ -71,7 +71,8 @@ class _Binder:
 
     def snapshot(self, context):
         depsgraph = context.evaluated_depsgraph_get()
-        return [jobs.snapshot(mesh, cage, depsgraph, **options) for mesh, cage, options in self.targets(context)]
+        return [geometry.snapshot(mesh, cage, depsgraph, **options)
+                for mesh, cage, options in self.targets(context)]
 
     def execute(self, context):
         try:
@@ -254,7 +255,7 @@ class OBJECT_OT_lbc_unbind(bpy.types.Operator):
         objects = _bound_selection(context)
         for obj in objects:
             mesh_name = obj.data.name
-            keeping = jobs.remove(obj)
+            keeping = writing.remove(obj)
             if keeping:
                 self.report({"WARNING"}, f"{obj.name}: unbound; its mesh data '{mesh_name}' keeps the weights, shared "
                                          f"with {', '.join(keeping)}, which stay bound")

@@ -80,7 +80,7 @@ class BindOptions:
     mode: EnumProperty(name="Dimension", items=MODE_ITEMS, default="AUTO")
 
     def bind_options(self):
-        """The options as keyword arguments for :func:`lbc_addon.jobs.snapshot`."""
+        """The options as keyword arguments for :func:`lbc_addon.geometry.snapshot`."""
         return {
             "resolution": self.resolution,
             "weighting": self.weighting,

@@ -314,27 +314,32 @@ def _read_inputs(cage_path, mesh_path=None):
     cage_faces : list of int arrays, or None
     points : (m, 3) or, for a polygon cage, (m, 2) float array; None without ``mesh_path``
 
+    A flat cage with faces whose mesh lies in its plane is returned as Blender binds it
+    (:func:`lbc_core.planar.flatten`): its outline as the polygon, the points in the plane's coordinates.
+
     Raises
     ------
     CageError
         Besides the files' own errors: 2D points in another plane z = constant than the polygon cage's.
     """
     from . import io
+    from .planar import flatten
 
     vertices, faces = io.read_mesh(cage_path)
     cage = vertices if faces is not None else io.planar(vertices, cage_path)
     if mesh_path is None:
         return cage, faces, None
     points, _ = io.read_mesh(mesh_path)
-    if faces is None:
-        flat = io.planar(points, mesh_path)
-        if abs(points[0, 2] - vertices[0, 2]) > 1e-9 * max(float(np.ptp(cage)), 1e-300):
-            raise CageError(
-                f"{mesh_path} lies in the plane z = {points[0, 2]:g} but the 2D cage {cage_path} in z = "
-                f"{vertices[0, 2]:g}: move one into the other's plane"
-            )
-        points = flat
-    return cage, faces, points
+    if faces is not None:
+        flat = flatten(cage, faces, points)
+        return (cage, faces, points) if flat is None else (flat.polygon, None, flat.points)
+    in_plane = io.planar(points, mesh_path)
+    if abs(points[0, 2] - vertices[0, 2]) > 1e-9 * max(float(np.ptp(cage)), 1e-300):
+        raise CageError(
+            f"{mesh_path} lies in the plane z = {points[0, 2]:g} but the 2D cage {cage_path} in z = "
+            f"{vertices[0, 2]:g}: move one into the other's plane"
+        )
+    return cage, faces, in_plane
 
 
 def _plots():

@@ -1,4 +1,4 @@
-"""Reading Blender meshes: topology fingerprints, flatness, the outline of a flat cage."""
+"""Reading Blender: topology fingerprints, positions in mesh space, the snapshot of a bind request."""
 
 import bpy
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 
 from lbc_addon import geometry
 from lbc_core import CageError
-from blender_scenes import mesh_object, reset
+from blender_scenes import mesh_object, reset, sphere_in_box_scene
 
 
 def _grid(name, size=3):
@@ -28,47 +28,16 @@ def test_fingerprint_ignores_positions_and_sees_topology():
     assert geometry.topology_fingerprint(other.data) != before
 
 
-def test_flat_frame_finds_the_plane_of_a_tilted_flat_scene():
-    rotation = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))[0]
-    square = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0]], dtype=float) @ rotation.T + 5.0
-    inside = np.array([[1, 1, 0], [0.5, 1.5, 0]], dtype=float) @ rotation.T + 5.0
-    origin, axes = geometry.flat_frame(square, inside)
-    flat = (square - origin) @ axes.T
-    assert np.allclose(np.linalg.norm(flat[1] - flat[0]), 2.0)
-    lifted = inside + rotation[:, 2] * 0.01
-    assert geometry.flat_frame(square, lifted) is None
-    assert geometry.flat_frame(np.vstack([square, square[0] + rotation[:, 2]]), inside) is None
-
-
-def test_boundary_loop_of_a_filled_grid_walks_its_border():
+def test_snapshot_of_a_flat_grid_cage_is_a_2d_request_on_its_outline():
     reset()
-    loop = geometry.boundary_loop(_grid("Grid").data)
-    assert len(loop) == 8 and 4 not in loop  # the centre vertex controls nothing
-    ring = [0, 1, 2, 5, 8, 7, 6, 3]
-    start = ring.index(loop[0])
-    walked = ring[start:] + ring[:start]
-    assert list(loop) in (walked, [walked[0]] + walked[1:][::-1])
-
-
-def test_boundary_loop_of_a_wire_polygon_and_of_an_ngon():
-    reset()
-    wire = mesh_object("Wire", [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [], edges=[(0, 1), (2, 3), (1, 2), (3, 0)])
-    assert sorted(geometry.boundary_loop(wire.data)) == [0, 1, 2, 3]
-    ngon = mesh_object("Ngon", [[np.cos(a), np.sin(a), 0] for a in np.linspace(0, 6, 7)], [[0, 1, 2, 3, 4, 5, 6]])
-    loop = list(geometry.boundary_loop(ngon.data))
-    assert loop in ([0, 1, 2, 3, 4, 5, 6], [0, 6, 5, 4, 3, 2, 1])
-
-
-def test_boundary_loop_refuses_branching_or_several_outlines():
-    reset()
-    branching = mesh_object("Branch", [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 2, 0]], [],
-                            edges=[(0, 1), (1, 2), (2, 3), (3, 0), (2, 4)])
-    with pytest.raises(CageError, match="not one closed loop"):
-        geometry.boundary_loop(branching.data)
-    square = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
-    two = mesh_object("Two", square + [[x + 3, y, z] for x, y, z in square], [[0, 1, 2, 3], [4, 5, 6, 7]])
-    with pytest.raises(CageError, match="several loops"):
-        geometry.boundary_loop(two.data)
+    cage = _grid("Cage", size=4)
+    mesh = mesh_object("Mesh", [[1.2, 1.5, 0.0], [2.0, 0.5, 0.0]], [])
+    request = geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get())
+    assert request.dimension == 2 and len(request.flat.loop) == 12  # the 4 inner vertices control nothing
+    lifted = mesh_object("Lifted", [[1.2, 1.5, 0.5]], [])
+    assert geometry.snapshot(lifted, cage, bpy.context.evaluated_depsgraph_get()).dimension == 3
+    with pytest.raises(CageError, match="2D binding needs a flat cage"):
+        geometry.snapshot(lifted, cage, bpy.context.evaluated_depsgraph_get(), mode="2D")
 
 
 def test_positions_are_read_in_mesh_space_relative_to_the_cage():
@@ -81,3 +50,14 @@ def test_positions_are_read_in_mesh_space_relative_to_the_cage():
     matrix = geometry.cage_to_mesh_matrix(cage, mesh)
     local = geometry.to_local(matrix, geometry.vertex_positions(cage.data))
     assert np.allclose(local[0], [0.5, 1.0, 1.5])
+
+
+def test_snapshot_refuses_shared_mesh_data_and_non_mesh_cages():
+    mesh, cage = sphere_in_box_scene()
+    twin = bpy.data.objects.new("Twin", mesh.data)
+    bpy.context.scene.collection.objects.link(twin)
+    with pytest.raises(CageError, match="shared by 2 objects"):
+        geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get())
+    empty = bpy.data.objects.new("Empty", None)
+    with pytest.raises(CageError, match="not a mesh"):
+        geometry.snapshot(twin, empty, bpy.context.evaluated_depsgraph_get())

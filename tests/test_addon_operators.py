@@ -234,9 +234,9 @@ class _ModalHarness:
 
 
 def _requests(mesh, cage):
-    from lbc_addon import jobs
+    from lbc_addon import geometry
 
-    return [jobs.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), resolution=CELLS)]
+    return [geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), resolution=CELLS)]
 
 
 def test_modal_bind_shows_progress_and_applies_when_the_worker_is_done():

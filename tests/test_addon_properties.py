@@ -20,11 +20,11 @@ def test_bind_options_are_stored_and_reused_by_rebind(monkeypatch):
     assert stored["resolution"] == 800 and stored["weighting"] == "linear" and stored["mode"] == "3D"
     assert stored["influences"] == 5 and mesh.lbc.slots <= 5
     assert abs(stored["epsilon"] - 0.01) < 1e-7 and abs(stored["threshold"] - 2e-3) < 1e-9
-    from lbc_addon import jobs
+    from lbc_addon import geometry
 
     seen = []
-    original = jobs.snapshot
-    monkeypatch.setattr(jobs, "snapshot", lambda *args, **kwargs: seen.append(kwargs) or original(*args, **kwargs))
+    original = geometry.snapshot
+    monkeypatch.setattr(geometry, "snapshot", lambda *args, **kwargs: seen.append(kwargs) or original(*args, **kwargs))
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
     assert seen == [stored]

@@ -319,3 +319,32 @@ def test_fuzz_lbc_with_damaged_binding_files(tmp_path, capsys, logo_binding, cut
     assert code in (0, 2)
     if code == 2:
         assert len(err.strip().splitlines()) == 1 and err.startswith("lbc: error:") and out == ""
+
+
+def test_a_flat_cage_with_faces_binds_in_2d_as_in_blender(tmp_path, capsys):
+    from lbc_addon import jobs
+    from lbc_core.binding import load_binding
+    from lbc_core.planar import flatten
+
+    # A tilted 4 × 4 grid of quads: its outline (12 vertices) is the cage, the 4 inner vertices control nothing.
+    rotation = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
+    cage = np.array([[c, r, 0.0] for r in range(4) for c in range(4)]) @ rotation.T + 2.0
+    quads = [[r * 4 + c, r * 4 + c + 1, (r + 1) * 4 + c + 1, (r + 1) * 4 + c] for r in range(3) for c in range(3)]
+    points = np.array([[0.4, 0.5, 0.0], [1.5, 2.2, 0.0], [2.6, 1.1, 0.0]]) @ rotation.T + 2.0
+    write_mesh(tmp_path / "cage.obj", cage, quads)
+    write_mesh(tmp_path / "points.ply", points)
+    assert run(capsys, "bind", tmp_path / "cage.obj", tmp_path / "points.ply", "-o", tmp_path / "b.npz")[0] == 0
+    binding = load_binding(tmp_path / "b.npz")
+    assert binding.cage.dim == 2 and binding.cage.n_control_points == 12
+
+    # The add-on's solve of the same scene (the request geometry.snapshot makes, with every option at its default).
+    read_cage, read_points = read_mesh(tmp_path / "cage.obj")[0], read_mesh(tmp_path / "points.ply")[0]
+    options = {"resolution": 0, "weighting": "quadratic", "epsilon": 0.0, "tolerance": 0.0, "threshold": 0.0,
+               "influences": 0, "mode": "AUTO"}
+    flat = flatten(read_cage, quads, read_points)
+    result = jobs.solve(jobs.BindRequest(1, 2, "Mesh", read_points, read_cage, quads, flat, options, "", ""))
+    blender = np.zeros((len(points), len(cage)))
+    np.add.at(blender, (np.arange(len(points))[:, None], result.index), result.weight)
+    command_line = np.zeros_like(blender)
+    command_line[:, flat.loop[binding.control_input_index]] = binding.weights.toarray()
+    np.testing.assert_allclose(blender, command_line, atol=1e-6)

@@ -1,0 +1,151 @@
+"""Writing a bind into Blender (main thread): the cached weights, the deformer and ``Object.lbc``, as one
+transaction; and taking a binding out again (Unbind).
+"""
+
+import numpy as np
+
+from . import deformer, geometry, influence, storage
+from .core import CageError
+from .properties import is_bound
+
+
+def apply(request, result):
+    """Write the binding into the scene (main thread), replacing the mesh's binding if it has one.
+
+    A transaction: when any write fails, everything written is taken back (:class:`_SavedBinding`) and the error is
+    raised again, so the scene is as it was, the previous binding included. Raises CageError if the objects changed
+    during the solve. Returns the bound mesh object.
+    """
+    mesh_obj, cage_obj = geometry.find_object(request.mesh_uid), geometry.find_object(request.cage_uid)
+    if mesh_obj is None or cage_obj is None:
+        raise CageError(f"'{request.mesh_name}' or its cage was deleted during the bind: nothing was bound")
+    if geometry.topology_fingerprint(mesh_obj.data) != request.mesh_topology:
+        raise CageError(f"'{mesh_obj.name}' was edited during the bind: bind again")
+    saved = _SavedBinding(mesh_obj)
+    try:
+        replaced_group = _write(mesh_obj, cage_obj, request, result)
+    except Exception:
+        saved.restore(mesh_obj)
+        raise
+    deformer.release_group(replaced_group, mesh_obj.lbc.node_group)
+    return mesh_obj
+
+
+def _write(mesh_obj, cage_obj, request, result):
+    """The writes of :func:`apply`, in order; returns the node group of the replaced binding (or None)."""
+    replacing = is_bound(mesh_obj)
+    settings = mesh_obj.lbc
+    if not replacing:
+        active = mesh_obj.modifiers.active
+        settings.active_modifier = active.name if active is not None else ""
+    storage.remove(mesh_obj.data)
+    storage.write(mesh_obj.data, result.index, result.weight, result.rest)
+    modifier, replaced_group = deformer.attach(mesh_obj, cage_obj, result.index.shape[1], len(request.cage_points),
+                                              len(request.points))
+    _store_settings(settings, request, result, cage_obj, modifier.node_group)
+    if settings.show_influence:  # repainted with the new weights
+        influence.show(mesh_obj, settings.influence_vertex)
+    return replaced_group
+
+
+def _store_settings(settings, request, result, cage_obj, group):
+    settings.is_bound = True
+    settings.cage = cage_obj
+    settings.node_group = group
+    for key, value in request.options.items():
+        setattr(settings, key, value)
+    settings.dimension = request.dimension
+    settings.cage_vertex_count = len(request.cage_points)
+    settings.mesh_vertex_count = len(request.points)
+    settings.cage_topology = request.cage_topology
+    settings.core_fingerprint = result.core_fingerprint
+    settings.control_points = result.control_points
+    settings.slots = result.index.shape[1]
+    settings.mean_influences = float(np.count_nonzero(result.weight, axis=1).mean()) if len(result.weight) else 0.0
+    settings.outside = result.outside
+    settings.bind_seconds = result.seconds
+    settings.warnings = "; ".join(result.warnings)
+    settings.status = f"Following '{cage_obj.name}'"
+
+
+class _SavedBinding:
+    """What :func:`apply` may change on a mesh object, saved before it writes, to put back if a write fails.
+
+    Saved: the add-on's attributes (and the influence colors) of the mesh data, the modifier stack's names and
+    active modifier, the LBC modifier's node group and inputs, the file's node groups, and ``Object.lbc``.
+    """
+
+    def __init__(self, mesh_obj):
+        import bpy
+
+        mesh = mesh_obj.data
+        self.attributes = storage.copy_attributes(mesh, storage.binding_names(mesh) + [influence.ATTRIBUTE_NAME])
+        self.active_color = mesh.color_attributes.active_color_name
+        self.modifiers = [modifier.name for modifier in mesh_obj.modifiers]
+        self.active_modifier = mesh_obj.modifiers.active.name if mesh_obj.modifiers.active else None
+        modifier = deformer.find_modifier(mesh_obj) if is_bound(mesh_obj) else None
+        self.deformer = None if modifier is None else (modifier.name, modifier.node_group,
+                                                       deformer.raw_inputs(modifier))
+        self.node_groups = {group.session_uid for group in bpy.data.node_groups}
+        self.settings = _settings_values(mesh_obj.lbc) if mesh_obj.is_property_set("lbc") else None
+
+    def restore(self, mesh_obj):
+        import bpy
+
+        for modifier in list(mesh_obj.modifiers):
+            if modifier.name not in self.modifiers:
+                deformer.remove_modifier(mesh_obj, modifier)
+        if self.deformer is not None:
+            name, group, values = self.deformer
+            modifier = mesh_obj.modifiers[name]
+            modifier.node_group = group
+            deformer.set_raw_inputs(modifier, values)
+        for group in list(bpy.data.node_groups):
+            if group.session_uid not in self.node_groups:
+                bpy.data.node_groups.remove(group)
+        mesh = mesh_obj.data
+        storage.restore_attributes(mesh, self.attributes, storage.binding_names(mesh) + [influence.ATTRIBUTE_NAME])
+        active = self.active_color
+        mesh.color_attributes.active_color_name = active if active in mesh.color_attributes else ""
+        if self.settings is None:
+            mesh_obj.property_unset("lbc")
+        else:
+            for key, value in self.settings.items():
+                setattr(mesh_obj.lbc, key, value)
+        if self.active_modifier is not None:
+            mesh_obj.modifiers.active = mesh_obj.modifiers[self.active_modifier]
+        mesh.update()
+
+
+def _settings_values(settings):
+    """Every registered property of an ``Object.lbc`` group: {name: value}."""
+    return {prop.identifier: getattr(settings, prop.identifier) for prop in settings.bl_rna.properties
+            if prop.identifier != "rna_type"}
+
+
+def remove(mesh_obj):
+    """Undo :func:`apply`: the modifier, its node group and ``Object.lbc`` go, and the attributes too unless another
+    bound object shares the mesh data (an Alt+D linked duplicate still uses them); the active modifier is the one
+    active before binding.
+
+    Returns the names of the bound objects that keep the shared weights (empty when they were removed).
+    """
+    influence.hide(mesh_obj)
+    active = mesh_obj.lbc.active_modifier
+    deformer.detach(mesh_obj)
+    mesh_obj.property_unset("lbc")
+    sharing = shared_with(mesh_obj)
+    if not sharing:
+        storage.remove(mesh_obj.data)
+    if active in mesh_obj.modifiers:
+        mesh_obj.modifiers.active = mesh_obj.modifiers[active]
+    return [obj.name for obj in sharing]
+
+
+def shared_with(mesh_obj):
+    """The other bound objects using ``mesh_obj``'s mesh data (linked duplicates)."""
+    import bpy
+
+    if mesh_obj.data.users < 2:
+        return []
+    return [obj for obj in bpy.data.objects if obj != mesh_obj and obj.data == mesh_obj.data and is_bound(obj)]

@@ -1,0 +1,139 @@
+"""Writing a bind: a cancelled or failed solve changes nothing; apply refuses objects that changed meanwhile, is a
+transaction (a failed write takes everything back) and replaces a binding in place."""
+
+from contextlib import nullcontext
+
+import bpy
+import numpy as np
+import pytest
+
+from lbc_addon import deformer, geometry, influence, jobs, storage, writing
+from lbc_addon.properties import is_bound
+from lbc_core import CageError, Cancelled
+from blender_scenes import evaluated_positions, mesh_state, sphere_in_box_scene
+
+OPTIONS = {"resolution": 1000}
+
+
+def _request(mesh, cage, **options):
+    return geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), **{**OPTIONS, **options})
+
+
+def test_cancelled_worker_leaves_the_scene_unchanged():
+    mesh, cage = sphere_in_box_scene()
+    before = mesh_state(mesh), sorted(bpy.data.node_groups.keys())
+    worker = jobs.Worker([_request(mesh, cage)])
+    worker.cancel()  # before the thread runs: the solve stops at its first check
+    worker.start()
+    worker.join()
+    assert worker.done and worker.cancelled
+    assert isinstance(worker.error, Cancelled) and worker.results == []
+    assert (mesh_state(mesh), sorted(bpy.data.node_groups.keys())) == before
+    assert not is_bound(mesh)
+
+
+def test_worker_solves_in_its_thread_and_reports_progress():
+    mesh, cage = sphere_in_box_scene()
+    worker = jobs.Worker([_request(mesh, cage)])
+    worker.start()
+    worker.join()
+    assert worker.error is None and len(worker.results) == 1
+    assert worker.fraction == pytest.approx(1.0)
+    request, result = worker.results[0]
+    assert result.index.shape == result.weight.shape == (len(mesh.data.vertices), result.index.shape[1])
+    np.testing.assert_allclose(result.weight.sum(axis=1), 1.0, atol=1e-5)
+    writing.apply(request, result)
+    assert is_bound(mesh)
+
+
+def test_apply_refuses_a_mesh_edited_during_the_solve():
+    mesh, cage = sphere_in_box_scene()
+    request = _request(mesh, cage)
+    result = jobs.solve(request)
+    mesh.data.vertices.add(1)  # the user added a vertex while the worker ran
+    before = mesh_state(mesh)
+    with pytest.raises(CageError, match="edited during the bind"):
+        writing.apply(request, result)
+    assert mesh_state(mesh) == before
+
+
+def test_apply_refuses_a_cage_deleted_during_the_solve():
+    mesh, cage = sphere_in_box_scene()
+    request = _request(mesh, cage)
+    result = jobs.solve(request)
+    bpy.data.objects.remove(cage)
+    with pytest.raises(CageError, match="deleted during the bind"):
+        writing.apply(request, result)
+    assert not is_bound(mesh)
+
+
+def _binding_state(mesh):
+    """mesh_state plus what a binding keeps outside the mesh data: Object.lbc and the LBC modifier's inputs."""
+    settings = writing._settings_values(mesh.lbc) if mesh.is_property_set("lbc") else None
+    modifier = deformer.find_modifier(mesh) if is_bound(mesh) else None
+    return mesh_state(mesh), settings, None if modifier is None else (modifier.node_group, deformer.inputs(modifier))
+
+
+def _fail_after(function):
+    """``function`` that does its work, then fails: a write Blender refuses half-way."""
+
+    def failing(*args, **kwargs):
+        function(*args, **kwargs)
+        raise RuntimeError("injected failure")
+
+    return failing
+
+
+# Every write apply() makes, in its order: the weights, the node group, the modifier's inputs, the modifier, the
+# properties, the influence colors repainted over a replaced binding.
+WRITE_STEPS = [(storage, "write"), (deformer, "build_node_group"), (deformer, "set_inputs"), (deformer, "attach"),
+               (writing, "_store_settings"), (influence, "show")]
+
+
+@pytest.mark.parametrize("replacing", [False, True], ids=["first bind", "replacing a binding"])
+def test_a_failure_at_any_write_step_leaves_the_scene_bit_for_bit_as_before(monkeypatch, replacing):
+    mesh, cage = sphere_in_box_scene()
+    mesh.modifiers.new("Smooth", "SMOOTH")
+    request = _request(mesh, cage)
+    result = jobs.solve(request)
+    if replacing:
+        writing.apply(request, jobs.solve(_request(mesh, cage, resolution=600)))
+        mesh.modifiers.move(0, 1)  # the artist moved the deformer below Smooth and set its inputs
+        deformer.set_inputs(deformer.find_modifier(mesh), {"Strength": 0.5, "Vertex Group": "top"})
+        influence.show(mesh, 3)
+        cage.location.x += 0.2
+    before, users = _binding_state(mesh), cage.users
+    deformed = evaluated_positions(mesh)
+    for module, name in WRITE_STEPS:
+        with monkeypatch.context() as patch:
+            patch.setattr(module, name, _fail_after(getattr(module, name)))
+            fails = replacing or name != "show"
+            with pytest.raises(RuntimeError, match="injected failure") if fails else nullcontext():
+                writing.apply(request, result)
+        if not replacing and name == "show":
+            continue  # a first bind shows no influence: this step does not run
+        assert _binding_state(mesh) == before, f"failure in {module.__name__}.{name}"
+        assert cage.users == users  # the binding holds no more of the cage than before (X must still free it)
+        assert np.array_equal(evaluated_positions(mesh), deformed)
+
+
+def test_binding_a_bound_mesh_replaces_its_binding_in_place():
+    mesh, cage = sphere_in_box_scene()
+    mesh.modifiers.new("Smooth", "SMOOTH")
+    writing.apply(*_solved(mesh, cage))
+    modifier = deformer.find_modifier(mesh)
+    mesh.modifiers.move(0, 1)
+    modifier.name = "My Cage Deform"
+    deformer.set_inputs(modifier, {"Strength": 0.25, "Invert Vertex Group": True})
+    writing.apply(*_solved(mesh, cage, resolution=600))
+    assert [m.name for m in mesh.modifiers] == ["Smooth", "My Cage Deform"]  # one deformer, where the artist put it
+    assert [group.name for group in bpy.data.node_groups] == [deformer.GROUP_NAME]
+    values = deformer.inputs(mesh.modifiers["My Cage Deform"])
+    assert values["Strength"] == 0.25 and values["Invert Vertex Group"] and values["Cage"] == cage
+    assert mesh.lbc.resolution == 600
+    assert len(storage.binding_names(mesh.data)) == 2 * mesh.lbc.slots + 1
+
+
+def _solved(mesh, cage, **options):
+    request = _request(mesh, cage, **options)
+    return request, jobs.solve(request)
