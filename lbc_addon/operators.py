@@ -3,6 +3,11 @@
 Bind runs modal in the UI: the solve goes to a worker thread, a timer polls it, the status bar shows its progress and
 Esc cancels it; the scene is only written when the solve succeeded. In background mode (``blender -b``, the bpy
 module) there is no event loop, so it runs synchronously and prints its progress.
+
+Adjust Last Operation (the redo panel) runs ``execute()``, synchronously: Blender undoes the bind, then
+``ED_undo_operator_repeat`` calls ``WM_operator_repeat``, which calls the operator's exec and never its invoke (read in
+Blender's source, editors/undo/ed_undo.cc and windowmanager/intern/wm_event_system.cc). So a changed option there
+binds again on the main thread: the UI waits for the solve, Esc does not cancel it, progress goes to the console.
 """
 
 import bpy
@@ -243,13 +248,10 @@ class OBJECT_OT_lbc_unbind(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if _running:
-            cls.poll_message_set("Wait for the running bind, or cancel it with Esc")
-            return False
-        if not _bound_selection(context):
-            cls.poll_message_set("Select a bound mesh")
-            return False
-        return True
+        message = "Wait for the running bind, or cancel it with Esc" if _running else None
+        if message is None and not _bound_selection(context):
+            message = "Select a bound mesh"
+        return _allowed(cls, message)
 
     def execute(self, context):
         objects = _bound_selection(context)
@@ -282,10 +284,7 @@ class OBJECT_OT_lbc_show_influence(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if not _influence_targets(context):
-            cls.poll_message_set("Make a bound mesh or its cage active")
-            return False
-        return True
+        return _allowed(cls, None if _influence_targets(context) else "Make a bound mesh or its cage active")
 
     def execute(self, context):
         shown = 0
@@ -313,10 +312,8 @@ class OBJECT_OT_lbc_hide_influence(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if not any(obj.lbc.show_influence for obj in _influence_targets(context)):
-            cls.poll_message_set("No influence is shown")
-            return False
-        return True
+        shown = any(obj.lbc.show_influence for obj in _influence_targets(context))
+        return _allowed(cls, None if shown else "No influence is shown")
 
     def execute(self, context):
         for mesh_obj in _influence_targets(context):
