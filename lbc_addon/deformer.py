@@ -537,6 +537,7 @@ def check_bindings(depsgraph, changed=None):
         cause, message = diagnose(obj, depsgraph)
         set_enabled(obj, cause != "topology")
         if obj.lbc.status != message:  # writing the same value would trigger another depsgraph update
+            obj.lbc.state = "FOLLOWING" if cause is None else "STOPPED"
             obj.lbc.status = message
         if _last_messages.get(obj.session_uid) != message:
             _last_messages[obj.session_uid] = message

@@ -28,6 +28,13 @@ MODE_ITEMS = (
 )
 
 
+# Whether the deformer works: the panel picks its icon and actions from this, and shows ``status`` (the why) as text.
+STATE_ITEMS = (
+    ("FOLLOWING", "Following", "The mesh follows its cage"),
+    ("STOPPED", "Stopped", "The deformer cannot work (the status says why): the mesh stays at rest"),
+)
+
+
 class BindOptions:
     """The bind options shared by the operators' properties and the stored binding (annotations only)."""
 
@@ -110,6 +117,7 @@ class LBC_PG_binding(BindOptions, bpy.types.PropertyGroup):
     outside: IntProperty(name="Outside", description="Mesh vertices outside the cage at bind time")
     bind_seconds: FloatProperty(name="Bind Time", unit="TIME_ABSOLUTE")
     warnings: StringProperty(name="Warnings", description="What lbc_core repaired or noticed at bind time")
+    state: EnumProperty(name="State", items=STATE_ITEMS, default="FOLLOWING")
     status: StringProperty(name="Status", description="Why the deformer works or stopped")
     active_modifier: StringProperty(description="The modifier that was active before binding, made active again on "
                                     "unbind")

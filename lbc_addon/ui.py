@@ -16,7 +16,7 @@ def _format_bytes(count):
 def draw_binding(layout, obj):
     """State, figures and actions of a bound mesh."""
     settings = obj.lbc
-    ok = settings.status.startswith("Following")
+    ok = settings.state == "FOLLOWING"
     box = layout.box()
     box.label(text=settings.status or "Bound", icon="CHECKMARK" if ok else "ERROR")
     if settings.cage is None:  # deleted: bind to another cage (Bind's poll says what to select)

@@ -65,6 +65,7 @@ def _store_settings(settings, request, result, cage_obj, group):
     settings.outside = result.outside
     settings.bind_seconds = result.seconds
     settings.warnings = "; ".join(result.warnings)
+    settings.state = "FOLLOWING"
     settings.status = f"Following '{cage_obj.name}'"
 
 

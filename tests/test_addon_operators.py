@@ -32,7 +32,7 @@ def test_bind_through_the_operator_adds_the_deformer_and_reports(capfd):
     assert settings.is_bound and settings.cage == cage and settings.dimension == 3
     assert settings.control_points == 8 and settings.cage_vertex_count == 8
     assert settings.resolution == CELLS
-    assert settings.status == "Following 'Box'"
+    assert settings.state == "FOLLOWING" and settings.status == "Following 'Box'"
 
 
 def test_poll_explains_what_to_select():
@@ -139,7 +139,7 @@ def test_rebind_after_a_topology_change_deforms_again():
     edit.free()
     cage.data.update()
     evaluated_positions(mesh)
-    assert "vertices" in mesh.lbc.status  # 9 vertices where 8 were bound
+    assert mesh.lbc.state == "STOPPED" and "vertices" in mesh.lbc.status  # 9 vertices where 8 were bound
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
     assert mesh.lbc.cage_vertex_count == 9 and mesh.lbc.resolution == CELLS
