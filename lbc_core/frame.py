@@ -1,4 +1,9 @@
-"""The unit frame: the cage centred on the origin and scaled to about unit diagonal, where every stage computes.
+"""The two frames lbc computes in, both owned here.
+
+:class:`UnitFrame`, where every stage of a bind computes: the cage centred on the origin and scaled to about unit
+diagonal, a similarity, so the weights are those of the user's cage. :class:`MeshingFrame`, where the domain mesher
+alone works: the unit frame's centring and scaling, and for a very thin 3D cage also a stretch along its principal
+axes, an affine map the mesh is mapped back through (the weights are never computed in it).
 
 Far from the origin, differences of coordinates lose the digits the offset takes (at 1e6, a unit cage keeps ten), and
 a constraint like Σ w c = x mixes numbers of very different sizes with Σ w = 1. In the unit frame every stage sees
@@ -13,6 +18,7 @@ import dataclasses
 
 import numpy as np
 
+from .cage import Cage
 from .meshing import DomainMesh
 from .meshing.common import bary_positions
 
@@ -65,3 +71,53 @@ class UnitFrame:
         vertices[domain.control_vertices] = cage.vertices
         return DomainMesh(vertices, domain.cells, domain.boundary_vertices, domain.boundary_facet,
                           domain.boundary_bary, domain.control_vertices)
+
+
+# A 3D cage thinner than this along a principal axis (× its largest extent) is meshed stretched to this aspect.
+ASPECT_FLOOR = 0.25
+
+
+class MeshingFrame:
+    """The affine map from the user's coordinates to the frame the domain mesher's backends mesh in.
+
+    x → (x − centre) M: the cage's bounding-box centre goes to the origin, its diagonal to length 1. A 3D cage whose
+    extent along one of its principal axes is below :data:`ASPECT_FLOOR` × its largest is also stretched along
+    those axes up to that aspect: barycentric coordinates and planarity are affine invariants, so a mesh made in the
+    stretched frame and mapped back still conforms to the cage, with as many cells across the thin direction as
+    across the others (isotropic cells would need the thickness as their size: 1e8 cells for a 1 × 1 × 1e-4 box).
+
+    Parameters
+    ----------
+    vertices : (n, d) float array, the cage's vertices
+    """
+
+    def __init__(self, vertices):
+        low, high = vertices.min(axis=0), vertices.max(axis=0)
+        self.centre = 0.5 * (low + high)
+        dim = vertices.shape[1]
+        matrix = np.eye(dim)
+        if dim == 3:
+            centred = vertices - vertices.mean(axis=0)
+            _, _, axes = np.linalg.svd(centred, full_matrices=False)
+            axes = axes.T  # columns: principal directions
+            if np.linalg.det(axes) < 0:
+                axes[:, 2] = -axes[:, 2]
+            extents = np.ptp(centred @ axes, axis=0)
+            stretch = np.maximum(1.0, ASPECT_FLOOR * extents.max() / np.maximum(extents, np.finfo(float).tiny))
+            if np.any(stretch > 1.0):
+                matrix = axes * stretch[None, :]
+        diagonal = np.linalg.norm(np.ptp((vertices - self.centre) @ matrix, axis=0))
+        self.matrix = matrix / diagonal
+        self.inverse = np.linalg.inv(self.matrix)
+
+    def cage(self, cage):
+        """The cage in this frame (same facets and numbering)."""
+        return Cage(self.to_local(cage.vertices), cage.facets, cage.facet_face, cage.vertex_map, list(cage.warnings))
+
+    def to_local(self, points):
+        """(P, d) points in this frame."""
+        return (points - self.centre) @ self.matrix
+
+    def to_world(self, points):
+        """(P, d) points in the user's coordinates."""
+        return points @ self.inverse + self.centre

@@ -1,10 +1,11 @@
-"""UnitFrame: exact power-of-two scaling, centring, and a domain mapped back with its contract kept bitwise."""
+"""The frames: UnitFrame (exact power-of-two scaling, centring, a domain mapped back with its contract kept bitwise)
+and MeshingFrame (a thin cage stretched for the mesher, mapped back)."""
 
 import numpy as np
 import pytest
 
 from lbc_core.cage import make_cage
-from lbc_core.frame import UnitFrame
+from lbc_core.frame import ASPECT_FLOOR, MeshingFrame, UnitFrame
 from lbc_core.meshing import mesh_domain
 
 CUBE_FACES = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
@@ -44,3 +45,13 @@ def test_a_domain_maps_back_with_control_and_boundary_vertices_exact():
     difference = np.abs(domain.vertices - frame.from_unit(unit_domain.vertices))
     assert difference.max() <= 4 * np.spacing(1e6)
     assert np.array_equal(domain.cells, unit_domain.cells)
+
+
+def test_the_meshing_frame_stretches_a_thin_cage_and_maps_back_exactly():
+    rotation = np.linalg.qr(np.random.default_rng(2).normal(size=(3, 3)))[0]
+    slab = np.array([[x, y, z] for x in (0, 4.0) for y in (0, 2.0) for z in (0, 0.01)]) @ rotation.T + 7.0
+    frame = MeshingFrame(slab)
+    local = frame.to_local(slab)
+    extents = np.sort(np.linalg.svd(local - local.mean(axis=0), compute_uv=False))
+    assert extents[0] >= 0.99 * ASPECT_FLOOR * extents[-1]  # as thick as the floor allows, not 1/400 of it
+    np.testing.assert_allclose(frame.to_world(local), slab, atol=1e-12)

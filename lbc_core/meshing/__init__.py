@@ -24,7 +24,7 @@ Delaunay triangulation. ``tetrahedra``: 3D. ``"delaunay"`` (also ``"auto"``): a 
 tetrahedralisation of the surface samples and a body-centred cubic lattice (see :mod:`.tetrahedra`).
 
 Every backend works on the cage moved to its centre and scaled to unit diagonal (3D: also stretched along its
-principal axes when it is very thin, see :class:`~.common.Frame`); the result is mapped back, its boundary vertices
+principal axes when it is very thin, see :class:`lbc_core.frame.MeshingFrame`); the result is mapped back, its boundary vertices
 recomputed from their barycentric coordinates on the original cage, so the guarantees above hold in the user's units.
 
 fTetWild (pytetwild) was measured and not used: its tetrahedra do not contain the cage vertices (misses up to 0.35 %
@@ -108,7 +108,8 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
     Cancelled
     """
     from . import polygon, tetrahedra
-    from .common import Frame, finish
+    from ..frame import MeshingFrame
+    from .common import finish
 
     dim = cage.dim
     if method not in METHODS[dim]:
@@ -118,7 +119,7 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
     if not cells >= 10:
         raise ValueError(f"the target cell count must be at least 10, got {cells}")
     steps = Progress.of(progress, cancel)
-    frame = Frame(cage.vertices)
+    frame = MeshingFrame(cage.vertices)
     local = frame.cage(cage)
     if dim == 3:
         mesh = tetrahedra.mesh(local, int(cells), steps.part(0.0, 0.95))
