@@ -226,7 +226,7 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
 
 
 # The arrays of a binding file: (dtype kinds accepted, number of dimensions).
-_ARRAYS = {
+FILE_ARRAYS = {
     "format": ("U", 0), "version": ("U", 0), "scheme": ("U", 0), "fingerprint": ("U", 0),
     "cage_vertices": ("f", 2), "cage_facets": ("iu", 2), "cage_facet_face": ("iu", 1), "cage_vertex_map": ("iu", 1),
     "rest_cage_vertices": ("f", 2), "weights_data": ("f", 1), "weights_indices": ("iu", 1),
@@ -259,15 +259,15 @@ def _read_archive(path):
             if "format" not in data.files or str(data["format"]) != FORMAT:
                 raise CageError(f"{path} is not an lbc binding file (it has no {FORMAT!r} format mark): bind again "
                                 "to make one")
-            missing = [key for key in _ARRAYS if key not in data.files]
+            missing = [key for key in FILE_ARRAYS if key not in data.files]
             if missing:
                 _damaged(path, f"it lacks {', '.join(missing)}")
-            arrays = {key: data[key] for key in _ARRAYS}
+            arrays = {key: data[key] for key in FILE_ARRAYS}
         except CageError:
             raise
         except Exception as error:  # a damaged member: bad CRC, truncated stream, bad header
             _damaged(path, f"it cannot be read ({_reason(error)})")
-    for key, (kinds, ndim) in _ARRAYS.items():
+    for key, (kinds, ndim) in FILE_ARRAYS.items():
         if arrays[key].dtype.kind not in kinds or arrays[key].ndim != ndim:
             _damaged(path, f"{key} has type {arrays[key].dtype} and {arrays[key].ndim} dimensions")
     return arrays

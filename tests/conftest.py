@@ -2,8 +2,16 @@
 
 import os
 import sys
+from pathlib import Path
 
+import numpy as np
 import pytest
+
+import lbc_core
+from lbc_core.io import read_cage, read_mesh
+from random_cages import GRID, STAR
+
+DATA = Path(__file__).parent / "data"
 
 
 class _ExitPastBlenderTeardown:
@@ -53,6 +61,45 @@ def bound_gargoyle(bound_gargoyle_file):
     register_addon()
     bpy.ops.wm.open_mainfile(filepath=str(bound_gargoyle_file))
     return bpy.data.objects["Gargoyle"], bpy.data.objects["Cage"]
+
+
+# Bindings that test_pipeline (the bind) and test_binding (the record and its files) both use: bound once per session.
+def polygon_points(vertices, count, seed=0):
+    from matplotlib.path import Path as PolygonPath
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(vertices.min(axis=0), vertices.max(axis=0), (count, 2))
+    return points[PolygonPath(vertices).contains_points(points)]
+
+
+@pytest.fixture(scope="session")
+def woody():
+    vertices, _ = read_cage(DATA / "woody-control-edgeset.obj")
+    vertices = vertices[:, :2]
+    points = polygon_points(vertices, 4000)
+    return vertices, points, lbc_core.bind(vertices, None, points)
+
+
+@pytest.fixture(scope="session")
+def gargoyle():
+    vertices, faces = read_cage(DATA / "cages-3d" / "gargoyle" / "cage_L12.obj")
+    points, _ = read_mesh(DATA / "cages-3d" / "gargoyle" / "mesh.off")
+    return vertices, faces, points, lbc_core.bind(vertices, faces, points, cells=3000)
+
+
+@pytest.fixture(scope="session")
+def star_binding():
+    return lbc_core.bind(STAR, None, GRID, cells=300)
+
+
+@pytest.fixture(scope="session")
+def clothing():
+    """The clothing cage, its deformed pose and a binding of the garment's vertices (some outside the cage)."""
+    folder = DATA / "cages-3d" / "clothing"
+    cage, faces = read_mesh(folder / "cage.obj")
+    posed, _ = read_mesh(folder / "cage_deformed.obj")
+    mesh, _ = read_mesh(folder / "mesh.obj")
+    return cage, faces, posed, lbc_core.bind(cage, faces, mesh, cells=2000)
 
 
 def pytest_configure(config):

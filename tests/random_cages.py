@@ -1,0 +1,42 @@
+"""Random cages for property-based tests: star-shaped polygons, radial surfaces over a sphere triangulation, and
+the 8-pointed star with a grid around it."""
+
+import numpy as np
+from hypothesis import strategies as st
+from scipy.spatial import ConvexHull
+
+lengths = st.floats(0.05, 1.0, allow_nan=False)
+
+
+def star_polygon(gaps, radii):
+    """Vertices (n, 2) at angles spaced in proportion to ``gaps`` (a full turn) and distances ``radii``."""
+    n = min(len(gaps), len(radii))
+    angles = 2 * np.pi * np.cumsum(gaps[:n]) / np.sum(gaps[:n])
+    return np.c_[np.cos(angles), np.sin(angles)] * np.asarray(radii[:n])[:, None], angles
+
+
+def sphere_directions(n_points):
+    """(n, 3) unit vectors (a Fibonacci spiral) and their convex hull's triangles (2n - 4, 3), outward."""
+    index = np.arange(n_points) + 0.5
+    polar, azimuth = np.arccos(1 - 2 * index / n_points), np.pi * (1 + 5**0.5) * index
+    directions = np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], axis=1)
+    triangles = ConvexHull(directions).simplices
+    a, b, c = (directions[triangles[:, k]] for k in range(3))
+    inward = np.einsum("ij,ij->i", a, np.cross(b, c)) < 0
+    return directions, np.where(inward[:, None], triangles[:, ::-1], triangles)
+
+
+def draw_dented_sphere(data, n_points, min_radius, max_push, shrink):
+    """A sphere triangulation with random radii whose drawn subset of vertices is scaled by ``shrink`` and pushed by
+    one random vector of components up to ``max_push``; returns (vertices (n, 3), triangles (T, 3))."""
+    directions, triangles = sphere_directions(n_points)
+    radii = np.array(data.draw(st.lists(st.floats(min_radius, 1.0), min_size=n_points, max_size=n_points)))
+    vertices = directions * radii[:, None]
+    dented = np.array(data.draw(st.lists(st.booleans(), min_size=n_points, max_size=n_points)))
+    push = np.array(data.draw(st.tuples(*[st.floats(-max_push, max_push)] * 3)))
+    vertices[dented] = vertices[dented] * shrink + push
+    return vertices, triangles
+
+
+STAR = star_polygon([1.0] * 8, [1.0, 0.5] * 4)[0]  # an 8-pointed concave star
+GRID = np.stack(np.meshgrid(np.linspace(-1.2, 1.2, 13), np.linspace(-1.2, 1.2, 13)), axis=-1).reshape(-1, 2)

@@ -1,0 +1,487 @@
+"""bind end to end (lbc_core.pipeline): every shipped cage within the quality bounds, random cages bound or refused
+with a CageError, rest pose and locality, outside and empty point sets, frames far from the origin, progress, and a
+cancel that stops every stage promptly."""
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+import lbc_core
+from lbc_core.errors import CageError
+from lbc_core.io import read_cage, read_mesh
+from random_cages import GRID, STAR, draw_dented_sphere, lengths, star_polygon
+
+DATA = Path(__file__).parent / "data"
+L_POLYGON = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
+CUBE = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+CUBE_FACES = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+# Float64 itself rounds a coordinate x by up to half its ulp, so no binding can follow an affine map of the cage more
+# closely than a few ulps of the largest coordinate involved; this many are allowed.
+AFFINE_ULPS = 8
+
+
+def test_rest_pose_is_exact_and_moving_one_vertex_is_local(gargoyle):
+    vertices, faces, points, binding = gargoyle
+    np.testing.assert_array_equal(binding.deform(vertices), points)
+    moved = vertices.copy()
+    moved[0] += 0.1 * binding.cage.bbox_diagonal
+    displaced = np.linalg.norm(binding.deform(moved) - points, axis=1) > 0
+    assert displaced.mean() < 0.5
+
+
+def test_points_outside_are_bound_and_counted():
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    points = np.array([[0.5, 0.5], [1.5, 0.5], [0.25, -0.5]])
+    binding = lbc_core.bind(square, None, points, cells=200)
+    np.testing.assert_array_equal(binding.outside, [False, True, True])
+    assert binding.outside_count == 2
+    # Outside points follow their closest domain point: a translation moves them rigidly.
+    np.testing.assert_allclose(binding.deform(square + [2.0, 3.0]), points + [2.0, 3.0], atol=1e-12)
+
+
+def test_progress_is_monotonic_and_cancel_stops():
+    house = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.5, 1.5], [0.0, 1.0]])
+    fractions = []
+    lbc_core.bind(house, None, np.array([[0.5, 0.5]]), cells=300,
+                  progress=lambda fraction, message: fractions.append(fraction))
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    with pytest.raises(lbc_core.Cancelled):
+        lbc_core.bind(house, None, np.array([[0.5, 0.5]]), cells=300, cancel=lambda: True)
+
+
+def test_bad_points_are_refused():
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    with pytest.raises(lbc_core.CageError, match="NaN"):
+        lbc_core.bind(square, None, np.array([[np.nan, 0.5]]))
+    with pytest.raises(lbc_core.CageError, match="2D"):
+        lbc_core.bind(square, None, np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.7]]))
+    with pytest.raises(lbc_core.CageError, match="points must be real numbers"):
+        lbc_core.bind(square, None, np.array([[0.5 + 1j, 0.5]]))
+    with pytest.raises(lbc_core.CageError, match="the 2D cage lies in the plane z = 0 but the points in z = 5"):
+        lbc_core.bind(np.c_[square, np.zeros(4)], None, np.array([[0.5, 0.5, 5.0]]))
+    lbc_core.bind(np.c_[square, np.full(4, 5.0)], None, np.array([[0.5, 0.5, 5.0]]), cells=100)
+
+
+@pytest.mark.parametrize(
+    "cage, faces",
+    [("[[0, 0], [1, 0], [0, 1]]", "None"),
+     ("[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]", "[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]")],
+    ids=["triangle", "tetrahedron"],
+)
+def test_simplex_cages_bind(cage, faces):
+    # A simplex leaves the solver nothing to optimise; run in a child process so a crash fails the test, not the run.
+    import subprocess
+    import sys
+
+    script = (
+        "import numpy as np, lbc_core\n"
+        f"cage = np.array({cage}, dtype=float)\n"
+        f"b = lbc_core.bind(cage, {faces}, cage.mean(axis=0, keepdims=True), cells=300)\n"
+        "w = b.weights.toarray()\n"
+        "assert np.allclose(w, 1 / len(cage), atol=1e-9), w\n"
+    )
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, f"bind on a simplex cage failed (exit code {run.returncode}): {run.stderr[-2000:]}"
+
+
+def inside_points(dim, count, rng):
+    """Points well inside the unit-size L polygon (2D) or the unit cube (3D)."""
+    if dim == 3:
+        return rng.uniform(0.02, 0.98, (count, 3))
+    points = rng.uniform(0.02, 1.98, (4 * count, 2))
+    return points[(points[:, 0] < 0.98) | (points[:, 1] < 0.98)][:count]
+
+
+def affine_error_bound(diagonal, *arrays):
+    """max(1e-9 × the diagonal, AFFINE_ULPS ulps of the largest coordinate in ``arrays``)."""
+    largest = max(np.abs(array).max() for array in arrays)
+    return max(1e-9 * diagonal, AFFINE_ULPS * np.spacing(largest))
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(dim=st.sampled_from([2, 3]), log_scale=st.floats(-9, 9), log_offset=st.floats(-3, 8),
+       direction=st.lists(st.floats(-1, 1), min_size=3, max_size=3), matrix=st.lists(st.floats(-2, 2), min_size=9,
+       max_size=9), log_shift=st.floats(-3, 8), seed=st.integers(0, 2**16))
+def test_an_affine_map_of_the_cage_is_followed_at_any_offset_and_scale(dim, log_scale, log_offset, direction, matrix,
+                                                                       log_shift, seed):
+    """Issue 11, item 4: within 1e-9 of the diagonal, or a few ulps where float64 cannot do better (offset 1e8)."""
+    rng = np.random.default_rng(seed)
+    scale = 10.0**log_scale
+    offset = 10.0**log_offset * np.array(direction[:dim])
+    if np.any(np.abs(offset) > 1e12 * scale):  # beyond, float64 rounds the cage's own shape by 1e-4 of its size
+        offset = offset / np.abs(offset).max() * 1e12 * scale
+    unit_cage, faces = (L_POLYGON, None) if dim == 2 else (CUBE, CUBE_FACES)
+    cage = unit_cage * scale + offset
+    points = inside_points(dim, 60, rng) * scale + offset
+    binding = lbc_core.bind(cage, faces, points, cells=300)
+    assert not binding.outside.any()
+    linear = np.array(matrix[:dim * dim]).reshape(dim, dim)
+    shift = 10.0**log_shift * rng.uniform(-1, 1, dim)
+    posed = cage @ linear.T + shift
+    expected = points @ linear.T + shift
+    error = np.abs(binding.deform(posed) - expected).max()
+    assert error <= affine_error_bound(binding.cage.bbox_diagonal, cage, posed, points, expected)
+    np.testing.assert_allclose(np.asarray(binding.weights.sum(axis=1)).ravel(), 1.0, rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_cages_far_from_the_origin_bind(dim):
+    """An L polygon and a unit cube at 1e6 from the origin (they never finished meshing in the cage's coordinates;
+    in 2D the bundled Delaunay mesher, which Blender uses, did not)."""
+    unit_cage, faces = (L_POLYGON, None) if dim == 2 else (CUBE, CUBE_FACES)
+    cage = unit_cage + 1e6
+    points = inside_points(dim, 200, np.random.default_rng(5)) + 1e6
+    binding = lbc_core.bind(cage, faces, points, method="delaunay")
+    posed = cage * 1.5 + 3.0
+    error = np.abs(binding.deform(posed) - (points * 1.5 + 3.0)).max()
+    assert error <= affine_error_bound(binding.cage.bbox_diagonal, posed)
+    # What is stored in the cage's units is in the cage's units: the domain and its control vertices, bitwise.
+    assert binding.domain.vertices[binding.domain.control_vertices].tobytes() == binding.cage.vertices.tobytes()
+    assert np.all(binding.domain.vertices >= 1e6 - 1e-9)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_scaled_cage_gives_the_same_weights(dim):
+    """Scaling by a power of two is exact in the unit frame: identical weights, every length scaled exactly."""
+    unit_cage, faces = (L_POLYGON, None) if dim == 2 else (CUBE, CUBE_FACES)
+    points = inside_points(dim, 100, np.random.default_rng(6))
+    small = lbc_core.bind(unit_cage, faces, points, cells=400)
+    large = lbc_core.bind(unit_cage * 2.0**20, faces, points * 2.0**20, cells=400)
+    assert (large.weights != small.weights).nnz == 0
+    np.testing.assert_array_equal(large.domain.vertices, small.domain.vertices * 2.0**20)
+    np.testing.assert_array_equal(large.domain_weights, small.domain_weights)
+    assert large.objective == small.objective * 2.0 ** (20 * (dim - 1))
+
+
+# Issue 11, item 3: each stage of a bind, told by the first progress message it sends, and the 0.5 s within which a
+# cancel must stop it.
+STAGE_MESSAGES = {
+    "meshing": "",  # the first message of a bind is the mesher's
+    "geodesics": "geodesic distances",
+    "factorisation": "factorising the solver's matrix",
+    "ADMM": "ADMM iteration",
+    "projection": "projecting onto the constraints",
+    "interpolation": "Interpolation",
+    "reduction": "reducing the weights",
+}
+CANCEL_LATENCY = 0.5
+
+
+def cancel_latency(cage_vertices, cage_faces, points, stage, **options):
+    """Seconds from ``cancel()`` turning true, at the stage's first progress message, to :class:`Cancelled`."""
+    turned_true = []
+
+    def progress(fraction, message):
+        if not turned_true and message.startswith(STAGE_MESSAGES[stage]):
+            turned_true.append(time.perf_counter())
+
+    with pytest.raises(lbc_core.Cancelled):
+        lbc_core.bind(cage_vertices, cage_faces, points, progress=progress, cancel=lambda: bool(turned_true),
+                      **options)
+    assert turned_true, f"the {stage} stage sent no progress message"
+    return time.perf_counter() - turned_true[0]
+
+
+def longest_waits(cage_vertices, cage_faces, points, **options):
+    """The longest time between two polls of ``cancel`` in each stage of a whole bind: the latency of a cancel that
+    turns true at the worst moment. A wait is the stage's whose message came last before it began."""
+    events = []  # (time, stage or None for a poll)
+
+    def progress(fraction, message):
+        stages = [name for name, prefix in STAGE_MESSAGES.items() if prefix and message.startswith(prefix)]
+        events.append((time.perf_counter(), stages[0] if stages else None))
+
+    def cancel():
+        events.append((time.perf_counter(), "poll"))
+        return False
+
+    start = time.perf_counter()
+    lbc_core.bind(cage_vertices, cage_faces, points, progress=progress, cancel=cancel, **options)
+    longest, stage, last_poll = {}, "meshing", start
+    for moment, kind in events:
+        if kind == "poll":
+            longest[stage] = max(longest.get(stage, 0.0), moment - last_poll)
+            last_poll = moment
+        elif kind is not None:
+            stage = kind
+    return longest
+
+
+@pytest.fixture(scope="module")
+def gargoyle_waits():
+    """The waits of the 168-control-point gargoyle cage at the default resolution, where one ADMM iteration takes
+    tens of milliseconds and the geodesics (uninterrupted before issue 11) a second; 60 iterations show the loop's."""
+    vertices, faces = read_cage(DATA / "cages-3d" / "gargoyle" / "cage_L08.obj")
+    points, _ = read_mesh(DATA / "cages-3d" / "gargoyle" / "mesh.off")
+    return longest_waits(vertices, faces, points, cells=8000, max_iterations=60)
+
+
+@pytest.fixture(scope="module")
+def woody_waits(woody):
+    vertices, points, _ = woody
+    return longest_waits(vertices, None, points)
+
+
+@pytest.mark.parametrize("stage", list(STAGE_MESSAGES))
+def test_cancel_stops_every_stage_of_a_3d_bind_promptly(gargoyle, gargoyle_waits, stage):
+    vertices, faces, points, _ = gargoyle
+    latency = cancel_latency(vertices, faces, points, stage, cells=8000)
+    assert latency < CANCEL_LATENCY, f"cancel took {latency:.2f} s to stop the {stage} stage"
+    if stage != "meshing":  # the mesher's own loops are tested with it
+        assert gargoyle_waits[stage] < CANCEL_LATENCY, f"{stage}: {gargoyle_waits[stage]:.2f} s between cancel polls"
+
+
+@pytest.mark.parametrize("stage", list(STAGE_MESSAGES))
+def test_cancel_stops_every_stage_of_a_2d_bind_promptly(woody, woody_waits, stage):
+    vertices, points, _ = woody
+    latency = cancel_latency(vertices, None, points, stage)
+    assert latency < CANCEL_LATENCY, f"cancel took {latency:.2f} s to stop the {stage} stage"
+    if stage != "meshing":
+        assert woody_waits[stage] < CANCEL_LATENCY, f"{stage}: {woody_waits[stage]:.2f} s between cancel polls"
+
+
+@pytest.mark.parametrize("size, offset", [(1.0, 1e8), (1e-6, 1e4), (1e-9, 10.0)])
+def test_a_binding_far_from_the_origin_saves_and_loads(tmp_path, size, offset):
+    """The load check measures reproduction about the cage's centre, as bind does (it refused these before)."""
+    cage = L_POLYGON * size + offset
+    binding = lbc_core.bind(cage, None, inside_points(2, 20, np.random.default_rng(7)) * size + offset, cells=300)
+    binding.save(tmp_path / "far.npz")
+    loaded = lbc_core.load_binding(tmp_path / "far.npz", cage)
+    np.testing.assert_array_equal(loaded.deform(cage * 2.0), binding.deform(cage * 2.0))
+
+
+# Every cage we ship (issue 2's acceptance): quality at the mesh's vertices, the locality printed.
+
+CAGES_2D = ["woody", "Gil_Gecko", "cactus", "LBClogo"]
+GARGOYLE = [f"L{level:02d}" for level in range(8, 17)]
+
+
+def inside_grid(polygon, per_side=80):
+    from matplotlib.path import Path as PolygonPath
+
+    axes = [np.linspace(low, high, per_side) for low, high in zip(polygon.min(axis=0), polygon.max(axis=0))]
+    grid = np.stack(np.meshgrid(*axes), axis=-1).reshape(-1, 2)
+    return grid[PolygonPath(polygon).contains_points(grid)]
+
+
+def check(binding, points, cage_vertices):
+    weights = binding.weights
+    diagonal = binding.cage.bbox_diagonal
+    n = binding.cage.n_control_points
+    assert np.abs(np.asarray(weights.sum(axis=1)).ravel() - 1).max() <= 1e-9
+    assert np.abs(weights @ binding.rest_cage_vertices - points).max() <= 1e-9 * diagonal
+    assert weights.data.min() >= -1e-6
+    rng = np.random.default_rng(0)
+    d = points.shape[1]
+    matrix, shift = np.eye(d) + 0.3 * rng.normal(size=(d, d)), rng.normal(size=d)
+    moved = binding.deform(cage_vertices @ matrix.T + shift)
+    assert np.abs(moved - (points @ matrix.T + shift)).max() <= 1e-6 * diagonal
+    counts = binding.influence_counts()
+    print(f"{n} control points: {counts.mean():.2f} per point on average, max {counts.max()}")
+    if n >= 20:
+        assert counts.mean() < n / 2
+
+
+@pytest.mark.parametrize("name", CAGES_2D)
+def test_2d_cages(name):
+    cage, _ = read_cage(DATA / f"{name}-control-edgeset.obj")
+    cage = cage[:, :2]
+    points = inside_grid(cage)
+    check(lbc_core.bind(cage, None, points), points, cage)
+
+
+@pytest.mark.parametrize("level", GARGOYLE)
+def test_gargoyle_cages(level):
+    cage, faces = read_cage(DATA / "cages-3d" / "gargoyle" / f"cage_{level}.obj")
+    points, _ = read_mesh(DATA / "cages-3d" / "gargoyle" / "mesh.off")
+    binding = lbc_core.bind(cage, faces, points)
+    assert binding.outside_count == 0
+    check(binding, points, cage)
+
+
+def test_clothing_cage():
+    cage, faces = read_cage(DATA / "cages-3d" / "clothing" / "cage.obj")
+    points, _ = read_mesh(DATA / "cages-3d" / "clothing" / "mesh.obj")
+    binding = lbc_core.bind(cage, faces, points)
+    assert binding.outside_count == 0
+    check(binding, points, cage)
+    # The posed cage that ships with the garment deforms it to finite, bounded positions.
+    posed, _ = read_cage(DATA / "cages-3d" / "clothing" / "cage_deformed.obj")
+    moved = binding.deform(posed)
+    assert np.all(np.isfinite(moved))
+    assert np.all(moved.min(axis=0) >= posed.min(axis=0) - 1e-9) and np.all(moved.max(axis=0) <= posed.max(axis=0) + 1e-9)
+
+
+# ------------------------------------------------------------------------------------------- bound weights (bind)
+
+# Quality bounds of lbc_core's results (issue 2, item 7), relative to the cage's bounding-box diagonal for lengths.
+UNITY, REPRODUCTION, NEGATIVE = 1e-9, 1e-9, -1e-6
+TINY = settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def bind_or_cage_error(vertices, faces, points, cells):
+    """lbc_core.bind's Binding, or None when it raised CageError; any other exception fails the test."""
+    try:
+        binding = lbc_core.bind(vertices, faces, points, cells=cells)
+    except CageError as error:
+        assert str(error), "a CageError must say what is wrong"
+        event(f"refused: {str(error).split(':')[0].split(' at ')[0]}")
+        return None
+    event("bound")
+    return binding
+
+
+def assert_quality(binding, points, inside):
+    """The binding meets the quality bounds at the domain's vertices and at the points.
+
+    Parameters
+    ----------
+    binding : lbc_core.Binding
+    points : (m, d) float array
+    inside : (m,) bool array
+        Points known to lie inside the cage (away from its boundary): they must not be counted outside, and their
+        weights reproduce them.
+    """
+    diagonal = binding.cage.bbox_diagonal
+    controls = binding.cage.vertices
+    # At the domain's vertices: the solve's own result.
+    W = binding.domain_weights
+    assert np.max(np.abs(W.sum(axis=1) - 1)) <= UNITY
+    assert np.max(np.abs(W @ controls - binding.domain.vertices)) <= REPRODUCTION * diagonal
+    assert W.min() >= NEGATIVE
+    np.testing.assert_array_equal(W[binding.domain.control_vertices], np.eye(len(controls)))  # Lagrange
+    # At the points: reduced sparse weights, bound exactly at the rest pose.
+    weights = binding.weights.toarray()
+    assert weights.shape == (len(points), len(controls))
+    assert np.max(np.abs(weights.sum(axis=1) - 1), initial=0) <= UNITY
+    assert weights.min(initial=0) >= NEGATIVE
+    assert np.max(np.abs(weights[inside] @ controls - points[inside]), initial=0) <= REPRODUCTION * diagonal
+    assert not np.any(binding.outside[inside])
+    np.testing.assert_allclose(binding.deform(binding.cage.vertices[binding.cage.vertex_map]), points, rtol=0,
+                               atol=1e-12 * diagonal)
+
+
+def inside_polygon(polygon, points, margin):
+    """Where points lie relative to a closed polygon (n, 2).
+
+    Returns
+    -------
+    inside : (m,) bool array
+        Inside by the even-odd rule.
+    clear : (m,) bool array
+        Farther than ``margin`` from every edge (where inside or outside is beyond doubt).
+    """
+    start, end = polygon, np.roll(polygon, -1, axis=0)
+    # Even-odd rule: count the edges a ray towards +x crosses.
+    straddle = (start[None, :, 1] > points[:, None, 1]) != (end[None, :, 1] > points[:, None, 1])
+    t = (points[:, None, 1] - start[None, :, 1]) / np.where(end[:, 1] == start[:, 1], 1.0, end[:, 1] - start[:, 1])
+    crossing_x = start[None, :, 0] + t * (end[None, :, 0] - start[None, :, 0])
+    odd = np.count_nonzero(straddle & (crossing_x > points[:, None, 0]), axis=1) % 2 == 1
+    along = end - start
+    s = np.clip(np.einsum("mnj,nj->mn", points[:, None] - start[None], along) / np.sum(along**2, axis=1), 0, 1)
+    distance = np.linalg.norm(points[:, None] - (start[None] + s[..., None] * along[None]), axis=2).min(axis=1)
+    return odd, distance > margin
+
+
+@TINY
+@given(
+    st.lists(lengths, min_size=4, max_size=12),  # triangles: test_simplex_cages_bind
+    st.lists(lengths, min_size=4, max_size=12),
+    st.floats(0.0, 0.4),
+    st.integers(0, 2**32 - 1),
+)
+def test_random_polygons_bind_within_the_quality_bounds(gaps, radii, roughness, seed):
+    rng = np.random.default_rng(seed)
+    polygon, _ = star_polygon(gaps, radii)
+    polygon = polygon + roughness * rng.uniform(-1, 1, polygon.shape)  # concave, sometimes self-intersecting
+    points = rng.uniform(polygon.min(axis=0) - 0.1, polygon.max(axis=0) + 0.1, (100, 2))
+    binding = bind_or_cage_error(polygon, None, points, cells=300)
+    if binding is not None:
+        inside, clear = inside_polygon(polygon, points, 1e-6)
+        assert_quality(binding, points, inside & clear)
+        np.testing.assert_array_equal(binding.outside[clear], ~inside[clear])  # outside points found and counted
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(6, 24), st.data())
+def test_random_polyhedra_bind_within_the_quality_bounds(n_points, data):
+    # Dent some vertices: towards the centre (still star-shaped) or sideways (concave, maybe self-intersecting).
+    vertices, triangles = draw_dented_sphere(data, n_points, min_radius=0.4, max_push=0.4, shrink=0.6)
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    # Points near the centre (inside when the cage stays star-shaped around it) and anywhere around the cage.
+    points = np.r_[rng.normal(scale=0.02, size=(50, 3)), rng.uniform(-1.2, 1.2, (50, 3))]
+    binding = bind_or_cage_error(vertices, triangles, points, cells=2000)
+    if binding is not None:
+        # A point on the inner side of every facet's plane sees every facet from inside: it is inside the cage.
+        inside = np.all(_inner_distances(binding.cage, points) > 1e-6, axis=1)
+        assert_quality(binding, points, inside)
+
+
+def _inner_distances(cage, points):
+    """(m, E): distance of each point from each outward facet's plane, positive on the inner side."""
+    a, b, c = (cage.vertices[cage.facets[:, k]] for k in range(3))
+    normals = np.cross(b - a, c - a)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.einsum("ej,ej->e", a, normals)[None] - points @ normals.T
+
+
+# ------------------------------------------------------------------------------- nothing lost; points outside; empty
+
+def test_mesh_partly_outside_is_bound_and_counted(star_binding):
+    inside, clear = inside_polygon(STAR, GRID, 1e-6)
+    assert 0 < star_binding.outside_count < len(GRID)
+    np.testing.assert_array_equal(star_binding.outside[clear], ~inside[clear])
+    # Bound: every point, outside ones included, follows an affine map of the cage exactly.
+    affine = np.array([[1.2, 0.3], [-0.2, 0.9]])
+    moved = star_binding.deform(STAR @ affine.T + [0.5, -1.0])
+    np.testing.assert_allclose(moved[inside & clear], GRID[inside & clear] @ affine.T + [0.5, -1.0], atol=1e-9)
+    np.testing.assert_array_equal(star_binding.deform(STAR), GRID)  # the rest pose is exact, outside too
+
+
+def test_mesh_wholly_outside_is_bound_and_counted():
+    far = np.array([[5.0, 0.0], [0.0, -4.0], [3.0, 3.0]])
+    binding = lbc_core.bind(STAR, None, far, cells=300)
+    assert binding.outside_count == 3
+    np.testing.assert_allclose(binding.weights.sum(axis=1), 1.0, atol=UNITY)
+    np.testing.assert_allclose(binding.deform(STAR + [1.0, 2.0]), far + [1.0, 2.0], atol=1e-12)
+
+
+def test_empty_mesh_gives_an_empty_binding():
+    binding = lbc_core.bind(STAR, None, np.zeros((0, 2)), cells=300)
+    assert binding.weights.shape == (0, len(STAR)) and binding.outside_count == 0
+    assert binding.deform(STAR).shape == (0, 2)
+
+
+@pytest.mark.parametrize(
+    "points, message",
+    [
+        (np.zeros((3, 4)), "must be an \\(m, 2\\) or \\(m, 3\\) array"),
+        (np.array([[np.nan, 0.0]]), "NaN or infinite"),
+    ],
+)
+def test_points_of_a_bad_shape_or_not_finite_are_refused(points, message):
+    with pytest.raises(CageError, match=message):
+        lbc_core.bind(STAR, None, points, cells=300)
+
+
+def test_points_of_another_dimension_are_refused(clothing):
+    cage, faces, _, _ = clothing
+    with pytest.raises(CageError, match="the cage is 3D but the points are 2D"):
+        lbc_core.bind(cage, faces, np.zeros((2, 2)))
+
+
+def test_cancelled_bind_raises_cancelled():
+    with pytest.raises(lbc_core.Cancelled):
+        lbc_core.bind(STAR, None, GRID, cells=300, cancel=lambda: True)
+
+
+def test_2d_points_given_with_a_z_coordinate():
+    # File data: 2D points as (m, 3) with a constant z are bound; a varying z is refused.
+    binding = lbc_core.bind(STAR, None, np.c_[GRID, np.full(len(GRID), 2.0)], cells=300)
+    assert binding.weights.shape == (len(GRID), len(STAR))
+    with pytest.raises(CageError, match="z varies"):
+        lbc_core.bind(STAR, None, np.zeros((2, 3)) + [[0, 0, 0], [0, 0, 1]], cells=300)
