@@ -3,7 +3,6 @@
 import numpy as np
 import scipy.sparse as sp
 
-from lbc_core.constraints import constraint_residuals, restore_constraints
 from lbc_core.reduction import reduce_weights
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -12,38 +11,6 @@ SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 def bilinear_weights(points):
     x, y = points[:, 0], points[:, 1]
     return np.stack([(1 - x) * (1 - y), x * (1 - y), x * y, (1 - x) * y], axis=1)
-
-
-def test_restore_fixes_perturbed_weights_exactly():
-    rng = np.random.default_rng(0)
-    points = rng.uniform(0.1, 0.9, (200, 2))
-    noisy = bilinear_weights(points) + rng.normal(0, 1e-4, (200, 4))
-    fixed = restore_constraints(noisy, SQUARE, points)
-    unity, reproduction = constraint_residuals(fixed, SQUARE, points)
-    assert unity.max() < 1e-13 and reproduction.max() < 1e-13
-    assert fixed.min() >= 0
-    assert np.abs(fixed - noisy).max() < 1e-3
-
-
-def test_restore_clamps_negatives_and_keeps_constraints():
-    points = np.array([[0.5, 0.5]])
-    weights = np.array([[0.5, -1e-5, 0.5, 1e-5]])
-    fixed = restore_constraints(weights, SQUARE, points)
-    assert fixed.min() >= 0
-    unity, reproduction = constraint_residuals(fixed, SQUARE, points)
-    assert unity.max() < 1e-14 and reproduction.max() < 1e-14
-
-
-def test_restore_gives_the_same_with_shared_and_per_point_slots():
-    rng = np.random.default_rng(2)
-    points = rng.uniform(0.05, 0.95, (100, 2))
-    weights = bilinear_weights(points) + rng.normal(0, 3e-2, (100, 4))  # large enough to clamp some
-    columns = np.broadcast_to(np.arange(4), weights.shape)
-    shared = restore_constraints(weights, SQUARE, points)
-    per_point = restore_constraints(weights, SQUARE, points, columns)
-    assert (weights < 0).any() and np.abs(shared - per_point).max() < 1e-12
-    assert np.allclose(constraint_residuals(shared, SQUARE, points), constraint_residuals(per_point, SQUARE, points,
-                                                                                          columns), atol=1e-14)
 
 
 def test_reduce_drops_small_weights_and_restores_linear_precision():

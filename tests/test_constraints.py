@@ -1,0 +1,57 @@
+"""Constraints: the least-norm correction that restores partition of unity and reproduction on a support, and the
+solver's projection of its clamped output."""
+
+import numpy as np
+
+from lbc_core.constraints import constraint_residuals, project_onto_constraints, restore_constraints
+
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+
+
+def bilinear_weights(points):
+    x, y = points[:, 0], points[:, 1]
+    return np.stack([(1 - x) * (1 - y), x * (1 - y), x * y, (1 - x) * y], axis=1)
+
+
+def test_restore_fixes_perturbed_weights_exactly():
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0.1, 0.9, (200, 2))
+    noisy = bilinear_weights(points) + rng.normal(0, 1e-4, (200, 4))
+    fixed = restore_constraints(noisy, SQUARE, points)
+    unity, reproduction = constraint_residuals(fixed, SQUARE, points)
+    assert unity.max() < 1e-13 and reproduction.max() < 1e-13
+    assert fixed.min() >= 0
+    assert np.abs(fixed - noisy).max() < 1e-3
+
+
+def test_restore_clamps_negatives_and_keeps_constraints():
+    points = np.array([[0.5, 0.5]])
+    weights = np.array([[0.5, -1e-5, 0.5, 1e-5]])
+    fixed = restore_constraints(weights, SQUARE, points)
+    assert fixed.min() >= 0
+    unity, reproduction = constraint_residuals(fixed, SQUARE, points)
+    assert unity.max() < 1e-14 and reproduction.max() < 1e-14
+
+
+def test_restore_gives_the_same_with_shared_and_per_point_slots():
+    rng = np.random.default_rng(2)
+    points = rng.uniform(0.05, 0.95, (100, 2))
+    weights = bilinear_weights(points) + rng.normal(0, 3e-2, (100, 4))  # large enough to clamp some
+    columns = np.broadcast_to(np.arange(4), weights.shape)
+    shared = restore_constraints(weights, SQUARE, points)
+    per_point = restore_constraints(weights, SQUARE, points, columns)
+    assert (weights < 0).any() and np.abs(shared - per_point).max() < 1e-12
+    assert np.allclose(constraint_residuals(shared, SQUARE, points), constraint_residuals(per_point, SQUARE, points,
+                                                                                          columns), atol=1e-14)
+
+
+def test_the_solver_projection_keeps_zeros_and_grows_a_support_that_cannot_reproduce():
+    points = np.array([[0.5, 0.5], [0.5, 0.9]])
+    # Point 0 keeps its zeros; point 1 is left with two opposite corners, which cannot reproduce it off their diagonal.
+    clamped = np.array([[0.25, 0.0, 0.5, 0.25], [0.5, 0.0, 0.5, 0.0]])
+    unclamped = bilinear_weights(points)
+    projected = project_onto_constraints(clamped, unclamped, SQUARE, points)
+    unity, reproduction = constraint_residuals(projected, SQUARE, points)
+    assert unity.max() < 1e-12 and reproduction.max() < 1e-12 and projected.min() >= 0
+    assert projected[0, 1] == 0.0
+    assert np.count_nonzero(projected[1]) > 2
