@@ -17,6 +17,7 @@ from .errors import CageError
 from .io import writing
 from .meshing import DomainMesh
 from .parallel import thread_map, worker_count
+from .statistics import influence_counts
 from .version import __version__
 
 # Deforming fewer points than this is faster on one thread.
@@ -79,12 +80,11 @@ class Binding:
         return first
 
     def influence_counts(self, threshold=None):
-        """Number of control points with a weight above ``threshold`` (default 1e-3 / n) per point; (m,) int array."""
-        if threshold is None:
-            threshold = 1e-3 / self.cage.n_control_points
-        above = self.weights.copy()
-        above.data = (above.data > threshold).astype(np.int64)
-        return np.asarray(above.sum(axis=1)).ravel()
+        """Number of control points with a weight above ``threshold`` per point; (m,) int array.
+
+        None: the paper's 1e-3 / n, as :func:`lbc_core.statistics.influence_counts` counts.
+        """
+        return influence_counts(self.weights, threshold)
 
     def deform(self, new_cage_vertices):
         """Positions of the points for a moved cage.

@@ -39,7 +39,7 @@ DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
 # The solve's memory grows as control points × cells (measured: about 0.3 kB per control point and cell in 2D and
 # 0.4 kB in 3D with single-precision iterations, 0.9 and 1.2 kB in double precision) and its time per iteration as mesh
-# vertices × control points². At 2000 control points the 3D default resolution (20000 tetrahedra) needs 17 to 48 GB
+# vertices × control points². At 2000 control points the 3D default resolution (8000 tetrahedra) needs 6 to 19 GB
 # and the 2D default (3000 triangles) 2 to 6 GB: beyond that no machine binds in reasonable time, so such cages are
 # refused before any work. The solver refuses smaller problems that do not fit the machine's memory.
 MAX_CONTROL_POINTS = 2000

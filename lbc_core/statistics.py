@@ -158,18 +158,21 @@ def influence(domain, weights, ks=None):
     return ks, np.where(ks > n, 0.0, at_least[np.clip(ks, 0, n)])
 
 
-def influence_counts(weights):
-    """How many control points influence each point: #{i : |w_i| > 1e-3 / n}.
+def influence_counts(weights, threshold=None):
+    """How many control points influence each point: #{i : |w_i| > threshold}.
 
     Parameters
     ----------
     weights : (m, n) scipy.sparse matrix or float array
+    threshold : float, optional
+        None: the paper's τ = 1e-3 / n (:func:`influence_threshold`).
 
     Returns
     -------
     (m,) int array
     """
-    threshold = influence_threshold(weights.shape[1])
+    if threshold is None:
+        threshold = influence_threshold(weights.shape[1])
     if sp.issparse(weights):
         weights = sp.csr_matrix(weights)
         large = np.abs(weights.data) > threshold
