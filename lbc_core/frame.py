@@ -19,8 +19,7 @@ import dataclasses
 import numpy as np
 
 from .cage import Cage
-from .meshing import DomainMesh
-from .meshing.common import bary_positions
+from .geometry import bary_positions
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,8 +68,7 @@ class UnitFrame:
         vertices = self.from_unit(domain.vertices)
         vertices[domain.boundary_vertices] = bary_positions(cage, domain.boundary_facet, domain.boundary_bary)
         vertices[domain.control_vertices] = cage.vertices
-        return DomainMesh(vertices, domain.cells, domain.boundary_vertices, domain.boundary_facet,
-                          domain.boundary_bary, domain.control_vertices)
+        return dataclasses.replace(domain, vertices=vertices)
 
 
 # A 3D cage thinner than this along a principal axis (× its largest extent) is meshed stretched to this aspect.

@@ -1,4 +1,4 @@
-"""The geometry kernel: predicates, closest points, winding numbers and simplex measures.
+"""The geometry kernel: predicates, closest points, winding numbers, simplex measures, points on cage facets.
 
 One implementation of each, used by the cage checks (cage.py), the domain meshers (meshing/) and point location
 (interpolation.py). Every function works on numpy arrays, vectorised over the leading axis; lengths are in the
@@ -268,3 +268,27 @@ def radius_ratios(vertices, tets):
                  * np.cross(edges[:, 2], edges[:, 0]) + lengths2[:, 2, None] * np.cross(edges[:, 0], edges[:, 1]))
     circumradius = np.linalg.norm(numerator, axis=1) / (12.0 * np.maximum(volume, np.finfo(float).tiny))
     return 9.0 * volume / (area * np.maximum(circumradius, np.finfo(float).tiny))
+
+
+def bary_positions(cage, facet, bary):
+    """Positions sum_k bary[:, k] * corner_k of points given on cage facets, summed from k = 0 upward.
+
+    Parameters
+    ----------
+    cage : Cage
+        Anything with the cage's ``vertices`` (n, d) and ``facets`` (E, d).
+    facet : (P,) int array
+    bary : (P, d) float array
+
+    Returns
+    -------
+    (P, d) float array
+    """
+    corners = cage.vertices[cage.facets[facet]]  # (P, d, d)
+    points = bary[:, 0, None] * corners[:, 0]
+    for k in range(1, bary.shape[1]):
+        points = points + bary[:, k, None] * corners[:, k]
+    # A one-hot bary gives the corner itself, but 1 * (-0.0) + 0 * c would turn -0.0 into +0.0: copy corners.
+    at_corner = np.flatnonzero(np.max(bary, axis=1) == 1.0)
+    points[at_corner] = corners[at_corner, np.argmax(bary[at_corner], axis=1)]
+    return points

@@ -5,7 +5,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import CageError
-from ..geometry import signed_measures
+from ..geometry import bary_positions, signed_measures
 from . import DomainMesh
 
 
@@ -46,29 +46,6 @@ def finish(cage, vertices, cells, boundary_vertices, boundary_facet, boundary_ba
 def split_counts(lengths, spacing):
     """Number of equal pieces for each cage edge so that no piece is longer than ``spacing``."""
     return np.maximum(1, np.ceil(lengths / spacing - 1e-9)).astype(np.int64)
-
-
-def bary_positions(cage, facet, bary):
-    """Positions sum_k bary[:, k] * corner_k of points given on cage facets, summed from k = 0 upward.
-
-    Parameters
-    ----------
-    cage : Cage
-    facet : (P,) int array
-    bary : (P, d) float array
-
-    Returns
-    -------
-    (P, d) float array
-    """
-    corners = cage.vertices[cage.facets[facet]]  # (P, d, d)
-    points = bary[:, 0, None] * corners[:, 0]
-    for k in range(1, bary.shape[1]):
-        points = points + bary[:, k, None] * corners[:, k]
-    # A one-hot bary gives the corner itself, but 1 * (-0.0) + 0 * c would turn -0.0 into +0.0: copy corners.
-    at_corner = np.flatnonzero(np.max(bary, axis=1) == 1.0)
-    points[at_corner] = corners[at_corner, np.argmax(bary[at_corner], axis=1)]
-    return points
 
 
 def far_points(vertices):
