@@ -162,14 +162,7 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     progress : callable(fraction, message), optional
         Told, at 0, how much memory and (roughly) time the solve will take.
 
-    Returns
-    -------
-    cage : Cage
-    points : (m, d) float array
-
-    Raises
-    ------
-    CageError
+    Returns and raises as :func:`check_cage_and_points`, and CageError for a bind the memory cannot hold.
     """
     cage, points = check_cage_and_points(cage_vertices, cage_faces, points, options)
     n_cells = options.cells or DEFAULT_CELLS[cage.dim]
