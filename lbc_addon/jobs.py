@@ -42,7 +42,7 @@ class BindRequest:
 
 @dataclass
 class BindResult:
-    """What :func:`apply` writes, and the figures the panel shows."""
+    """What :func:`lbc_addon.writing.apply` writes, and the figures the panel shows."""
 
     index: np.ndarray  # (m, K) int32 cage vertex indices
     weight: np.ndarray  # (m, K) float32
