@@ -162,7 +162,7 @@ def main(argv=None):
     parser.add_argument("--cage", default="L10", help="gargoyle cage level, L08 (168 vertices) to L16 (6)")
     parser.add_argument("--subdivide", type=int, default=2,
                         help="subdivision levels applied to the gargoyle first (0: its 2674 vertices; 2: 64k)")
-    parser.add_argument("--cells", type=int, default=0, help="LBC resolution (cells); 0: lbc_core's default")
+    parser.add_argument("--cells", type=int, default=0, help="cells of the LBC domain mesh; 0: lbc_core's default")
     parser.add_argument("--precision", type=int, default=5, help="Mesh Deform precision (Blender's default: 5)")
     parser.add_argument("--frames", type=int, default=30, help="frames timed per deformer")
     args = parser.parse_args(argv)
@@ -179,7 +179,7 @@ def main(argv=None):
 
     start = time.perf_counter()
     with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[mesh, cage]):
-        assert bpy.ops.object.lbc_bind(resolution=args.cells) == {"FINISHED"}
+        assert bpy.ops.object.lbc_bind(cells=args.cells) == {"FINISHED"}
     lbc_bind = time.perf_counter() - start
     lbc = mesh.modifiers[deformer.MODIFIER_NAME]
     print(f"LBC: bound in {lbc_bind:.1f} s, K = {mesh.lbc.slots} slots, {mesh.lbc.mean_influences:.1f} influences "

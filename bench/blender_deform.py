@@ -247,7 +247,7 @@ def run_scene(name, slot_caps, sum_forms, rounds, precision, reference_cells):
         bpy.context.scene.collection.objects.link(fine)
         storage.remove(fine.data)
         start = time.perf_counter()
-        api.bind(fine, cage, resolution=reference_cells, influences=0)
+        api.bind(fine, cage, cells=reference_cells, influences=0)
         print(f"  LBC at {reference_cells} cells bound in {time.perf_counter() - start:.1f} s")
         bpy.context.scene.collection.objects.unlink(fine)
         compare(f"LBC {reference_cells} cells", mesh, "the default resolution's")

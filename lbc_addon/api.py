@@ -4,7 +4,7 @@ Example::
 
     import bpy
     from lbc_addon import api   # inside Blender with the extension enabled: from bl_ext.user_default.lbc import api
-    summary = api.bind(bpy.data.objects["Body"], bpy.data.objects["Cage"], resolution=20000)
+    summary = api.bind(bpy.data.objects["Body"], bpy.data.objects["Cage"], cells=20000)
     print(summary)
     bpy.ops.wm.save_mainfile()
 """
@@ -16,7 +16,7 @@ from .core import CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, e
 from .properties import DEFAULT_INFLUENCES, bound_to, is_bound
 
 
-def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, threshold=0.0,
+def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, threshold=0.0,
          influences=DEFAULT_INFLUENCES, mode="AUTO", progress=None, cancel=None):
     """Bind ``mesh_obj`` to ``cage_obj`` (replacing an existing binding) and add the deformer.
 
@@ -35,7 +35,7 @@ def bind(mesh_obj, cage_obj, *, resolution=0, weighting="quadratic", epsilon=0.0
     Cancelled
         When ``cancel()`` turned true.
     """
-    request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), resolution=resolution,
+    request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), cells=cells,
                                 weighting=weighting, epsilon=epsilon, tolerance=tolerance, threshold=threshold,
                                 influences=influences, mode=mode)
     result = jobs.solve(request, progress, cancel)

@@ -66,7 +66,7 @@ def cage_to_mesh_matrix(cage_obj, mesh_obj):
     return mesh_obj.matrix_world.inverted_safe() @ cage_obj.matrix_world
 
 
-def snapshot(mesh_obj, cage_obj, depsgraph, resolution=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
+def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
              threshold=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
     """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
     if mesh_obj.type != "MESH":
@@ -103,7 +103,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, resolution=0, weighting="quadratic",
         cage_points=cage_points,
         cage_faces=cage_faces,
         flat=flat,
-        options={"resolution": resolution, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
+        options={"cells": cells, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
                  "threshold": threshold, "influences": influences, "mode": mode},
         cage_topology=cage_topology,
         mesh_topology=topology_fingerprint(mesh_obj.data),

@@ -61,10 +61,10 @@ def core_options(options):
     Parameters
     ----------
     options : dict
-        ``resolution``, ``weighting``, ``epsilon``, ``tolerance``, ``threshold`` as stored in ``Object.lbc``.
+        ``cells``, ``weighting``, ``epsilon``, ``tolerance``, ``threshold`` as stored in ``Object.lbc``.
     """
     return lbc_core.BindOptions(
-        cells=options["resolution"] or None,
+        cells=options["cells"] or None,
         weighting=options["weighting"],
         epsilon=options["epsilon"],
         threshold=options["threshold"] or None,

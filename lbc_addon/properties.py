@@ -4,6 +4,7 @@ Stored as ID properties, so it is saved in the .blend; Unbind removes the whole 
 """
 
 import bpy
+from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from .core import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D, DEFAULT_TOLERANCE
@@ -38,8 +39,8 @@ STATE_ITEMS = (
 class BindOptions:
     """The bind options shared by the operators' properties and the stored binding (annotations only)."""
 
-    resolution: IntProperty(
-        name="Resolution",
+    cells: IntProperty(
+        name="Cells",
         description=f"About how many cells (triangles in 2D, tetrahedra in 3D) fill the cage; 0 uses lbc's default "
         f"({DEFAULT_CELLS_2D} in 2D, {DEFAULT_CELLS_3D} in 3D). More cells: finer weights, slower bind",
         default=0,
@@ -89,7 +90,7 @@ class BindOptions:
     def bind_options(self):
         """The options as keyword arguments for :func:`lbc_addon.geometry.snapshot`."""
         return {
-            "resolution": self.resolution,
+            "cells": self.cells,
             "weighting": self.weighting,
             "epsilon": self.epsilon,
             "tolerance": self.tolerance,
@@ -142,11 +143,32 @@ def bound_to(cage, objects):
     return [obj for obj in objects if is_bound(obj) and obj.lbc.cage == cage]
 
 
+# Options stored under another name by earlier versions of the add-on: (old name, property).
+RENAMED_OPTIONS = (("resolution", "cells"),)
+
+
+@persistent
+def adopt_renamed_options(*_args):
+    """Move the values a file saved by an earlier version keeps under an option's old name onto the current one, so
+    a Rebind uses the cell count the artist chose (the old key stays readable as an ID property in 4.2-5.2)."""
+    for obj in bpy.data.objects:
+        if not is_bound(obj):
+            continue
+        for old, new in RENAMED_OPTIONS:
+            value = obj.lbc.get(old)
+            if value is not None:
+                setattr(obj.lbc, new, value)
+                del obj.lbc[old]
+
+
 def register():
     bpy.utils.register_class(LBC_PG_binding)
     bpy.types.Object.lbc = PointerProperty(type=LBC_PG_binding)
+    bpy.app.handlers.load_post.append(adopt_renamed_options)
 
 
 def unregister():
+    if adopt_renamed_options in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(adopt_renamed_options)
     del bpy.types.Object.lbc
     bpy.utils.unregister_class(LBC_PG_binding)

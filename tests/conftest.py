@@ -46,7 +46,7 @@ def bound_gargoyle_file(tmp_path_factory):
     from blender_scenes import CELLS, bind, gargoyle_scene
 
     mesh, cage = gargoyle_scene("L10")
-    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     path = tmp_path_factory.mktemp("blend") / "bound_gargoyle.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     return path

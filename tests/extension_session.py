@@ -79,8 +79,8 @@ bpy.ops.mesh.primitive_cube_add(size=2.0)
 cage = bpy.context.active_object
 sphere_rest = state(sphere)
 
-result["bind_operator"] = run_operator(lambda: bpy.ops.object.lbc_bind(resolution=1000), cage, [sphere, cage])
-result["bind_api"] = api.bind(ico, cage, resolution=1000)["control_points"]
+result["bind_operator"] = run_operator(lambda: bpy.ops.object.lbc_bind(cells=1000), cage, [sphere, cage])
+result["bind_api"] = api.bind(ico, cage, cells=1000)["control_points"]
 cage.location.x += 0.5
 result["moved"] = [shift_x(sphere), shift_x(ico)]
 
@@ -94,13 +94,13 @@ bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5)
 lone = bpy.context.active_object
 lone_before = state(lone)
 try:
-    api.bind(lone, open_cage, resolution=1000)
+    api.bind(lone, open_cage, cells=1000)
     result["bad_cage"] = "bound"
 except api.CageError as error:
     result["bad_cage"] = str(error)
 result["bad_cage_untouched"] = state(lone) == lone_before
 try:
-    run_operator(lambda: bpy.ops.object.lbc_bind(resolution=1000), open_cage, [lone, open_cage])
+    run_operator(lambda: bpy.ops.object.lbc_bind(cells=1000), open_cage, [lone, open_cage])
     result["bad_cage_operator"] = "bound"
 except RuntimeError as error:  # in a script, an operator's error report is raised
     result["bad_cage_operator"] = str(error)

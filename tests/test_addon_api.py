@@ -18,7 +18,7 @@ def test_api_bind_returns_the_figures_and_unbind_restores_the_mesh():
     mesh, cage = sphere_in_box_scene()
     before = mesh_state(mesh)
     fractions = []
-    summary = api.bind(mesh, cage, resolution=1000, progress=lambda fraction, message: fractions.append(fraction))
+    summary = api.bind(mesh, cage, cells=1000, progress=lambda fraction, message: fractions.append(fraction))
     assert summary["dimension"] == 3 and summary["control_points"] == 8
     assert 1 <= summary["mean_influences"] <= summary["slots"] <= 8
     assert summary["outside"] == 0 and summary["seconds"] > 0
@@ -36,7 +36,7 @@ def test_api_bind_raises_lbc_cores_error_and_changes_nothing():
     cage.data.vertices[3].co = cage.data.vertices[7].co
     before = mesh_state(mesh)
     with pytest.raises(lbc_core.CageError):
-        api.bind(mesh, cage, resolution=1000)
+        api.bind(mesh, cage, cells=1000)
     assert mesh_state(mesh) == before
 
 
@@ -62,10 +62,10 @@ def test_reopened_blend_deforms_the_same_without_recomputing(bound_gargoyle, tmp
 
 def test_rebind_all_and_the_deformer_inputs_from_a_script():
     mesh, cage = sphere_in_box_scene()
-    api.bind(mesh, cage, resolution=600, influences=4)
+    api.bind(mesh, cage, cells=600, influences=4)
     summaries = api.rebind_all(cage)
     assert len(summaries) == 1 and summaries[0]["slots"] == mesh.lbc.slots < 8  # capped: 4, or more where needed
-    assert (mesh.lbc.resolution, mesh.lbc.influences) == (600, 4)
+    assert (mesh.lbc.cells, mesh.lbc.influences) == (600, 4)
     rest = evaluated_positions(mesh)
     cage.location.x += 0.4
     full = evaluated_positions(mesh) - rest

@@ -26,12 +26,12 @@ CELLS = 1000
 
 def test_bind_through_the_operator_adds_the_deformer_and_reports(capfd):
     mesh, cage = sphere_in_box_scene()
-    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     assert "Bound 1 mesh(es)" in capfd.readouterr().out
     settings = mesh.lbc
     assert settings.is_bound and settings.cage == cage and settings.dimension == 3
     assert settings.control_points == 8 and settings.cage_vertex_count == 8
-    assert settings.resolution == CELLS
+    assert settings.cells == CELLS
     assert settings.state == "FOLLOWING" and settings.status == "Following 'Box'"
 
 
@@ -61,7 +61,7 @@ def test_unbind_restores_the_mesh_bit_for_bit():
     mesh, cage = sphere_in_box_scene()
     _decorate(mesh)
     before = mesh_state(mesh)
-    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     assert mesh_state(mesh) != before
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         assert bpy.ops.object.lbc_unbind() == {"FINISHED"}
@@ -86,11 +86,11 @@ def test_undo_after_bind_unbind_and_rebind_returns_the_exact_earlier_state():
     with undo_context():
         bpy.ops.ed.undo_push(message="before bind")
         with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[mesh, cage]):
-            _undo_step(bpy.ops.object.lbc_bind, resolution=CELLS)
+            _undo_step(bpy.ops.object.lbc_bind, cells=CELLS)
         states.append(mesh_state(bpy.data.objects["Sphere"]))
         mesh = bpy.data.objects["Sphere"]
         with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
-            mesh.lbc.resolution = 600  # the rebind makes other weights
+            mesh.lbc.cells = 600  # the rebind makes other weights
             _undo_step(bpy.ops.object.lbc_rebind)
         states.append(mesh_state(bpy.data.objects["Sphere"]))
         assert states[2] != states[1]
@@ -117,21 +117,21 @@ def test_bind_with_an_open_cage_fails_and_leaves_the_scene_unchanged():
     before = mesh_state(mesh), mesh_state(cage), sorted(bpy.data.node_groups.keys())
     # An operator that reports an error raises it in the calling script, with lbc_core's message.
     with pytest.raises(RuntimeError, match="the cage is not closed"):
-        bind(mesh, cage, resolution=CELLS)
+        bind(mesh, cage, cells=CELLS)
     assert (mesh_state(mesh), mesh_state(cage), sorted(bpy.data.node_groups.keys())) == before
 
 
 def test_vertices_outside_the_cage_are_counted_and_reported(capfd):
     mesh, cage = sphere_in_box_scene()
     mesh.data.vertices[0].co = (0.0, 0.0, 3.0)  # pulled out through the top of the box
-    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     assert mesh.lbc.outside == 1
     assert "1 vertices lie outside the cage" in capfd.readouterr().out
 
 
 def test_rebind_after_a_topology_change_deforms_again():
     mesh, cage = sphere_in_box_scene()
-    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     edit = bmesh.new()
     edit.from_mesh(cage.data)
     bmesh.ops.subdivide_edges(edit, edges=edit.edges[:1], cuts=1)
@@ -142,7 +142,7 @@ def test_rebind_after_a_topology_change_deforms_again():
     assert mesh.lbc.state == "STOPPED" and "vertices" in mesh.lbc.status  # 9 vertices where 8 were bound
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
-    assert mesh.lbc.cage_vertex_count == 9 and mesh.lbc.resolution == CELLS
+    assert mesh.lbc.cage_vertex_count == 9 and mesh.lbc.cells == CELLS
     assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() < 1e-6 * diagonal(mesh)
     cage.location.y += 0.5
     expected = positions(mesh.data) + np.array(mesh.matrix_world.inverted().to_3x3()) @ np.array([0.0, 0.5, 0.0])
@@ -236,7 +236,7 @@ class _ModalHarness:
 def _requests(mesh, cage):
     from lbc_addon import geometry
 
-    return [geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), resolution=CELLS)]
+    return [geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), cells=CELLS)]
 
 
 def test_modal_bind_shows_progress_and_applies_when_the_worker_is_done():
@@ -261,15 +261,15 @@ def test_rebind_all_binds_every_mesh_of_the_active_cage_again_with_its_own_optio
     mesh, cage = sphere_in_box_scene()
     second = mesh_object("Second", positions(mesh.data) * 0.5, [list(p.vertices) for p in mesh.data.polygons],
                          mesh.matrix_world.copy())
-    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
-    assert bind(second, cage, resolution=600, weighting="linear") == {"FINISHED"}
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
+    assert bind(second, cage, cells=600, weighting="linear") == {"FINISHED"}
     with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[cage]):
         assert bpy.ops.object.lbc_rebind_all.poll()
         for obj in (mesh, second):
             obj.lbc.bind_seconds = -1.0  # a mark the new bind overwrites
         assert bpy.ops.object.lbc_rebind_all() == {"FINISHED"}
     assert mesh.lbc.bind_seconds > 0 and second.lbc.bind_seconds > 0
-    assert (mesh.lbc.resolution, second.lbc.resolution, second.lbc.weighting) == (CELLS, 600, "linear")
+    assert (mesh.lbc.cells, second.lbc.cells, second.lbc.weighting) == (CELLS, 600, "linear")
     assert [m.type for m in second.modifiers] == ["NODES"]  # replaced, not stacked
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         with pytest.raises(RuntimeError, match="Make a cage with bound meshes active"):
@@ -279,7 +279,7 @@ def test_rebind_all_binds_every_mesh_of_the_active_cage_again_with_its_own_optio
 def test_unbinding_a_linked_duplicate_keeps_the_weights_the_original_still_uses(capfd):
     mesh, cage = sphere_in_box_scene()
     before = mesh_state(mesh)
-    assert bind(mesh, cage, resolution=CELLS) == {"FINISHED"}
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         assert bpy.ops.object.duplicate(linked=True) == {"FINISHED"}  # Alt+D
     twin = next(obj for obj in bpy.data.objects if obj.data == mesh.data and obj != mesh)
@@ -313,5 +313,5 @@ def test_a_failed_write_is_reported_and_taken_back(monkeypatch):
 
     monkeypatch.setattr(deformer, "_stop_condition", refused)
     with pytest.raises(RuntimeError, match="writing the binding failed .*IndexError.* the scene was left as it was"):
-        bind(mesh, cage, resolution=CELLS)
+        bind(mesh, cage, cells=CELLS)
     assert mesh_state(mesh) == before and not is_bound(mesh)

@@ -13,11 +13,11 @@ def test_weighting_choices_are_lbc_cores():
 
 def test_bind_options_are_stored_and_reused_by_rebind(monkeypatch):
     mesh, cage = sphere_in_box_scene()
-    options = {"resolution": 800, "weighting": "linear", "epsilon": 0.01, "tolerance": 1e-3, "threshold": 2e-3,
+    options = {"cells": 800, "weighting": "linear", "epsilon": 0.01, "tolerance": 1e-3, "threshold": 2e-3,
                "influences": 5, "mode": "3D"}
     assert bind(mesh, cage, **options) == {"FINISHED"}
     stored = mesh.lbc.bind_options()
-    assert stored["resolution"] == 800 and stored["weighting"] == "linear" and stored["mode"] == "3D"
+    assert stored["cells"] == 800 and stored["weighting"] == "linear" and stored["mode"] == "3D"
     assert stored["influences"] == 5 and mesh.lbc.slots <= 5
     assert abs(stored["epsilon"] - 0.01) < 1e-7 and abs(stored["threshold"] - 2e-3) < 1e-9
     from lbc_addon import geometry
@@ -36,3 +36,15 @@ def test_objects_never_bound_get_no_property_group():
     assert "lbc" not in mesh.keys() and "lbc" not in cage.keys()
     bpy.context.evaluated_depsgraph_get()  # the add-on's depsgraph check looks at every object
     assert "lbc" not in mesh.keys() and "lbc" not in cage.keys()
+
+
+def test_a_file_saved_before_the_cells_rename_keeps_its_cell_count(tmp_path):
+    mesh, cage = sphere_in_box_scene()
+    assert bind(mesh, cage, cells=600) == {"FINISHED"}
+    mesh.lbc.cells = 0
+    mesh.lbc["resolution"] = 600  # where versions before the rename stored the option
+    name, path = mesh.name, str(tmp_path / "before_rename.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    reopened = bpy.data.objects[name]
+    assert reopened.lbc.cells == 600 and reopened.lbc.get("resolution") is None

@@ -12,7 +12,7 @@ from lbc_addon.properties import is_bound
 from lbc_core import CageError, Cancelled
 from blender_scenes import evaluated_positions, mesh_state, sphere_in_box_scene
 
-OPTIONS = {"resolution": 1000}
+OPTIONS = {"cells": 1000}
 
 
 def _request(mesh, cage, **options):
@@ -97,7 +97,7 @@ def test_a_failure_at_any_write_step_leaves_the_scene_bit_for_bit_as_before(monk
     request = _request(mesh, cage)
     result = jobs.solve(request)
     if replacing:
-        writing.apply(request, jobs.solve(_request(mesh, cage, resolution=600)))
+        writing.apply(request, jobs.solve(_request(mesh, cage, cells=600)))
         mesh.modifiers.move(0, 1)  # the artist moved the deformer below Smooth and set its inputs
         deformer.set_inputs(deformer.find_modifier(mesh), {"Strength": 0.5, "Vertex Group": "top"})
         influence.show(mesh, 3)
@@ -125,12 +125,12 @@ def test_binding_a_bound_mesh_replaces_its_binding_in_place():
     mesh.modifiers.move(0, 1)
     modifier.name = "My Cage Deform"
     deformer.set_inputs(modifier, {"Strength": 0.25, "Invert Vertex Group": True})
-    writing.apply(*_solved(mesh, cage, resolution=600))
+    writing.apply(*_solved(mesh, cage, cells=600))
     assert [m.name for m in mesh.modifiers] == ["Smooth", "My Cage Deform"]  # one deformer, where the artist put it
     assert [group.name for group in bpy.data.node_groups] == [deformer.GROUP_NAME]
     values = deformer.inputs(mesh.modifiers["My Cage Deform"])
     assert values["Strength"] == 0.25 and values["Invert Vertex Group"] and values["Cage"] == cage
-    assert mesh.lbc.resolution == 600
+    assert mesh.lbc.cells == 600
     assert len(storage.binding_names(mesh.data)) == 2 * mesh.lbc.slots + 1
 
 
