@@ -10,11 +10,12 @@ import scipy.sparse as sp
 from . import fem
 from .progress import Progress
 
+# ρ of each weighting, by name; the paper's first (lbc_core.options.WEIGHTINGS lists these names for the options).
 WEIGHTINGS = {
-    "constant": lambda d: np.ones_like(d),
-    "linear": lambda d: d,
     "quadratic": lambda d: d * d,
+    "linear": lambda d: d,
     "sqrt": np.sqrt,
+    "constant": lambda d: np.ones_like(d),
 }
 # Sources whose distances are computed together in 3D: bounds the (3 F, sources) gradient arrays and the time between
 # two cancel checks (8 sources take 0.1-0.3 s on 64k tetrahedra).

@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from .errors import CageError
+from .geodesics import WEIGHTINGS as _RHO
 
 # About how many triangles / tetrahedra fill the cage by default. 2D: the reference solver's resolution for the paper's
 # figures. 3D, chosen by fidelity and time: the clothing garment posed with its shipped cage pose moves by up to 48 %
@@ -21,8 +22,8 @@ from .errors import CageError
 # 8k, while a bind of the 168-control-point gargoyle cage_L08 on the 2-core test machine took 10 s at 4k, 21 s at 8k.
 DEFAULT_CELLS = {2: 3000, 3: 8000}
 MIN_CELLS = 10
-# ρ of the geodesic TV weights ω = ρ(D) (lbc_core.geodesics.WEIGHTINGS holds the functions), the paper's first.
-WEIGHTINGS = ("quadratic", "linear", "sqrt", "constant")
+# The names of ρ in the geodesic TV weights ω = ρ(D), the paper's first: those lbc_core.geodesics implements.
+WEIGHTINGS = tuple(_RHO)
 DEFAULT_EPSILON = 0.0
 DEFAULT_MAX_ITERATIONS = 10000
 # Domain meshers per dimension (lbc_core.meshing.mesh_domain).

@@ -3,7 +3,7 @@
 import bpy
 
 from lbc_addon.properties import WEIGHTING_ITEMS, is_bound
-from lbc_core.geodesics import WEIGHTINGS
+from lbc_core.options import WEIGHTINGS
 from blender_scenes import bind, sphere_in_box_scene
 
 
