@@ -73,6 +73,9 @@ class SolveResult:
         iterate Z in the input's units (the output, W projected, is lower).
     seconds : dict
         Time per stage.
+    state : SolverState or None
+        The solver's final state, to warm-start a solve on the same mesh carried onto an edited cage (None when
+        there was nothing to iterate).
     """
 
     weights: np.ndarray
@@ -82,6 +85,66 @@ class SolveResult:
     tv_weights: np.ndarray
     history: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
+    state: "SolverState" = None
+
+
+@dataclass
+class SolverState:
+    """A solve's final Douglas-Rachford state and what gives its parts their meaning, for a warm start.
+
+    The state is in measure-scaled variables (see :class:`_Problem`): v_X = X̃ + Ũ per cell, v_W = W̃ + Ṽ per interior
+    vertex. A solve on the same cells and interior vertices, moved, rescales each part by its own measure: the split
+    gradient X̃ = shrink(v_X) by √|c|, the dual Ũ = v_X - X̃ by the cell's shrink threshold, v_W by √(β m_v).
+
+    Attributes
+    ----------
+    state : (d F n + N_in n,) float array
+    thresholds : (F, n) float array
+        Shrink thresholds √|c| ω / ρ the state was computed with.
+    sqrt_cell : (F, 1) float array
+        √|c| of each cell.
+    sqrt_mass : (N_in, 1) float array
+        √(β m_v) of each interior vertex.
+    interior : (N_in,) int array
+        The interior vertices, in the state's order.
+    """
+
+    state: np.ndarray
+    thresholds: np.ndarray
+    sqrt_cell: np.ndarray
+    sqrt_mass: np.ndarray
+    interior: np.ndarray
+
+    def restricted(self, cells, interior):
+        """The state of a sub-problem: the cells where ``cells`` (F,) is true and the interior vertices
+        ``interior`` (a subset of this state's, sorted), the others held fixed."""
+        v_x, v_w = self._parts()
+        rows = np.searchsorted(self.interior, interior)
+        return SolverState(np.concatenate([v_x[:, cells].ravel(), v_w[rows].ravel()]), self.thresholds[cells],
+                           self.sqrt_cell[cells], self.sqrt_mass[rows], interior)
+
+    def updated(self, sub, cells):
+        """This state with a sub-problem's final state (:meth:`restricted` with the same ``cells``) written in."""
+        v_x, v_w = self._parts()
+        rows = np.searchsorted(self.interior, sub.interior)
+        v_x, v_w = v_x.copy(), v_w.copy()
+        v_x[:, cells], v_w[rows] = sub._parts()
+        thresholds, sqrt_cell, sqrt_mass = self.thresholds.copy(), self.sqrt_cell.copy(), self.sqrt_mass.copy()
+        thresholds[cells], sqrt_cell[cells], sqrt_mass[rows] = sub.thresholds, sub.sqrt_cell, sub.sqrt_mass
+        return SolverState(np.concatenate([v_x.ravel(), v_w.ravel()]), thresholds, sqrt_cell, sqrt_mass,
+                           self.interior)
+
+    def _parts(self):
+        """Views of the state as v_X (d, F, n) and v_W (N_in, n)."""
+        F, n = self.thresholds.shape
+        size_w = len(self.interior) * n
+        v_x = self.state[:len(self.state) - size_w]
+        return v_x.reshape(-1, F, n), self.state[len(self.state) - size_w:].reshape(-1, n)
+
+    @property
+    def nbytes(self):
+        return sum(part.nbytes for part in (self.state, self.thresholds, self.sqrt_cell, self.sqrt_mass,
+                                            self.interior))
 
 
 def solve_on_mesh(
@@ -101,6 +164,7 @@ def solve_on_mesh(
     anderson_memory=5,
     anderson_period=ANDERSON_PERIOD,
     single_precision=True,
+    start=None,
     progress=None,
     cancel=None,
 ):
@@ -141,6 +205,10 @@ def solve_on_mesh(
     single_precision : bool
         Iterate in float32 (half the memory traffic); the result is corrected in float64, so the constraints hold
         to round-off either way.
+    start : SolverState, optional
+        A previous solve's final state (``SolveResult.state``) on the same cells and boundary vertices, whose
+        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.rebind`): the iterations
+        start there instead of from the harmonic coordinates.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
         Polled between the steps of every stage (factorisation, each ADMM iteration, projection); when it
@@ -160,6 +228,11 @@ def solve_on_mesh(
     n_vertices, d = vertices.shape
     n = len(control_points)
     _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
+    if start is not None and (start.thresholds.shape != (len(cells), n) or len(start.interior) + len(boundary_vertices)
+                              != n_vertices):
+        raise CageError(f"the start state is for {start.thresholds.shape[0]} cells, {start.thresholds.shape[1]} "
+                        f"control points and {len(start.interior)} interior vertices, not {len(cells)}, {n} and "
+                        f"{n_vertices - len(boundary_vertices)}: start from a solve on this mesh")
     if tolerance is None:
         tolerance = DEFAULT_TOLERANCE[d]
     tv_weights = np.asarray(tv_weights, dtype=float)
@@ -173,7 +246,7 @@ def solve_on_mesh(
     interior = np.setdiff1d(np.arange(n_vertices), boundary_vertices)
     weights = np.empty((n_vertices, n))
     weights[boundary_vertices] = boundary_weights
-    iterations, converged, history = 0, True, []
+    iterations, converged, history, state = 0, True, [], None
     if len(interior):
         dtype = np.float32 if single_precision else np.float64
         progress(0.0, "factorising the solver's matrix")
@@ -184,10 +257,10 @@ def solve_on_mesh(
             # n = d + 1: a simplex cage. The constraints leave no freedom; Z = H are its barycentric coordinates.
             Z = W = problem.H.astype(np.float64)
         else:
-            Z, W, iterations, converged, history = _admm(
+            Z, W, iterations, converged, history, state = _admm(
                 problem, tv_weights, epsilon, tolerance, max_iterations,
                 _default_penalty(d, n) if penalty is None else penalty, relaxation, check_every, anderson_memory,
-                anderson_period, progress.part(_FACTORISATION_END, _ADMM_END),
+                anderson_period, progress.part(_FACTORISATION_END, _ADMM_END), start,
             )
             for record in history:  # objectives in the input's units
                 if "objective" in record:
@@ -202,7 +275,7 @@ def solve_on_mesh(
     else:
         objective = tv_objective(vertices, cells, weights, tv_weights)
     progress(1.0, "solved")
-    return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds)
+    return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds, state)
 
 
 # Where each part of the solve ends on its progress range (the ADMM iterations take most of the time).
@@ -349,6 +422,7 @@ class _Problem:
         self.d = d
         self.n_cells = len(measures)
         self.n_interior = len(interior)
+        self.interior = interior
         self.measures = measures
         self.beta = beta
         # Rows component-major, scaled by √|c|; columns split into the unknowns and the fixed boundary.
@@ -507,6 +581,26 @@ class _DouglasRachford:
 
         self.in_rounds(gradient)
         v_w[:] = p.sqrt_mass * np.clip(Z, 0.0, 1.0)
+        return state
+
+    def carried_state(self, start):
+        """A previous solve's final state (:class:`SolverState`) rescaled to this mesh's measures and thresholds:
+        X̃ by the ratio of √|c|, Ũ by the ratio of the thresholds (so it stays as far inside or on their ball), v_W by
+        the ratio of √(β m_v)."""
+        p = self.p
+        state = np.array(start.state, dtype=p.G.dtype)
+        v_x, v_w = self.split(state)
+        cell_ratio = (p.sqrt_cell / start.sqrt_cell).astype(state.dtype)
+        threshold_ratio = np.divide(self.thresholds, start.thresholds, out=np.ones_like(self.thresholds),
+                                    where=start.thresholds > 0)
+
+        def rescale(chunk):
+            cells = chunk.cells
+            kept = _shrink_factor(v_x[:, cells], start.thresholds[cells].astype(state.dtype), self.epsilon)
+            v_x[:, cells] *= kept * cell_ratio[cells] + (1.0 - kept) * threshold_ratio[cells]
+
+        self.in_rounds(rescale)
+        v_w *= (p.sqrt_mass / start.sqrt_mass).astype(state.dtype)
         return state
 
     def solve(self, rhs):
@@ -682,7 +776,7 @@ class _Anderson:
 
 
 def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alpha, check_every, memory, period,
-          progress):
+          progress, start=None):
     step = _DouglasRachford(problem, tv_weights, epsilon, alpha, penalty, progress.check)
     anderson = (_Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype, progress.check)
                 if memory else None)
@@ -703,8 +797,13 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         return state, last, previous, residual, residual_norm, float(last_norm)
 
     started = time.perf_counter()
-    progress(0.0, "ADMM: starting from the harmonic coordinates")
-    value, out, _, residual, residual_norm, _ = advance(step.initial_state(), None, period)
+    if start is None:
+        progress(0.0, "ADMM: starting from the harmonic coordinates")
+        initial = step.initial_state()
+    else:
+        progress(0.0, "ADMM: starting from the previous solve")
+        initial = step.carried_state(start)
+    value, out, _, residual, residual_norm, _ = advance(initial, None, period)
     history = []
     converged = False
     iteration = period
@@ -768,7 +867,8 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries faint
     # tails there until full convergence. Both go back unscaled.
     W_unscaled = out.W.astype(np.float64) / problem.sqrt_mass.astype(np.float64)
-    return out.Z.astype(np.float64), W_unscaled, iteration, converged, history
+    final = SolverState(value, step.thresholds, problem.sqrt_cell, problem.sqrt_mass, problem.interior)
+    return out.Z.astype(np.float64), W_unscaled, iteration, converged, history, final
 
 
 def _difference(a, b, check, keep=True):
