@@ -51,6 +51,8 @@ class Binding:
     converged : bool
     objective : float
         The weighted total variation of ``domain_weights`` (NaN for baselines).
+    solver_state : lbc_core.solver.SolverState or None
+        The solver's final state, kept in memory (not saved) for a warm re-bind (:func:`lbc_core.rebind.rebind`).
     """
 
     cage: Cage
@@ -66,6 +68,7 @@ class Binding:
     iterations: int = 0
     converged: bool = True
     objective: float = float("nan")
+    solver_state: object = field(default=None, repr=False)
 
     @property
     def outside_count(self):

@@ -137,6 +137,7 @@ def bind(
         iterations=result.iterations,
         converged=result.converged,
         objective=result.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
+        solver_state=result.state,
     )
 
 
