@@ -1,0 +1,280 @@
+"""Warm re-bind: bind again after a few cage vertices moved at rest, reusing the previous domain mesh and solution.
+
+The previous binding's coordinates at its domain vertices, w(x), carry its mesh onto the edited cage:
+x' = Σ_i w_i(x) c'_i. Boundary vertices stay on their (moved) facets exactly, since boundary values are linear on
+facets, and control vertices land on the moved control points. Where no cell inverts or loses its shape, the carried
+mesh is a valid domain of the edited cage, and at its vertices the old coordinates meet every constraint exactly
+(they sum to 1, reproduce the carried positions by construction, and are non-negative).
+
+Where no moved control point's coordinate reaches, nothing moved and the old coordinates stay optimal but for the
+geodesic weights of the moved coordinates, which only matter where those coordinates are non-zero. So only the
+cells around the moved coordinates' supports (grown by FREE_RINGS rings) are solved again, the other vertices held
+at their previous weights as fixed values, starting from the previous solve's final state (``Binding.solver_state``,
+kept in memory) rather than from the harmonic coordinates; the geodesic weights and the evaluation at the points are
+computed afresh, as in :func:`lbc_core.bind`.
+
+Where the carried mesh is not valid (a cell folds or loses too much of its shape, a mesh face would leave a cage
+face that is no longer flat: typically a cage vertex moved by more than about a cell's size), the cage's topology,
+welding or face splitting changed, or the previous binding has no solver state (one loaded from a file), the re-bind
+is a cold bind with the previous options, and ``Binding.options["start"]`` says why.
+"""
+
+import time
+
+import numpy as np
+
+from .binding import Binding
+from .cage import make_cage
+from .errors import CageError
+from .fem import boundary_facets
+from .frame import UnitFrame
+from .geodesics import geodesic_distances
+from .geodesics import tv_weights as make_tv_weights
+from .geometry import bary_positions, radius_ratios, signed_measures, triangle_normals, unit
+from .interpolation import interpolation_matrix
+from .meshing import COPLANAR_ANGLE, DomainMesh
+from .objective import tv_objective
+from .options import BindOptions
+from .pipeline import REPRODUCTION_TOLERANCE, bind, check_points
+from .progress import Progress
+from .reduction import interpolate_and_reduce
+from .smoothing import SmoothInterpolation
+from .solver import SolveResult, solve_on_mesh
+
+# A carried cell must keep at least this share of its shape quality (radius ratio in 3D, the same ratio of in- to
+# circumradius in 2D): a cell squashed further would make the solve on the carried mesh coarser than a fresh mesh.
+QUALITY_KEPT = 0.25
+# Share of the progress bar each stage gets.
+_STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 0.9), "reduction": (0.9, 1.0)}
+WARM = "previous solution"
+# Rings of mesh vertices around the moved control points' supports that are solved again: room for a support to grow.
+FREE_RINGS = 2
+
+
+def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=None, cancel=None):
+    """Bind again to an edited cage, starting from a previous binding's mesh and solution.
+
+    Parameters
+    ----------
+    previous : Binding
+        An LBC binding of the same cage (same vertices, faces and welding), before the edit.
+    cage_vertices : (n_input, d) float array
+        The edited cage's vertices, in the order and number given to :func:`lbc_core.bind`.
+    cage_faces : None or sequence of index sequences
+        The cage's faces, as given to :func:`lbc_core.bind` (None for a 2D polygon).
+    points : (m, d) float array, optional
+        The points to bind; None binds the previous binding's points again.
+    progress : callable(fraction, message), optional
+    cancel : callable() -> bool, optional
+        Returning True stops the re-bind with :class:`lbc_core.Cancelled`.
+
+    Returns
+    -------
+    Binding
+        ``options["start"]`` is "previous solution: <k> of <F> cells solved again" for a warm re-bind, else
+        "harmonic (cold bind: <why>)".
+
+    Raises
+    ------
+    CageError
+        For a bad cage or points (as :func:`lbc_core.bind`), or a previous binding that is not an LBC one.
+    """
+    clock = time.perf_counter()
+    progress = Progress.of(progress, cancel)
+    if previous.scheme != "lbc":
+        raise CageError(f"a warm re-bind needs an LBC binding to start from, not a {previous.scheme!r} one: bind "
+                        "with lbc_core.bind")
+    request = _options_of(previous)
+    cage = make_cage(cage_vertices, cage_faces)
+    points = previous.points if points is None else check_points(cage, points)
+    reason = _topology_change(previous.cage, cage)
+    carried = None
+    if previous.solver_state is None:
+        reason = "the previous binding's solver state is not at hand (it is kept in memory only, not in files)"
+    if reason is None:
+        frame = UnitFrame.of(cage)
+        unit_cage = frame.cage_to_unit(cage)
+        carried, reason = carry_domain(previous, unit_cage)
+    if carried is None:
+        progress(0.0, f"binding from scratch: {reason}")
+        binding = bind(cage_vertices, cage_faces, points, options=request, progress=progress)
+        binding.options["start"] = f"harmonic (cold bind: {reason})"
+        return binding
+    progress.part(*_STAGES["carry"])(1.0, "the previous mesh carried onto the edited cage")
+    timings = {"carry": time.perf_counter() - clock}
+
+    moved = np.any(cage.vertices != previous.rest_cage_vertices, axis=1)
+    result, objective, state, solved = _solve_near(previous, carried, unit_cage, moved,
+                                                   progress.part(*_STAGES["solve"]))
+    timings.update(result.seconds)
+
+    clock = time.perf_counter()
+    located, outside, _ = interpolation_matrix(carried.vertices, carried.cells, frame.to_unit(points),
+                                               progress=progress.part(*_STAGES["interpolation"]))
+    timings["interpolation"] = time.perf_counter() - clock
+    clock = time.perf_counter()
+    reduction = progress.part(*_STAGES["reduction"])
+    threshold = previous.options["threshold"]
+    weights = interpolate_and_reduce(SmoothInterpolation(carried.vertices, carried.cells, located, progress=reduction),
+                                     result.weights, unit_cage.vertices, carried.vertices, threshold,
+                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
+    timings["reduction"] = time.perf_counter() - clock
+    progress(1.0, "bound again from the previous solution")
+    return Binding(
+        cage=cage,
+        rest_cage_vertices=cage.vertices.copy(),
+        weights=weights,
+        domain=frame.domain_from_unit(carried, cage),
+        domain_weights=result.weights,
+        outside=outside,
+        points=points,
+        scheme="lbc",
+        options=dict(previous.options, start=f"{WARM}: {solved} of {len(carried.cells)} cells solved again"),
+        timings=timings,
+        iterations=result.iterations,
+        converged=result.converged,
+        objective=objective * frame.scale ** (cage.dim - 1),
+        solver_state=state,
+    )
+
+
+def _solve_near(previous, carried, unit_cage, moved, progress):
+    """Solve again where the moved control points' coordinates reach (their support, grown by FREE_RINGS rings of
+    vertices), the rest of the carried mesh held at the previous solution, from the previous solver state.
+
+    Returns
+    -------
+    result : SolveResult
+        Its weights cover the whole mesh; its objective only the cells solved.
+    objective : float
+        The whole mesh's objective (unit frame).
+    state : SolverState
+        The whole mesh's state, for the next warm re-bind.
+    solved : int
+        How many cells were solved again.
+    """
+    clock = time.perf_counter()
+    options = previous.options
+    distances = geodesic_distances(carried.vertices, carried.cells, carried.control_vertices, progress.part(0, 0.1))
+    tv_weights = make_tv_weights(carried.cells, distances, options["weighting"])
+    geodesics_seconds = time.perf_counter() - clock
+    free = np.any(previous.domain_weights[:, moved] > 0, axis=1)
+    free = _grown(free, carried.cells, FREE_RINGS)
+    free[carried.boundary_vertices] = False
+    cells = np.any(free[carried.cells], axis=1)
+    fixed = np.flatnonzero(~free)
+    state = previous.solver_state
+    if not free.any():  # nothing moved, or only where no coordinate reaches the interior
+        result = SolveResult(previous.domain_weights, 0, True, float("nan"), tv_weights)
+        return result, tv_objective(carried.vertices, carried.cells, result.weights, tv_weights), state, 0
+    result = solve_on_mesh(
+        carried.vertices, carried.cells[cells], fixed, previous.domain_weights[fixed], unit_cage.vertices,
+        tv_weights[cells], start=state.restricted(cells, np.flatnonzero(free)), progress=progress.part(0.1, 0.95),
+        **{key: options[key] for key in ("epsilon", "max_iterations", "tolerance") if key in options},
+    )
+    result.seconds["geodesics"] = geodesics_seconds
+    objective = tv_objective(carried.vertices, carried.cells, result.weights, tv_weights)
+    state = state if result.state is None else state.updated(result.state, cells)
+    return result, objective, state, int(cells.sum())
+
+
+def carry_domain(previous, unit_cage):
+    """The previous binding's domain mesh carried onto an edited cage by its own coordinates, if still valid.
+
+    Parameters
+    ----------
+    previous : Binding
+    unit_cage : Cage
+        The edited cage (same topology as ``previous.cage``), in its unit frame.
+
+    Returns
+    -------
+    mesh : DomainMesh or None
+        In the unit frame of ``unit_cage``; None when the carried mesh is not a valid domain.
+    reason : str or None
+        Why not, for the user.
+    """
+    old = previous.domain
+    vertices = previous.domain_weights @ unit_cage.vertices
+    vertices[old.boundary_vertices] = bary_positions(unit_cage, old.boundary_facet, old.boundary_bary)
+    vertices[old.control_vertices] = unit_cage.vertices
+    folded = signed_measures(vertices, old.cells) <= 0
+    if folded.any():
+        return None, _near(previous, old.cells[folded], "the previous mesh would fold")
+    squashed = _quality(vertices, old.cells) < QUALITY_KEPT * _quality(old.vertices, old.cells)
+    if squashed.any():
+        return None, _near(previous, old.cells[squashed],
+                           f"cells of the previous mesh would lose more than {1 - QUALITY_KEPT:.0%} of their shape")
+    bent = _faces_off_cage(old, previous.cage, unit_cage)
+    if len(bent):
+        return None, (f"cage face {', '.join(map(str, bent[:5]))} is no longer flat, and the previous mesh has "
+                      "faces across it")
+    return DomainMesh(vertices, old.cells, old.boundary_vertices, old.boundary_facet, old.boundary_bary,
+                      old.control_vertices), None
+
+
+def _grown(mask, cells, rings):
+    """(N,) bool array: ``mask`` grown by ``rings`` rings of vertices through the cells."""
+    mask = mask.copy()
+    for _ in range(rings):
+        mask[cells[np.any(mask[cells], axis=1)].ravel()] = True
+    return mask
+
+
+def _options_of(previous):
+    """The BindOptions a previous binding was made with (its cell count is the one it reached)."""
+    recorded = previous.options
+    return BindOptions.of(None, **{key: recorded[key] for key in ("cells", "weighting", "epsilon", "threshold",
+                                                                 "method", "tolerance", "max_iterations")
+                                  if recorded.get(key) is not None})
+
+
+def _topology_change(old, new):
+    """Why a carried mesh cannot serve the new cage (welding, facets), or None."""
+    if old.fingerprint() != new.fingerprint():
+        return "the cage's vertices, faces or welding changed"
+    return None
+
+
+def _quality(vertices, cells):
+    """Shape quality of each cell, 1 for a regular one, 0 for a flat one."""
+    if vertices.shape[1] == 3:
+        return radius_ratios(vertices, cells)
+    a, b, c = (np.linalg.norm(vertices[cells[:, i]] - vertices[cells[:, j]], axis=1) for i, j in ((1, 2), (2, 0),
+                                                                                              (0, 1)))
+    # 2 × inradius / circumradius = (b + c - a)(c + a - b)(a + b - c) / (a b c)
+    return (b + c - a) * (c + a - b) * (a + b - c) / np.maximum(a * b * c, np.finfo(float).tiny)
+
+
+def _faces_off_cage(mesh, old_cage, cage):
+    """Input faces (3D) that some mesh boundary face spans together with a facet it was coplanar with, and that are
+    no longer coplanar with it.
+
+    A mesh boundary face may straddle the split lines of a planar cage face (a quad's diagonal); carried, it stays
+    on the cage only if those facets stay coplanar. (A face vertex on a sharp cage edge may be recorded on the facet
+    beyond it; such pairs were not coplanar before either, and the vertex stays on the edge.)
+    """
+    if cage.dim == 2:
+        return np.zeros(0, dtype=np.int64)
+    facet_of = np.full(len(mesh.vertices), -1)
+    facet_of[mesh.boundary_vertices] = mesh.boundary_facet
+    facets = facet_of[boundary_facets(mesh.cells)]  # (K, 3): the cage facet of each corner
+    facets = facets[np.any(facets != facets[:, :1], axis=1)]
+    old_normals, normals = (unit(triangle_normals(c.vertices[c.facets])) for c in (old_cage, cage))
+    off = np.zeros(len(facets), dtype=bool)
+    for k in (1, 2):
+        off |= _coplanar(old_normals, facets[:, 0], facets[:, k]) & ~_coplanar(normals, facets[:, 0], facets[:, k])
+    return np.unique(cage.facet_face[facets[off, 0]])
+
+
+def _coplanar(normals, first, second):
+    """Whether facets ``first`` and ``second`` (arrays of indices) have unit normals within COPLANAR_ANGLE."""
+    return np.einsum("kd,kd->k", normals[first], normals[second]) >= np.cos(COPLANAR_ANGLE)
+
+
+def _near(previous, cells, what):
+    """``what``, and the cage vertices nearest the offending cells, for the user."""
+    centroid = previous.domain.vertices[np.unique(cells)].mean(axis=0)
+    nearest = np.argsort(np.linalg.norm(previous.cage.vertices - centroid, axis=1))[:3]
+    inputs = previous.control_input_index[nearest]
+    return f"{what} ({len(cells)} cells, near cage vertex {', '.join(map(str, inputs))})"

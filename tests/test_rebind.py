@@ -1,0 +1,190 @@
+"""Warm re-bind: the carried mesh, the warm result's guarantees, its match with a cold solve, and every fallback."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lbc_core
+from lbc_core.boundary import boundary_weights
+from lbc_core.frame import UnitFrame
+from lbc_core.geodesics import geodesic_distances, tv_weights
+from lbc_core.io import read_cage, read_mesh
+from lbc_core.rebind import carry_domain, rebind
+from lbc_core.solver import solve_on_mesh
+
+DATA = Path(__file__).parent / "data"
+GARGOYLE = DATA / "cages-3d" / "gargoyle"
+UNITY, REPRODUCTION, NEGATIVE = 1e-9, 1e-9, -1e-12
+
+
+@pytest.fixture(scope="module")
+def gargoyle():
+    cage, faces = read_cage(GARGOYLE / "cage_L12.obj")
+    points, _ = read_mesh(GARGOYLE / "mesh.off")
+    return cage, faces, points, lbc_core.bind(cage, faces, points, cells=3000)
+
+
+def moved(cage, vertices, share, direction=(0.3, -0.5, 0.8)):
+    """``cage`` with ``vertices`` moved by ``share`` of its diagonal along ``direction``."""
+    direction = np.asarray(direction[:cage.shape[1]], dtype=float)
+    edited = cage.copy()
+    edited[vertices] += share * np.linalg.norm(np.ptp(cage, axis=0)) * direction / np.linalg.norm(direction)
+    return edited
+
+
+def assert_guarantees(binding, points):
+    """Partition of unity, reproduction and non-negativity at the domain's vertices and at the points; Lagrange at
+    the control vertices; the rest pose exact."""
+    controls = binding.cage.vertices
+    diagonal = binding.cage.bbox_diagonal
+    domain_weights = binding.domain_weights
+    assert np.abs(domain_weights.sum(axis=1) - 1).max() <= UNITY
+    assert np.abs(domain_weights @ controls - binding.domain.vertices).max() <= REPRODUCTION * diagonal
+    assert domain_weights.min() >= NEGATIVE
+    np.testing.assert_array_equal(domain_weights[binding.domain.control_vertices], np.eye(len(controls)))
+    weights = binding.weights.toarray()
+    inside = ~binding.outside
+    assert np.abs(weights.sum(axis=1) - 1).max() <= UNITY
+    assert np.abs(weights[inside] @ controls - points[inside]).max() <= REPRODUCTION * diagonal
+    assert weights.min() >= NEGATIVE
+    np.testing.assert_array_equal(binding.deform(controls[binding.cage.vertex_map]), points)
+
+
+def cold_on_carried_mesh(previous, cage_vertices, faces):
+    """A cold solve of the edited cage on the very mesh a warm re-bind carries: the same problem."""
+    cage = lbc_core.make_cage(cage_vertices, faces)
+    frame = UnitFrame.of(cage)
+    unit_cage = frame.cage_to_unit(cage)
+    mesh, reason = carry_domain(previous, unit_cage)
+    assert reason is None
+    weights = tv_weights(mesh.cells, geodesic_distances(mesh.vertices, mesh.cells, mesh.control_vertices))
+    result = solve_on_mesh(mesh.vertices, mesh.cells, mesh.boundary_vertices, boundary_weights(mesh, unit_cage),
+                           unit_cage.vertices, weights)
+    return result, frame
+
+
+def test_warm_rebind_meets_every_guarantee_and_matches_a_cold_solve_on_its_mesh(gargoyle):
+    cage, faces, points, first = gargoyle
+    edited = moved(cage, [3, 11], 0.01)
+    warm = rebind(first, edited, faces)
+    assert warm.options["start"].startswith("previous solution")
+    assert warm.converged
+    assert_guarantees(warm, points)
+    # The mesh is the previous one, carried: same cells, boundary vertices on the same facets, control vertices on
+    # the moved control points.
+    np.testing.assert_array_equal(warm.domain.cells, first.domain.cells)
+    np.testing.assert_array_equal(warm.domain.vertices[warm.domain.control_vertices], warm.cage.vertices)
+    cold, frame = cold_on_carried_mesh(first, edited, faces)
+    assert warm.iterations < cold.iterations / 2
+    # The same optimum within the solver's tolerance: objectives within 0.1 %, weights within a few hundredths.
+    assert abs(warm.objective / (cold.objective * frame.scale ** 2) - 1) < 1e-3
+    assert np.abs(warm.domain_weights - cold.weights).max() < 0.05
+
+
+def test_warm_rebind_follows_a_cold_bind_of_the_edited_cage(gargoyle):
+    cage, faces, points, first = gargoyle
+    edited = moved(cage, [5], 0.02)
+    warm = rebind(first, edited, faces)
+    cold = lbc_core.bind(edited, faces, points, cells=3000)
+    posed = moved(edited, [0, 1, 2], 0.1)
+    # Two cold binds on different meshes differ by about as much (see bench/RESULTS.md, "Warm re-bind").
+    gap = np.linalg.norm(warm.deform(posed) - cold.deform(posed), axis=1).max()
+    assert gap < 5e-3 * warm.cage.bbox_diagonal
+
+
+def test_a_second_warm_rebind_starts_from_the_first(gargoyle):
+    cage, faces, points, first = gargoyle
+    once = rebind(first, moved(cage, [3], 0.01), faces)
+    twice = rebind(once, moved(cage, [3, 20], 0.01), faces)
+    assert twice.options["start"].startswith("previous solution")
+    assert_guarantees(twice, points)
+    assert twice.iterations < first.iterations / 2
+
+
+def test_an_unmoved_cage_gives_the_previous_weights_back(gargoyle):
+    cage, faces, points, first = gargoyle
+    again = rebind(first, cage, faces)
+    assert again.iterations == 0
+    np.testing.assert_array_equal(again.domain_weights, first.domain_weights)
+    assert abs(again.weights - first.weights).max() < 1e-9
+
+
+def test_an_edit_that_would_fold_the_mesh_falls_back_to_a_cold_bind(gargoyle):
+    cage, faces, points, first = gargoyle
+    # A vertex pushed deep inward drags the cells around it through their neighbours.
+    centre = cage.mean(axis=0)
+    edited = cage.copy()
+    edited[0] += 0.6 * (centre - cage[0])
+    messages = []
+    warm = rebind(first, edited, faces, progress=lambda fraction, message: messages.append(message))
+    start = warm.options["start"]
+    assert start.startswith("harmonic (cold bind: the previous mesh would fold (") and "near cage vertex 0" in start
+    assert any(message.startswith("binding from scratch") for message in messages)
+    assert_guarantees(warm, points)
+    assert warm.solver_state is not None  # and the next re-bind can be warm again
+
+
+def test_another_topology_or_a_loaded_binding_falls_back_to_a_cold_bind(gargoyle, tmp_path):
+    cage, faces, points, first = gargoyle
+    path = tmp_path / "b.npz"
+    first.save(path)
+    loaded = lbc_core.load_binding(path)
+    assert loaded.solver_state is None
+    start = rebind(loaded, moved(cage, [3], 0.01), faces).options["start"]
+    assert start.startswith("harmonic (cold bind: the previous binding's solver state is not at hand")
+    # The cube's quads split along their other diagonals: other facets, so the carried mesh no longer fits.
+    cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    bound = lbc_core.bind(cube, quads, cube * 0.5 + 0.25, cells=300)
+    other_split = [triangle for a, b, c, d in quads for triangle in ([a, b, d], [b, c, d])]
+    start = rebind(bound, cube, other_split).options["start"]
+    assert start == "harmonic (cold bind: the cage's vertices, faces or welding changed)"
+
+
+def test_a_quad_bent_out_of_its_plane_falls_back_to_a_cold_bind():
+    # The carried mesh has boundary faces across the quads' diagonals, which would leave the bent cage.
+    cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    points = cube * 0.5 + 0.25
+    first = lbc_core.bind(cube, quads, points, cells=300)
+    edited = cube.copy()
+    edited[7] -= 0.01  # towards the centre: each quad at vertex 7 keeps its split, but bends
+    again = rebind(first, edited, quads)
+    assert again.options["start"] == ("harmonic (cold bind: cage face 1, 3, 5 is no longer flat, and the previous "
+                                      "mesh has faces across it)")
+    assert_guarantees(again, points)
+
+
+def test_cancel_stops_a_warm_rebind_and_leaves_the_previous_binding_as_it_was(gargoyle):
+    cage, faces, points, first = gargoyle
+    state, domain_weights = first.solver_state.state.copy(), first.domain_weights.copy()
+    polls = []
+
+    def cancel():
+        polls.append(1)
+        return len(polls) > 20
+
+    with pytest.raises(lbc_core.Cancelled):
+        rebind(first, moved(cage, [3], 0.01), faces, cancel=cancel)
+    np.testing.assert_array_equal(first.solver_state.state, state)
+    np.testing.assert_array_equal(first.domain_weights, domain_weights)
+
+
+def test_a_2d_polygon_rebinds_warm():
+    polygon = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0.05, 0.95, (300, 2))
+    first = lbc_core.bind(polygon, None, points, cells=800)
+    edited = moved(polygon, [2], 0.02)
+    warm = rebind(first, edited)
+    assert warm.options["start"].startswith("previous solution")
+    assert_guarantees(warm, points)
+    assert warm.iterations < first.iterations
+
+
+def test_a_baseline_binding_is_refused(gargoyle):
+    cage, faces, points, _ = gargoyle
+    mvc = lbc_core.bind_mvc(cage, faces, points[:50])
+    with pytest.raises(lbc_core.CageError, match="needs an LBC binding"):
+        rebind(mvc, cage, faces)
