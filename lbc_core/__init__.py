@@ -3,6 +3,7 @@
     import lbc_core
     b = lbc_core.bind(cage_vertices, cage_faces, points)   # cage_faces=None for a 2D polygon
     deformed = b.deform(new_cage_vertices)
+    b = lbc_core.rebind(b, edited_cage_vertices, cage_faces)  # after editing the cage at rest: warm where it can
 """
 
 from .version import __version__
@@ -12,11 +13,13 @@ from .options import BindOptions
 from .solver import SolveResult, solve_on_mesh
 from .binding import Binding, load_binding
 from .pipeline import bind
+from .rebinding import rebind
 from .baselines import bind_bbw, bind_harmonic, bind_mvc, mean_value_coordinates
 from .io import read_cage, read_mesh, write_mesh
 
 __all__ = [
     "BindOptions", "Binding", "Cage", "CageError", "Cancelled", "SolveResult", "bind", "bind_bbw", "bind_harmonic", "bind_mvc",
-    "load_binding", "make_cage", "mean_value_coordinates", "read_cage", "read_mesh", "solve_on_mesh", "write_mesh",
+    "load_binding", "make_cage", "mean_value_coordinates", "read_cage", "read_mesh", "rebind", "solve_on_mesh",
+    "write_mesh",
     "__version__",
 ]

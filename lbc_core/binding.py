@@ -52,7 +52,7 @@ class Binding:
     objective : float
         The weighted total variation of ``domain_weights`` (NaN for baselines).
     solver_state : lbc_core.solver.SolverState or None
-        The solver's final state, kept in memory (not saved) for a warm re-bind (:func:`lbc_core.rebind.rebind`).
+        The solver's final state, kept in memory (not saved) for a warm re-bind (:func:`lbc_core.rebind`).
     """
 
     cage: Cage

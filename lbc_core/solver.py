@@ -206,8 +206,8 @@ def solve_on_mesh(
         Iterate in float32 (half the memory traffic); the result is corrected in float64, so the constraints hold
         to round-off either way.
     start : SolverState, optional
-        A previous solve's final state (``SolveResult.state``) on the same cells and boundary vertices, whose
-        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.rebind`): the iterations
+        A previous solve's final state (``SolveResult.state``) on the same cells and interior vertices, whose
+        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.rebinding`): the iterations
         start there instead of from the harmonic coordinates.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional

@@ -10,7 +10,7 @@ from lbc_core.boundary import boundary_weights
 from lbc_core.frame import UnitFrame
 from lbc_core.geodesics import geodesic_distances, tv_weights
 from lbc_core.io import read_cage, read_mesh
-from lbc_core.rebind import carry_domain, rebind
+from lbc_core.rebinding import carry_domain, rebind
 from lbc_core.solver import solve_on_mesh
 
 DATA = Path(__file__).parent / "data"
