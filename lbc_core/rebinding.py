@@ -16,7 +16,7 @@ computed afresh, as in :func:`lbc_core.bind`.
 Where the carried mesh is not valid (a cell folds or loses too much of its shape, a mesh face would leave a cage
 face that is no longer flat: typically a cage vertex moved by more than about a cell's size), the cage's topology,
 welding or face splitting changed, or the previous binding has no solver state (one loaded from a file), the re-bind
-is a cold bind with the previous options, and ``Binding.options["start"]`` says why.
+is a cold bind with the previous options, and ``Binding.options["rebind"]`` says why.
 """
 
 import time
@@ -46,7 +46,8 @@ from .solver import SolveResult, solve_on_mesh
 QUALITY_KEPT = 0.25
 # Share of the progress bar each stage gets.
 _STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 0.9), "reduction": (0.9, 1.0)}
-WARM = "previous solution"
+# Binding.options["start"] of a re-bind: where the solver started.
+WARM, COLD = "previous solution", "harmonic"
 # Rings of mesh vertices around the moved control points' supports that are solved again: room for a support to grow.
 FREE_RINGS = 2
 
@@ -71,8 +72,9 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     Returns
     -------
     Binding
-        ``options["start"]`` is "previous solution: <k> of <F> cells solved again" for a warm re-bind, else
-        "harmonic (cold bind: <why>)".
+        ``options["start"]`` is "previous solution" (:data:`WARM`) for a warm re-bind, "harmonic" (:data:`COLD`)
+        for a cold one; ``options["rebind"]`` says, for the user, how many cells were solved again, or why the
+        bind started from scratch.
 
     Raises
     ------
@@ -98,7 +100,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     if carried is None:
         progress(0.0, f"binding from scratch: {reason}")
         binding = bind(cage_vertices, cage_faces, points, options=request, progress=progress)
-        binding.options["start"] = f"harmonic (cold bind: {reason})"
+        binding.options.update(start=COLD, rebind=f"bound from scratch: {reason}")
         return binding
     progress.part(*_STAGES["carry"])(1.0, "the previous mesh carried onto the edited cage")
     timings = {"carry": time.perf_counter() - clock}
@@ -129,7 +131,8 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
         outside=outside,
         points=points,
         scheme="lbc",
-        options=dict(previous.options, start=f"{WARM}: {solved} of {len(carried.cells)} cells solved again"),
+        options=dict(previous.options, start=WARM,
+                     rebind=f"bound again from the previous binding: {solved} of {len(carried.cells)} cells solved"),
         timings=timings,
         iterations=result.iterations,
         converged=result.converged,

@@ -68,7 +68,8 @@ def test_warm_rebind_meets_every_guarantee_and_matches_a_cold_solve_on_its_mesh(
     cage, faces, points, first = gargoyle
     edited = moved(cage, [3, 11], 0.01)
     warm = rebind(first, edited, faces)
-    assert warm.options["start"].startswith("previous solution")
+    assert warm.options["start"] == "previous solution"
+    assert warm.options["rebind"].startswith("bound again from the previous binding: ")
     assert warm.converged
     assert_guarantees(warm, points)
     # The mesh is the previous one, carried: same cells, boundary vertices on the same facets, control vertices on
@@ -97,7 +98,7 @@ def test_a_second_warm_rebind_starts_from_the_first(gargoyle):
     cage, faces, points, first = gargoyle
     once = rebind(first, moved(cage, [3], 0.01), faces)
     twice = rebind(once, moved(cage, [3, 20], 0.01), faces)
-    assert twice.options["start"].startswith("previous solution")
+    assert twice.options["start"] == "previous solution"
     assert_guarantees(twice, points)
     assert twice.iterations < first.iterations / 2
 
@@ -118,8 +119,9 @@ def test_an_edit_that_would_fold_the_mesh_falls_back_to_a_cold_bind(gargoyle):
     edited[0] += 0.6 * (centre - cage[0])
     messages = []
     warm = rebind(first, edited, faces, progress=lambda fraction, message: messages.append(message))
-    start = warm.options["start"]
-    assert start.startswith("harmonic (cold bind: the previous mesh would fold (") and "near cage vertex 0" in start
+    assert warm.options["start"] == "harmonic"
+    reason = warm.options["rebind"]
+    assert reason.startswith("bound from scratch: the previous mesh would fold (") and "near cage vertex 0" in reason
     assert any(message.startswith("binding from scratch") for message in messages)
     assert_guarantees(warm, points)
     assert warm.solver_state is not None  # and the next re-bind can be warm again
@@ -131,15 +133,15 @@ def test_another_topology_or_a_loaded_binding_falls_back_to_a_cold_bind(gargoyle
     first.save(path)
     loaded = lbc_core.load_binding(path)
     assert loaded.solver_state is None
-    start = rebind(loaded, moved(cage, [3], 0.01), faces).options["start"]
-    assert start.startswith("harmonic (cold bind: the previous binding's solver state is not at hand")
+    reason = rebind(loaded, moved(cage, [3], 0.01), faces).options["rebind"]
+    assert reason.startswith("bound from scratch: the previous binding's solver state is not at hand")
     # The cube's quads split along their other diagonals: other facets, so the carried mesh no longer fits.
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
     bound = lbc_core.bind(cube, quads, cube * 0.5 + 0.25, cells=300)
     other_split = [triangle for a, b, c, d in quads for triangle in ([a, b, d], [b, c, d])]
-    start = rebind(bound, cube, other_split).options["start"]
-    assert start == "harmonic (cold bind: the cage's vertices, faces or welding changed)"
+    reason = rebind(bound, cube, other_split).options["rebind"]
+    assert reason == "bound from scratch: the cage's vertices, faces or welding changed"
 
 
 def test_a_quad_bent_out_of_its_plane_falls_back_to_a_cold_bind():
@@ -151,8 +153,8 @@ def test_a_quad_bent_out_of_its_plane_falls_back_to_a_cold_bind():
     edited = cube.copy()
     edited[7] -= 0.01  # towards the centre: each quad at vertex 7 keeps its split, but bends
     again = rebind(first, edited, quads)
-    assert again.options["start"] == ("harmonic (cold bind: cage face 1, 3, 5 is no longer flat, and the previous "
-                                      "mesh has faces across it)")
+    assert again.options["rebind"] == ("bound from scratch: cage face 1, 3, 5 is no longer flat, and the previous "
+                                       "mesh has faces across it")
     assert_guarantees(again, points)
 
 
@@ -178,7 +180,7 @@ def test_a_2d_polygon_rebinds_warm():
     first = lbc_core.bind(polygon, None, points, cells=800)
     edited = moved(polygon, [2], 0.02)
     warm = rebind(first, edited)
-    assert warm.options["start"].startswith("previous solution")
+    assert warm.options["start"] == "previous solution"
     assert_guarantees(warm, points)
     assert warm.iterations < first.iterations
 
