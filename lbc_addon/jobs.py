@@ -8,16 +8,41 @@
 
 Nothing in the scene changes before step 3, so a failed or cancelled bind leaves the scene exactly as it was.
 :class:`Worker` runs step 2 for several meshes in a thread, with progress and cancellation, for the modal operator.
+
+Binding a mesh again to the same cage with the same options (Rebind, Rebind All, or Bind on a bound mesh) starts from
+its previous binding when this session still has it (``lbc_core.rebind``: a small cage edit at rest re-binds several
+times faster). The previous bindings live in memory only, the last :data:`KEPT_BINDINGS` of them: their solver state
+is 8-30 MB a binding, too large for the .blend, so a reopened file, or a mesh bound long ago, binds from scratch.
 """
 
 import threading
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import storage
 from .core import lbc_core
+
+
+# How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
+KEPT_BINDINGS = 4
+# The bind options that must match the previous binding's for a warm start (Max Influences is applied after the bind).
+_SOLVE_OPTIONS = ("cells", "weighting", "epsilon", "tolerance", "threshold", "mode")
+
+
+@dataclass
+class _Previous:
+    """A mesh's last binding in this session, and what it was a binding of."""
+
+    cage_uid: int
+    options: dict
+    loop: np.ndarray  # the flat cage's outline of a 2D bind, else None
+    binding: object  # lbc_core.Binding
+
+
+_previous = OrderedDict()  # mesh session_uid -> _Previous, the most recent last
 
 
 @dataclass
@@ -52,6 +77,8 @@ class BindResult:
     core_fingerprint: str
     warnings: list = field(default_factory=list)
     seconds: float = 0.0
+    binding: object = None  # the lbc_core.Binding, kept for a later warm re-bind once applied
+    rebind: str = ""  # for a bind that had a previous binding to start from: how it went (lbc_core.rebind)
 
 
 def core_options(options):
@@ -83,8 +110,12 @@ def solve(request, progress=None, cancel=None):
     else:
         cage_vertices, faces, points = request.cage_points, request.cage_faces, request.points
         column_base = np.arange(len(request.cage_points))
-    binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options), progress=progress,
-                            cancel=cancel)
+    previous = warm_start(request)
+    if previous is not None:
+        binding = lbc_core.rebind(previous, cage_vertices, faces, points, progress=progress, cancel=cancel)
+    else:
+        binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options),
+                                progress=progress, cancel=cancel)
     column_vertex = column_base[binding.control_input_index]
     index, weight = storage.slot_arrays(binding.weights, column_vertex)
     influences = request.options["influences"]
@@ -100,7 +131,38 @@ def solve(request, progress=None, cancel=None):
         core_fingerprint=binding.cage.fingerprint(),
         warnings=list(binding.cage.warnings),
         seconds=time.perf_counter() - start,
+        binding=binding,
+        rebind=binding.options.get("rebind", ""),
     )
+
+
+def warm_start(request):
+    """The previous binding of the request's mesh to start from, or None: this session must have bound the same
+    mesh to the same cage with the same options, and a 2D bind must use the same outline."""
+    previous = _previous.get(request.mesh_uid)
+    if previous is None or previous.cage_uid != request.cage_uid:
+        return None
+    if any(previous.options[key] != request.options[key] for key in _SOLVE_OPTIONS):
+        return None
+    loop = None if request.flat is None else request.flat.loop
+    if (previous.loop is None) != (loop is None) or (loop is not None and not np.array_equal(previous.loop, loop)):
+        return None
+    return previous.binding
+
+
+def remember(request, result):
+    """Keep ``result``'s binding as the mesh's previous one (the last KEPT_BINDINGS meshes' only); called once the
+    binding is written."""
+    _previous.pop(request.mesh_uid, None)
+    loop = None if request.flat is None else request.flat.loop
+    _previous[request.mesh_uid] = _Previous(request.cage_uid, dict(request.options), loop, result.binding)
+    while len(_previous) > KEPT_BINDINGS:
+        _previous.popitem(last=False)
+
+
+def forget(mesh_uid):
+    """Drop a mesh's previous binding (it was unbound)."""
+    _previous.pop(mesh_uid, None)
 
 
 class Worker:

@@ -52,6 +52,9 @@ def _apply_all(operator, pairs):
                                        f"({type(error).__name__}: {error}); the scene was left as it was")
     for mesh_obj in bound:
         _report_result(operator, mesh_obj)
+    for request, result in pairs:
+        if result.rebind:
+            operator.report({"INFO"}, f"{request.mesh_name}: {result.rebind}")
     return bound
 
 

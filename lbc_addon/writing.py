@@ -4,7 +4,7 @@ transaction; and taking a binding out again (Unbind).
 
 import numpy as np
 
-from . import deformer, geometry, influence, storage
+from . import deformer, geometry, influence, jobs, storage
 from .core import CageError
 from .properties import is_bound
 
@@ -28,6 +28,7 @@ def apply(request, result):
         saved.restore(mesh_obj)
         raise
     deformer.release_group(replaced_group, mesh_obj.lbc.node_group)
+    jobs.remember(request, result)
     return mesh_obj
 
 
@@ -132,6 +133,7 @@ def remove(mesh_obj):
     Returns the names of the bound objects that keep the shared weights (empty when they were removed).
     """
     influence.hide(mesh_obj)
+    jobs.forget(mesh_obj.session_uid)
     active = mesh_obj.lbc.active_modifier
     deformer.detach(mesh_obj)
     mesh_obj.property_unset("lbc")
