@@ -22,6 +22,8 @@ is a cold bind with the previous options, and ``Binding.options["rebind"]`` says
 import time
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 from .binding import Binding
 from .cage import make_cage
@@ -38,7 +40,7 @@ from .options import BindOptions
 from .pipeline import REPRODUCTION_TOLERANCE, bind, check_points
 from .progress import Progress
 from .reduction import interpolate_and_reduce
-from .smoothing import SmoothInterpolation
+from .smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation, median_edge
 from .solver import SolveResult, solve_on_mesh
 
 # A carried cell must keep at least this share of its shape quality (radius ratio in 3D, the same ratio of in- to
@@ -106,20 +108,33 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     timings = {"carry": time.perf_counter() - clock}
 
     moved = np.any(cage.vertices != previous.rest_cage_vertices, axis=1)
-    result, objective, state, solved = _solve_near(previous, carried, unit_cage, moved,
-                                                   progress.part(*_STAGES["solve"]))
+    result, objective, state, solved, free = _solve_near(previous, carried, unit_cage, moved,
+                                                         progress.part(*_STAGES["solve"]))
     timings.update(result.seconds)
 
+    # Points whose evaluation can see no vertex that moved or was solved again keep their previous weights.
+    old_vertices = frame.to_unit(previous.domain.vertices)
+    changed = free | (np.linalg.norm(carried.vertices - old_vertices, axis=1) > REPRODUCTION_TOLERANCE)
+    unit_points = frame.to_unit(points)
+    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, changed, moved)
     clock = time.perf_counter()
-    located, outside, _ = interpolation_matrix(carried.vertices, carried.cells, frame.to_unit(points),
-                                               progress=progress.part(*_STAGES["interpolation"]))
+    located, outside_again, _ = interpolation_matrix(carried.vertices, carried.cells, unit_points[again],
+                                                     progress=progress.part(*_STAGES["interpolation"]))
     timings["interpolation"] = time.perf_counter() - clock
     clock = time.perf_counter()
     reduction = progress.part(*_STAGES["reduction"])
-    threshold = previous.options["threshold"]
-    weights = interpolate_and_reduce(SmoothInterpolation(carried.vertices, carried.cells, located, progress=reduction),
-                                     result.weights, unit_cage.vertices, carried.vertices, threshold,
-                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
+    # The previous evaluation's radius and fade, in this mesh's median edges: kept and new rows fit alike.
+    ratio = median_edge(old_vertices, carried.cells) / median_edge(carried.vertices, carried.cells)
+    smooth = SmoothInterpolation(carried.vertices, carried.cells, located, radius_edges=RADIUS_EDGES * ratio,
+                                 fade_edges=FADE_EDGES * ratio, progress=reduction)
+    weights_again = interpolate_and_reduce(smooth, result.weights, unit_cage.vertices, carried.vertices,
+                                           previous.options["threshold"],
+                                           tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal,
+                                           progress=reduction)
+    if len(again) == len(points):
+        weights, outside = weights_again, outside_again
+    else:
+        weights, outside = _merged_rows(previous, again, weights_again, outside_again)
     timings["reduction"] = time.perf_counter() - clock
     progress(1.0, "bound again from the previous solution")
     return Binding(
@@ -132,7 +147,8 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
         points=points,
         scheme="lbc",
         options=dict(previous.options, start=WARM,
-                     rebind=f"bound again from the previous binding: {solved} of {len(carried.cells)} cells solved"),
+                     rebind=f"bound again from the previous binding: {solved} of {len(carried.cells)} cells solved, "
+                            f"{len(again)} of {len(points)} points evaluated"),
         timings=timings,
         iterations=result.iterations,
         converged=result.converged,
@@ -155,6 +171,8 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
         The whole mesh's state, for the next warm re-bind.
     solved : int
         How many cells were solved again.
+    free : (N,) bool array
+        The vertices solved again.
     """
     clock = time.perf_counter()
     options = previous.options
@@ -169,7 +187,7 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
     state = previous.solver_state
     if not free.any():  # nothing moved, or only where no coordinate reaches the interior
         result = SolveResult(previous.domain_weights, 0, True, float("nan"), tv_weights)
-        return result, tv_objective(carried.vertices, carried.cells, result.weights, tv_weights), state, 0
+        return result, tv_objective(carried.vertices, carried.cells, result.weights, tv_weights), state, 0, free
     result = solve_on_mesh(
         carried.vertices, carried.cells[cells], fixed, previous.domain_weights[fixed], unit_cage.vertices,
         tv_weights[cells], start=state.restricted(cells, np.flatnonzero(free)), progress=progress.part(0.1, 0.95),
@@ -178,7 +196,40 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
     result.seconds["geodesics"] = geodesics_seconds
     objective = tv_objective(carried.vertices, carried.cells, result.weights, tv_weights)
     state = state if result.state is None else state.updated(result.state, cells)
-    return result, objective, state, int(cells.sum())
+    return result, objective, state, int(cells.sum()), free
+
+
+def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, changed, moved):
+    """Indices of the points to evaluate again: all of them if the points changed, else those outside the cage (their
+    closest domain point may have moved), with weight on a moved control point, or within reach of a changed vertex
+    (the fit's radius, or a cell's longest edge for the piecewise-linear part and the fade near the cage, both read
+    at the corners of the point's cell)."""
+    if len(points) != len(previous.points) or not np.array_equal(points, previous.points):
+        return np.arange(len(points))
+    on_moved = np.asarray(previous.weights[:, np.flatnonzero(moved)].sum(axis=1)).ravel() > 0
+    on_moved |= previous.outside
+    changed = _grown(changed, carried.cells, 1)
+    if not changed.any():
+        return np.flatnonzero(on_moved)
+    corners = old_vertices[carried.cells]
+    longest = max(float(np.linalg.norm(corners[:, a] - corners[:, b], axis=1).max())
+                  for a in range(corners.shape[1]) for b in range(a))
+    reach = max(RADIUS_EDGES * median_edge(old_vertices, carried.cells), longest)
+    distance, _ = cKDTree(old_vertices[changed]).query(unit_points, distance_upper_bound=reach)
+    return np.flatnonzero(on_moved | np.isfinite(distance))
+
+
+def _merged_rows(previous, again, weights_again, outside_again):
+    """The previous weights and outside flags with the rows ``again`` replaced."""
+    m = previous.weights.shape[0]
+    kept = np.ones(m)
+    kept[again] = 0.0
+    placement = sp.csr_matrix((np.ones(len(again)), (again, np.arange(len(again)))), shape=(m, len(again)))
+    weights = (sp.diags(kept) @ previous.weights + placement @ weights_again).tocsr()
+    weights.eliminate_zeros()
+    outside = previous.outside.copy()
+    outside[again] = outside_again
+    return weights, outside
 
 
 def carry_domain(previous, unit_cage):

@@ -25,6 +25,14 @@ def gargoyle():
     return cage, faces, points, lbc_core.bind(cage, faces, points, cells=3000)
 
 
+@pytest.fixture(scope="module")
+def gargoyle_l10():
+    """A finer cage (67 control points), whose coordinates are more local: an edit leaves some points alone."""
+    cage, faces = read_cage(GARGOYLE / "cage_L10.obj")
+    points, _ = read_mesh(GARGOYLE / "mesh.off")
+    return cage, faces, points, lbc_core.bind(cage, faces, points, cells=3000)
+
+
 def moved(cage, vertices, share, direction=(0.3, -0.5, 0.8)):
     """``cage`` with ``vertices`` moved by ``share`` of its diagonal along ``direction``."""
     direction = np.asarray(direction[:cage.shape[1]], dtype=float)
@@ -92,6 +100,21 @@ def test_warm_rebind_follows_a_cold_bind_of_the_edited_cage(gargoyle):
     # Two cold binds on different meshes differ by about as much (see bench/RESULTS.md, "Warm re-bind").
     gap = np.linalg.norm(warm.deform(posed) - cold.deform(posed), axis=1).max()
     assert gap < 5e-3 * warm.cage.bbox_diagonal
+
+
+def test_points_out_of_reach_of_the_edit_keep_their_weights_and_the_rest_match_a_full_evaluation(gargoyle_l10):
+    cage, faces, points, first = gargoyle_l10
+    edited = moved(cage, [4], 0.01)
+    warm = rebind(first, edited, faces)
+    evaluated = int(warm.options["rebind"].split(" cells solved, ")[1].split(" of ")[0])
+    assert 0 < evaluated < len(points)
+    kept = np.flatnonzero(np.asarray(abs(warm.weights - first.weights).sum(axis=1)).ravel() == 0)
+    assert len(kept) >= len(points) - evaluated
+    # One point more: every point is evaluated again on the same solve.
+    extra = np.r_[points, points[:1]]
+    full = rebind(first, edited, faces, points=extra)
+    np.testing.assert_array_equal(full.domain_weights, warm.domain_weights)
+    assert abs(full.weights[:len(points)] - warm.weights).max() < 1e-9
 
 
 def test_a_second_warm_rebind_starts_from_the_first(gargoyle):
