@@ -1,0 +1,155 @@
+"""Warm re-bind (issue 12, item 5) against a cold bind of the same edited cage, side by side in one process.
+
+    .venv/bin/python bench/rebinding.py [--skip-64k]
+
+For each scene: bind the gargoyle to its cage, move 1, 3 or 5 cage vertices (seeded random directions) by 1-10 % of
+the cage's diagonal, then bind the edited cage cold (lbc_core.bind) and warm (lbc_core.rebind from the first
+binding). Printed per edit: both times and iterations, the objectives (and, on the warm re-bind's own carried mesh, a
+cold solve's: the same problem, so any difference is the solver's tolerance), the largest weight difference at the
+points, and the largest difference of the points deformed by one pose, over the cage's diagonal. "mesh noise" is the
+same comparison between two cold binds at 8000 and 9000 cells: what remeshing alone changes.
+"""
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import lbc_core  # noqa: E402
+from lbc_core.boundary import boundary_weights  # noqa: E402
+from lbc_core.frame import UnitFrame  # noqa: E402
+from lbc_core.io import read_cage, read_mesh  # noqa: E402
+from lbc_core.rebinding import carry_domain, rebind  # noqa: E402
+from lbc_core.geodesics import geodesic_distances, tv_weights  # noqa: E402
+from lbc_core.solver import solve_on_mesh  # noqa: E402
+
+GARGOYLE = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
+EDITS = [(1, 0.01), (1, 0.02), (3, 0.01), (5, 0.01), (1, 0.05), (3, 0.10)]
+
+
+def edited(cage, faces, count, share, seed=1):
+    """``cage`` with ``count`` vertices moved by ``share`` of its diagonal in random directions (a direction that
+    makes the cage invalid is drawn again)."""
+    rng = np.random.default_rng(seed)
+    diagonal = np.linalg.norm(np.ptp(cage, axis=0))
+    moved = cage.copy()
+    for vertex in rng.choice(len(cage), count, replace=False):
+        for _ in range(20):
+            direction = rng.normal(size=cage.shape[1])
+            trial = moved.copy()
+            trial[vertex] += share * diagonal * direction / np.linalg.norm(direction)
+            try:
+                lbc_core.make_cage(trial, faces)
+            except lbc_core.CageError:
+                continue
+            moved = trial
+            break
+    return moved
+
+
+def pose(cage):
+    """A smooth pose of the cage: a twist about its vertical axis growing with height, 40° at the top."""
+    low, high = cage.min(axis=0), cage.max(axis=0)
+    centre = (low + high) / 2
+    angle = np.radians(40) * (cage[:, 2] - low[2]) / (high[2] - low[2])
+    x, y = cage[:, 0] - centre[0], cage[:, 1] - centre[1]
+    posed = cage.copy()
+    posed[:, 0] = centre[0] + np.cos(angle) * x - np.sin(angle) * y
+    posed[:, 1] = centre[1] + np.sin(angle) * x + np.cos(angle) * y
+    return posed
+
+
+def differences(a, b, cage):
+    """Largest weight difference at the points, and of the points deformed by :func:`pose`, over the diagonal."""
+    diagonal = np.linalg.norm(np.ptp(cage, axis=0))
+    weights = abs(a.weights - b.weights).max()
+    posed = pose(cage)
+    return weights, np.linalg.norm(a.deform(posed) - b.deform(posed), axis=1).max() / diagonal
+
+
+def same_mesh_objective(previous, edited_cage, faces):
+    """A cold solve's objective on the mesh the warm re-bind carries (in the cage's units)."""
+    cage = lbc_core.make_cage(edited_cage, faces)
+    frame = UnitFrame.of(cage)
+    unit_cage = frame.cage_to_unit(cage)
+    mesh, _ = carry_domain(previous, unit_cage)
+    if mesh is None:
+        return float("nan"), 0
+    weights = tv_weights(mesh.cells, geodesic_distances(mesh.vertices, mesh.cells, mesh.control_vertices),
+                         previous.options["weighting"])
+    result = solve_on_mesh(mesh.vertices, mesh.cells, mesh.boundary_vertices, boundary_weights(mesh, unit_cage),
+                           unit_cage.vertices, weights)
+    return result.objective * frame.scale ** (cage.dim - 1), result.iterations
+
+
+def timed(function, *args, **keywords):
+    start = time.perf_counter()
+    result = function(*args, **keywords)
+    return result, time.perf_counter() - start
+
+
+def scene(name, cage, faces, points, edits):
+    first, seconds = timed(lbc_core.bind, cage, faces, points)
+    print(f"\n{name}: {len(points)} points, {first.cage.n_control_points} control points, {len(first.domain.cells)} "
+          f"tets; first bind {seconds:.2f} s ({first.iterations} iterations); solver state kept "
+          f"{first.solver_state.nbytes / 2**20:.1f} MB; load average {os.getloadavg()[0]:.1f}")
+    print("| edit | cold s | warm s | speed-up | iterations cold / warm (what was done again) | objective cold / warm / "
+          "cold on the warm mesh | max weight difference | max deformation difference / diagonal | warm stages (s) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for count, share in edits:
+        target = edited(cage, faces, count, share)
+        cold, cold_seconds = timed(lbc_core.bind, target, faces, points)
+        warm, warm_seconds = timed(rebind, first, target, faces)
+        same, _ = same_mesh_objective(first, target, faces)
+        weights, deformation = differences(warm, cold, target)
+        start, note = warm.options["start"], warm.options["rebind"]
+        stages = ", ".join(f"{k} {v:.2f}" for k, v in warm.timings.items())
+        label = f"{count} × {share:.0%}"
+        if start != "previous solution":
+            print(f"| {label} | {cold_seconds:.2f} | {warm_seconds:.2f} | — ({note}) | | | | | |")
+            continue
+        print(f"| {label} | {cold_seconds:.2f} | {warm_seconds:.2f} | {cold_seconds / warm_seconds:.1f}× | "
+              f"{cold.iterations} / {warm.iterations} ({note.split(': ')[1]}) | "
+              f"{cold.objective:.6g} / {warm.objective:.6g} / {same:.6g} | {weights:.3f} | {deformation:.2e} | "
+              f"{stages} |", flush=True)
+    noise = lbc_core.bind(cage, faces, points, cells=9000)
+    weights, deformation = differences(first, noise, cage)
+    print(f"mesh noise (cold 8000 against cold 9000 cells, unedited cage): max weight difference {weights:.3f}, "
+          f"deformation {deformation:.2e} of the diagonal; load average {os.getloadavg()[0]:.1f}", flush=True)
+
+
+def gargoyle_64k():
+    """The demo's gargoyle: the mesh Catmull-Clark subdivided twice (64,130 vertices), through bpy."""
+    import bpy
+
+    from bench import capsule
+    from bench.smoothness import apply_modifier, vertices_of
+
+    mesh, faces = read_mesh(GARGOYLE / "mesh.off")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    obj = capsule.blender_object(bpy, "Gargoyle", mesh, faces)
+    apply_modifier(bpy, obj, "SUBSURF", levels=2)
+    return vertices_of(obj)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--skip-64k", action="store_true")
+    arguments = parser.parse_args(argv)
+    points, _ = read_mesh(GARGOYLE / "mesh.off")
+    for level in ("L10", "L09"):
+        cage, faces = read_cage(GARGOYLE / f"cage_{level}.obj")
+        scene(f"gargoyle, cage {level}", cage, faces, points, EDITS)
+    if not arguments.skip_64k:
+        cage, faces = read_cage(GARGOYLE / "cage_L10.obj")
+        scene("gargoyle subdivided (demo), cage L10", cage, faces, gargoyle_64k(), [(1, 0.02), (3, 0.01)])
+
+
+if __name__ == "__main__":
+    main()
