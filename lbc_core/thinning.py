@@ -1,0 +1,161 @@
+"""Fewer influences per point without creases: a continuous threshold and a multiplicative restoration.
+
+A deformer's cost per frame grows with the influences per point; the smooth evaluation (:mod:`smoothing`) gives
+many small ones. Keeping each point's K largest weights is discontinuous where two weights swap rank, and keeping
+the survivors' constraints by an additive correction moves every kept weight when the support changes: a bent
+smooth mesh creases (bench/RESULTS.md, "Blender deformer"). Here every weight is lowered by a threshold τ and clamped
+at 0, so a weight enters and leaves at exactly 0; then partition of unity and reproduction are restored by the
+closest weights in the Kullback–Leibler sense, w''_j = w'_j exp(λ · (c_j − x, 1)) (d + 1 unknowns per point, a few
+Newton steps), which keeps zeros at zero, stays positive and is smooth in w'. τ is a constant (the floor), smooth in
+the point; a cap on the count raises τ to the (K+1)-th largest weight, continuous but only piecewise smooth.
+"""
+
+import numpy as np
+import scipy.sparse as sp
+
+from .constraints import csr_from_padded, padded_rows
+from .reduction import ROWS_PER_CHUNK
+
+# Default floor: the largest that keeps issue 12's capsule no more creased than Mesh Deform (bench/RESULTS.md).
+DEFAULT_FLOOR = 0.005
+
+# Times a point's threshold is relaxed (floor / 4, cap + 1) where its kept weights cannot reproduce it.
+RELAXATIONS = 6
+
+
+def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influences=0):
+    """Each point's weights lowered by a threshold and clamped at 0, then made to sum to 1 and reproduce it again.
+
+    Parameters
+    ----------
+    weights : (m, n) scipy.sparse matrix
+        Non-negative weights that sum to 1 and reproduce ``positions``.
+    controls : (n, d) float array
+        Control points.
+    positions : (m, d) float array
+        What each row reproduces (Σ_j w_j c_j).
+    floor : float
+        τ, subtracted from every weight (weights are fractions of 1; 0 keeps every weight).
+    max_influences : int
+        K > 0: τ is at least each point's (K+1)-th largest weight, so at most K weights stay; 0: no cap.
+
+    Returns
+    -------
+    (m, n) scipy.sparse.csr_matrix
+        Non-negative rows that sum to 1 and reproduce ``positions`` (to 1e-9 of the controls' extent), each a
+        subset of its input row's support. Where a point's kept weights cannot reproduce it (it lies on the hull of
+        their control points), its threshold is relaxed (floor / 4, K + 1) until they can, and after
+        :data:`RELAXATIONS` times it keeps its input row.
+    """
+    weights = sp.csr_matrix(weights, dtype=float)
+    controls = np.asarray(controls, dtype=float)
+    positions = np.asarray(positions, dtype=float)
+    chunks = [_thin_rows(weights[start:start + ROWS_PER_CHUNK], controls, positions[start:start + ROWS_PER_CHUNK],
+                         floor, max_influences) for start in range(0, weights.shape[0], ROWS_PER_CHUNK)]
+    return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
+
+
+def _thin_rows(weights, controls, positions, floor, max_influences):
+    """:func:`thin_weights` on one chunk of rows."""
+    values, columns = padded_rows(weights)
+    order = np.argsort(-values, axis=1, kind="stable")
+    values = np.take_along_axis(values, order, axis=1)
+    columns = np.take_along_axis(columns, order, axis=1)
+    extent = float(np.linalg.norm(np.ptp(controls, axis=0))) if len(controls) else 1.0
+    thinned = values.copy()  # rows that never reproduce keep their input
+    pending = np.arange(len(values))
+    floors = np.full(len(values), float(floor))
+    caps = np.full(len(values), int(max_influences))
+    for _ in range(RELAXATIONS + 1):
+        if not len(pending):
+            break
+        prior = np.maximum(values[pending] - thresholds(values[pending], floors[pending], caps[pending])[:, None], 0.0)
+        tilted, done = tilt(prior, controls[columns[pending]], positions[pending], extent)
+        thinned[pending[done]] = tilted[done]
+        pending = pending[~done]
+        floors[pending] /= 4
+        caps[pending] += caps[pending] > 0
+    return csr_from_padded(thinned, columns, weights.shape[1])
+
+
+def thresholds(values, floors, caps):
+    """Each row's τ: its floor, raised to its (K+1)-th largest value where it has a cap K > 0.
+
+    Parameters
+    ----------
+    values : (m, L) float array, each row sorted in decreasing order
+    floors : (m,) float array
+    caps : (m,) int array (0: no cap)
+
+    Returns
+    -------
+    (m,) float array
+    """
+    capped = (caps > 0) & (caps < values.shape[1])
+    ranked = values[np.arange(len(values)), np.minimum(caps, values.shape[1] - 1)]
+    return np.where(capped, np.maximum(floors, ranked), floors)
+
+
+def tilt(prior, controls, positions, extent, iterations=40):
+    """The weights closest to ``prior`` (Kullback–Leibler) that sum to 1 and reproduce ``positions``.
+
+    w_j = prior_j exp(λ · a_j), a_j = ((c_j − x) / extent, 1), with λ minimising the convex dual
+    Σ_j prior_j exp(λ · a_j) − λ_d (damped Newton steps).
+
+    Parameters
+    ----------
+    prior : (m, K) float array, non-negative
+    controls : (m, K, d) float array
+        The control point of each slot.
+    positions : (m, d) float array
+    extent : float
+        Length scale of the controls (their bounding box diagonal).
+
+    Returns
+    -------
+    weights : (m, K) float array
+        Zero where ``prior`` is zero.
+    done : (m,) bool array
+        Rows that sum to 1 within 1e-9 and reproduce their position within 1e-9 × ``extent``; the others (a
+        point on or outside the hull of its prior's support, or a zero prior) are to be taken with more weights.
+    """
+    m, K, d = controls.shape
+    total = prior.sum(axis=1, keepdims=True)
+    prior = np.divide(prior, total, out=np.zeros_like(prior), where=total > 0)
+    affine = np.concatenate([(controls - positions[:, None, :]) / extent, np.ones((m, K, 1))], axis=2)
+    target = np.zeros(d + 1)
+    target[d] = 1.0
+    multipliers = np.zeros((m, d + 1))
+    active = np.flatnonzero(total[:, 0] > 0)
+
+    def tilted(rows, lam):
+        exponent = np.clip((affine[rows] @ lam[:, :, None])[:, :, 0], -200.0, 200.0)
+        return prior[rows] * np.exp(exponent)
+
+    for _ in range(iterations):
+        if not len(active):
+            break
+        weights = tilted(active, multipliers[active])
+        gradient = np.einsum("mk,mki->mi", weights, affine[active]) - target
+        # A point outside the hull of its prior's support has no solution: λ runs off (weights grown e^50-fold).
+        settled = (np.abs(gradient).max(axis=1) <= 1e-12) | ~(np.abs(multipliers[active]).max(axis=1) < 50)
+        active, weights, gradient = active[~settled], weights[~settled], gradient[~settled]
+        if not len(active):
+            break
+        hessian = np.einsum("mk,mki,mkj->mij", weights, affine[active], affine[active])
+        hessian += 1e-14 * np.eye(d + 1)
+        step = np.linalg.solve(hessian, gradient[:, :, None])[:, :, 0]
+        dual = weights.sum(axis=1) - multipliers[active, d]
+        scale = np.ones(len(active))
+        for _ in range(30):  # halve the step where the dual would grow
+            trial = multipliers[active] - scale[:, None] * step
+            grows = tilted(active, trial).sum(axis=1) - trial[:, d] > dual + 1e-14  # rounding is no growth
+            if not grows.any():
+                break
+            scale[grows] /= 2
+        multipliers[active] -= scale[:, None] * step
+    weights = tilted(np.arange(m), multipliers)
+    unity = np.abs(weights.sum(axis=1) - 1.0)
+    reproduction = np.linalg.norm(np.einsum("mk,mkd->md", weights, controls) - positions, axis=1)
+    done = (total[:, 0] > 0) & (unity <= 1e-9) & (reproduction <= 1e-9 * extent)
+    return weights, done

@@ -1,0 +1,98 @@
+"""Thinning: fewer influences per point, continuous in the weights, the constraints kept exactly."""
+
+import numpy as np
+import scipy.sparse as sp
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from lbc_core.constraints import constraint_residuals
+from lbc_core.thinning import thin_weights, thresholds, tilt
+
+CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+CHECKS = settings(max_examples=40, deadline=None)
+
+
+def random_weights(seed, points, extra_controls=6):
+    """Controls (the unit cube's corners and some inside it) and random positive weights on all of them, which sum
+    to 1; the positions are what they reproduce."""
+    rng = np.random.default_rng(seed)
+    controls = np.vstack([CUBE, rng.uniform(0.1, 0.9, (extra_controls, 3))])
+    weights = rng.dirichlet(np.full(len(controls), 0.7), size=points)
+    return controls, weights, weights @ controls
+
+
+def first_try_succeeds(weights, controls, positions, floor, cap):
+    """Which rows :func:`thin_weights` can thin at their own threshold, without relaxing it."""
+    order = np.argsort(-weights, axis=1, kind="stable")
+    values = np.take_along_axis(weights, order, axis=1)
+    prior = np.maximum(values - thresholds(values, np.full(len(values), floor), np.full(len(values), cap))[:, None], 0)
+    extent = float(np.linalg.norm(np.ptp(controls, axis=0)))
+    return tilt(prior, controls[order], positions, extent)[1]
+
+
+@CHECKS
+@given(st.integers(0, 10_000), st.sampled_from([0.0, 0.01, 0.05]), st.sampled_from([0, 4, 6, 9]))
+def test_rows_sum_to_one_reproduce_stay_non_negative_and_within_their_support(seed, floor, cap):
+    controls, weights, positions = random_weights(seed, 60)
+    thinned = thin_weights(sp.csr_matrix(weights), controls, positions, floor, cap)
+    dense = thinned.toarray()
+    unity, reproduction = constraint_residuals(dense, controls, positions)
+    assert unity.max() <= 1e-9 and reproduction.max() <= 1e-9 * np.sqrt(3)
+    assert dense.min() >= 0
+    assert np.all((dense > 0) <= (weights > 0))
+
+
+@CHECKS
+@given(st.integers(0, 10_000), st.sampled_from([4, 5, 7]))
+def test_at_most_the_cap_stays_except_where_the_kept_weights_cannot_reproduce_the_point(seed, cap):
+    controls, weights, positions = random_weights(seed, 60)
+    counts = np.diff(thin_weights(sp.csr_matrix(weights), controls, positions, 0.0, cap).indptr)
+    reproducible = first_try_succeeds(weights, controls, positions, 0.0, cap)
+    assert np.all(counts[reproducible] <= cap)
+    assert np.all(counts[~reproducible] > cap)  # grown: the cap could not hold there
+
+
+def test_the_floor_drops_small_weights_and_a_zero_floor_keeps_valid_weights():
+    controls, weights, positions = random_weights(3, 200)
+    thinned = thin_weights(sp.csr_matrix(weights), controls, positions, 0.02).toarray()
+    assert np.all(thinned[weights <= 0.02] == 0)
+    assert np.count_nonzero(thinned) < 0.8 * np.count_nonzero(weights)
+    kept = thin_weights(sp.csr_matrix(weights), controls, positions, 0.0).toarray()
+    np.testing.assert_allclose(kept, weights, atol=1e-12)
+
+
+@CHECKS
+@given(st.integers(0, 10_000), st.sampled_from([(0.03, 0), (0.0, 6), (0.02, 7)]), st.floats(0.0, 1.0))
+def test_small_changes_of_the_weights_give_small_changes_of_the_result(seed, setting, s):
+    # A path between two valid weight sets (valid all along it: the constraints are linear); a rank swap or a
+    # weight crossing the threshold on the way must not make the result jump.
+    floor, cap = setting
+    controls, ends, positions = random_weights(seed, 2)
+    step = 1e-7
+
+    def at(t):
+        weights = (1 - t) * ends[:1] + t * ends[1:]
+        return weights, (1 - t) * positions[:1] + t * positions[1:]
+
+    results = []
+    for t in (s, s + step):
+        weights, position = at(t)
+        assume(first_try_succeeds(weights, controls, position, floor, cap).all())
+        results.append(thin_weights(sp.csr_matrix(weights), controls, position, floor, cap).toarray())
+    assert np.abs(results[1] - results[0]).max() <= 1e4 * step
+
+
+def test_a_point_the_kept_weights_cannot_reproduce_keeps_more():
+    # (0.5, 0.4, 0) weighted on a square's corners: its two largest weights (opposite corners, on the diagonal
+    # x = y) cannot reproduce it; the threshold is relaxed until a triangle around it is kept.
+    controls = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    weights = np.array([[0.4, 0.2, 0.3, 0.1]])
+    position = np.array([[0.5, 0.4, 0.0]])
+    np.testing.assert_allclose(weights @ controls, position)
+    thinned = thin_weights(sp.csr_matrix(weights), controls, position, 0.0, 2).toarray()
+    assert np.count_nonzero(thinned) >= 3
+    np.testing.assert_allclose(thinned @ controls, position, atol=1e-9)
+
+
+def test_empty_input():
+    assert thin_weights(sp.csr_matrix((0, 8)), CUBE, np.zeros((0, 3))).shape == (0, 8)
