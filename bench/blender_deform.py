@@ -1,7 +1,7 @@
 """Per-frame cost of the LBC deformer against Blender's Mesh Deform on the same mesh, cage and poses.
 
-    PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle] [--slots 8,12]
-        [--sums chain,fma,fma-vector] [--reference-cells 16000]
+    PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
+        [--thin 0.002:0,0.005:12] [--sums chain,fma,fma-vector] [--reference-cells 16000]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
@@ -11,11 +11,11 @@ depsgraph handler included) is recorded, as wall time and as the process's CPU t
 rounds, the lower and upper quartiles, and the load average before and after.
 
 Scenes: Suzanne subdivided to 48,612 vertices in a 56-vertex box cage, and the demo's gargoyle (two Catmull-Clark
-levels: 64,130 vertices) in its 67-vertex cage L10. Variants: no deformer, Mesh Deform (precision 5), LBC with every
-weight (uncapped K), LBC with its slots capped as the add-on does (``--slots``, default the add-on's cap; see
-:func:`lbc_addon.storage.cap_slots`), and LBC with its weighted sum built in another shape (``--sums``; see
-:func:`rebuild_sum`). ``--reference-cells`` also prints how far the default binding is from a finer one: the
-yardstick for the error a cap makes.
+levels: 64,130 vertices) in its 67-vertex cage L10. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
+the add-on's defaults, LBC with every weight (bound with a threshold of 1e-12: nothing thinned), LBC with every
+weight thinned by other thresholds and caps (``--thin floor:cap``; see :func:`lbc_core.thinning.thin_weights`), and
+LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`). ``--reference-cells`` also
+prints how far the binding with every weight is from a finer one: the yardstick for the error thinning makes.
 """
 
 import argparse
@@ -38,8 +38,12 @@ from blender_scenes import (  # noqa: E402
     register_addon,
     suzanne_in_box_scene,
 )
+import scipy.sparse as sp  # noqa: E402
+
 from lbc_addon import api, deformer, storage  # noqa: E402
-from lbc_addon.properties import DEFAULT_INFLUENCES  # noqa: E402
+from lbc_core.thinning import thin_weights  # noqa: E402
+
+EVERY_WEIGHT = 1e-12  # a Threshold that thins nothing
 
 
 def gargoyle_subdivided():
@@ -85,16 +89,22 @@ def copy_object(mesh, name):
     return copy
 
 
-def lbc_variant(bound, cage, name, slots, sum_form=None):
-    """A copy of the bound mesh deformed by LBC with at most ``slots`` slots (0: as bound), its weighted sum built
-    as ``sum_form`` (see :func:`rebuild_sum`; None: the add-on's)."""
+def lbc_variant(bound, cage, name, thinning=None, sum_form=None):
+    """A copy of the bound mesh deformed by LBC, its weights thinned by ``thinning`` = (floor, cap) (None: as
+    bound; see :func:`lbc_core.thinning.thin_weights`), its weighted sum built as ``sum_form`` (see
+    :func:`rebuild_sum`; None: the add-on's)."""
     obj = copy_object(bound, name)
     index, weight = storage.read(obj.data)
-    rest = storage.rest_offsets(index, weight, cage_rest_local(cage, obj))
-    if slots:
-        index, weight = storage.cap_slots(index, weight, cage_rest_local(cage, obj), rest, slots)
+    cage_rest = cage_rest_local(cage, obj)
+    if thinning is not None:
+        rows = np.repeat(np.arange(len(index)), index.shape[1])
+        weights = sp.csr_matrix((weight.astype(float).ravel(), (rows, index.ravel())),
+                                shape=(len(index), len(cage_rest)))
+        weights.eliminate_zeros()
+        index, weight = storage.slot_arrays(thin_weights(weights, cage_rest, weights @ cage_rest, *thinning),
+                                            np.arange(len(cage_rest)))
     storage.remove(obj.data)
-    storage.write(obj.data, index, weight, storage.rest_offsets(index, weight, cage_rest_local(cage, obj)))
+    storage.write(obj.data, index, weight, storage.rest_offsets(index, weight, cage_rest))
     deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices), len(obj.data.vertices))
     if sum_form is not None:
         rebuild_sum(obj, sum_form)
@@ -222,64 +232,73 @@ def measure(variants, cage, rest, rounds):
     return {name: np.array(values) for name, values in times.items()}
 
 
-def run_scene(name, slot_caps, sum_forms, rounds, precision, reference_cells):
+def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells):
     mesh, cage = SCENES[name]()
     rest = positions(cage.data)
     print(f"\n{name}: {len(mesh.data.vertices)} vertices, cage {len(rest)} vertices")
+    default = copy_object(mesh, "default")
+    bpy.context.scene.collection.objects.link(default)
     start = time.perf_counter()
-    summary = api.bind(mesh, cage, influences=0)  # every weight: the caps below are taken from these
+    summary = api.bind(mesh, cage, threshold=EVERY_WEIGHT)  # every weight: the other variants are thinned from it
     full = summary["slots"]
-    print(f"  LBC bound in {time.perf_counter() - start:.1f} s: K = {full} uncapped, "
+    print(f"  LBC bound in {time.perf_counter() - start:.1f} s with every weight: K = {full}, "
           f"{summary['mean_influences']:.1f} influences per vertex on average, {summary['outside']} outside")
+    start = time.perf_counter()
+    summary = api.bind(default, cage)
+    print(f"  LBC bound in {time.perf_counter() - start:.1f} s with the add-on's defaults: K = {summary['slots']}, "
+          f"{summary['mean_influences']:.1f} influences per vertex on average")
     scale = float(np.linalg.norm(np.ptp(positions(mesh.data), axis=0)))
-    bpy.context.scene.collection.objects.unlink(mesh)
+    for obj in (mesh, default):
+        bpy.context.scene.collection.objects.unlink(obj)
     variants = {"no deformer": copy_object(mesh, "plain")}
     variants["Mesh Deform"] = mesh_deform_variant(mesh, cage, "meshdeform", precision)
-    variants[f"LBC K={full}"] = mesh
+    variants[f"LBC every weight K={full}"] = mesh
+    variants[f"LBC default K={summary['slots']}"] = default
 
     def compare(key, reference, what):
         error = deformation_error(variants[key], reference, cage, rest, scale)
         print(f"  {key}: largest difference to {what} over three poses {error:.2e} of the mesh's diagonal")
 
+    compare(f"LBC default K={summary['slots']}", mesh, "every weight")
     if reference_cells:
-        # The yardstick for a cap's error: how far the binding itself is from one on twice as fine a domain mesh.
+        # The yardstick for thinning's error: how far the binding itself is from one on twice as fine a domain mesh.
         variants[f"LBC {reference_cells} cells"] = fine = copy_object(mesh, "fine")
         bpy.context.scene.collection.objects.link(fine)
         storage.remove(fine.data)
         start = time.perf_counter()
-        api.bind(fine, cage, cells=reference_cells, influences=0)
+        api.bind(fine, cage, cells=reference_cells, threshold=EVERY_WEIGHT)
         print(f"  LBC at {reference_cells} cells bound in {time.perf_counter() - start:.1f} s")
         bpy.context.scene.collection.objects.unlink(fine)
         compare(f"LBC {reference_cells} cells", mesh, "the default resolution's")
         del variants[f"LBC {reference_cells} cells"]
-    for cap in slot_caps:
-        if cap < full:
-            variants[f"LBC K<={cap}"] = lbc_variant(mesh, cage, f"lbc{cap}", cap)
-            compare(f"LBC K<={cap}", mesh, f"K={full}")
-            print(f"    (K = {len(storage.binding_names(variants[f'LBC K<={cap}'].data)) // 2} after the cap)")
-    for form in sum_forms:  # at every weight, and at the add-on's cap
-        variants[f"LBC K={full} {form}"] = lbc_variant(mesh, cage, form, 0, form)
-        compare(f"LBC K={full} {form}", mesh, "the add-on's tree")
-        variants[f"LBC K<={DEFAULT_INFLUENCES} {form}"] = lbc_variant(mesh, cage, form, DEFAULT_INFLUENCES, form)
+    for floor, cap in thinnings:
+        key = f"LBC thin {floor:g}:{cap}"
+        variants[key] = lbc_variant(mesh, cage, key, (floor, cap))
+        compare(key, mesh, "every weight")
+        print(f"    (K = {storage.slot_count(variants[key].data)} after thinning)")
+    for form in sum_forms:  # at every weight, and as bound by default
+        variants[f"LBC every weight {form}"] = lbc_variant(mesh, cage, form, None, form)
+        compare(f"LBC every weight {form}", mesh, "the add-on's tree")
+        variants[f"LBC default {form}"] = lbc_variant(default, cage, form, None, form)
     load = os.getloadavg()[0]
     times = measure(variants, cage, rest, rounds)
     print(f"  {rounds} interleaved frames each, load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
-    print(f"  {'variant':22}{'wall ms: median':>16}{'quartiles':>14}{'CPU ms: median':>16}{'quartiles':>14}")
+    print(f"  {'variant':26}{'wall ms: median':>16}{'quartiles':>14}{'CPU ms: median':>16}{'quartiles':>14}")
     for variant, values in times.items():
         columns = ""
         for kind in (0, 1):
             low, mid, high = np.percentile(values[:, kind], [25, 50, 75])
             columns += f"{mid:16.2f}{f'{low:.2f}-{high:.2f}':>14}"
-        print(f"  {variant:22}{columns}")
+        print(f"  {variant:26}{columns}")
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=31, help="timed frames per variant (interleaved rounds)")
     parser.add_argument("--scenes", default="suzanne,gargoyle")
-    parser.add_argument("--slots", default=str(DEFAULT_INFLUENCES),
-                        help="comma-separated caps on the slots to measure besides the uncapped K (default: the "
-                        "add-on's)")
+    parser.add_argument("--thin", default="",
+                        help="comma-separated floor:cap thinnings of every weight to measure besides the default "
+                        "(see lbc_core.thinning.thin_weights), e.g. 0.002:0,0.005:12")
     parser.add_argument("--sums", default="",
                         help="comma-separated other shapes of the weighted sum: chain,fma,fma-vector")
     parser.add_argument("--reference-cells", type=int, default=0,
@@ -287,9 +306,9 @@ def main(argv=None):
     parser.add_argument("--precision", type=int, default=5, help="Mesh Deform precision")
     args = parser.parse_args(argv)
     register_addon()
-    caps = [int(value) for value in args.slots.split(",") if value]
+    thinnings = [(float(value.split(":")[0]), int(value.split(":")[1])) for value in args.thin.split(",") if value]
     for name in args.scenes.split(","):
-        run_scene(name, caps, [form for form in args.sums.split(",") if form], args.frames, args.precision,
+        run_scene(name, thinnings, [form for form in args.sums.split(",") if form], args.frames, args.precision,
                   args.reference_cells)
 
 

@@ -2,8 +2,8 @@
 
 1. :func:`lbc_addon.geometry.snapshot` (main thread) copies the mesh and the evaluated cage into a
    :class:`BindRequest`.
-2. :func:`solve` (any thread; this module never imports ``bpy``) calls ``lbc_core.bind`` and turns its sparse
-   weights into K slots, a :class:`BindResult`.
+2. :func:`solve` (any thread; this module never imports ``bpy``) calls ``lbc_core.bind``, thins its
+   weights and turns them into K slots, a :class:`BindResult`.
 3. :func:`lbc_addon.writing.apply` (main thread) checks the objects did not change meanwhile, then writes.
 
 Nothing in the scene changes before step 3, so a failed or cancelled bind leaves the scene exactly as it was.
@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import storage
-from .core import lbc_core
+from .core import DEFAULT_FLOOR, lbc_core, thin_weights
 
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
@@ -88,13 +88,13 @@ def core_options(options):
     Parameters
     ----------
     options : dict
-        ``cells``, ``weighting``, ``epsilon``, ``tolerance``, ``threshold`` as stored in ``Object.lbc``.
+        ``cells``, ``weighting``, ``epsilon``, ``tolerance`` as stored in ``Object.lbc`` (``threshold`` and
+        ``influences`` are the add-on's own: :func:`solve` thins the weights with them).
     """
     return lbc_core.BindOptions(
         cells=options["cells"] or None,
         weighting=options["weighting"],
         epsilon=options["epsilon"],
-        threshold=options["threshold"] or None,
         tolerance=options["tolerance"] or None,
         # Shewchuk's Triangle is not bundled (its licence is not GPL-compatible): use lbc_core's own mesher.
         method="delaunay",
@@ -117,11 +117,11 @@ def solve(request, progress=None, cancel=None):
         binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options),
                                 progress=progress, cancel=cancel)
     column_vertex = column_base[binding.control_input_index]
-    index, weight = storage.slot_arrays(binding.weights, column_vertex)
-    influences = request.options["influences"]
-    if influences:
-        reproduced = storage.rest_offsets(index, weight, request.cage_points)
-        index, weight = storage.cap_slots(index, weight, request.cage_points, reproduced, influences)
+    # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
+    rest = binding.rest_cage_vertices
+    floor = request.options["threshold"] or DEFAULT_FLOOR
+    weights = thin_weights(binding.weights, rest, binding.weights @ rest, floor, request.options["influences"])
+    index, weight = storage.slot_arrays(weights, column_vertex)
     return BindResult(
         index=index,
         weight=weight,

@@ -9,8 +9,6 @@ such attributes from the attribute lists and keeps them through deform modifiers
 
 import numpy as np
 
-from .core import ROWS_PER_CHUNK, constraint_residuals, restore_constraints
-
 INDEX_PREFIX = ".lbc_index_"
 WEIGHT_PREFIX = ".lbc_weight_"
 REST_NAME = ".lbc_rest"
@@ -49,45 +47,6 @@ def slot_arrays(weights, column_vertex):
     weight = np.zeros((weights.shape[0], slots), dtype=np.float32)
     index[rows, position] = np.asarray(column_vertex)[weights.indices]
     weight[rows, position] = weights.data
-    return index, weight
-
-
-def cap_slots(index, weight, cage_rest, reproduced, slots):
-    """Keep each vertex's ``slots`` largest weights and restore the constraints on what is kept.
-
-    Where the largest ``slots`` weights of some vertex cannot sum to 1 and reproduce it while staying non-negative
-    (its kept cage vertices lie too flat around it), the cap grows by one until every vertex's can: the constraints
-    hold for every vertex, as for the uncapped weights.
-
-    Parameters
-    ----------
-    index, weight : (m, K) int32 and float32 arrays
-        Slots as made by :func:`slot_arrays`.
-    cage_rest : (c, 3) float array
-        The cage's rest positions, mesh space.
-    reproduced : (m, 3) float array
-        What the weights must reproduce: Σ w c of the full weights (the vertex itself, or the closest point inside
-        the cage for a vertex outside it).
-    slots : int
-        The cap on K.
-
-    Returns
-    -------
-    index (m, K') int32, weight (m, K') float32, K' = min(K, the smallest cap from ``slots`` on that works).
-    """
-    cage_rest = np.asarray(cage_rest, dtype=np.float64)
-    scale = float(np.linalg.norm(np.ptp(cage_rest, axis=0))) if len(cage_rest) else 1.0
-    order = np.argsort(-weight, axis=1, kind="stable")
-    for cap in range(slots, index.shape[1]):
-        kept_index = np.take_along_axis(index, order[:, :cap], axis=1)
-        kept = np.take_along_axis(weight, order[:, :cap], axis=1).astype(np.float64)
-        restored = np.empty_like(kept)
-        for start in range(0, len(kept), ROWS_PER_CHUNK):
-            rows = slice(start, start + ROWS_PER_CHUNK)
-            restored[rows] = restore_constraints(kept[rows], cage_rest, reproduced[rows], columns=kept_index[rows])
-        unity, reproduction = constraint_residuals(restored, cage_rest, reproduced, columns=kept_index)
-        if len(restored) == 0 or (unity.max() <= 1e-6 and reproduction.max() <= 1e-6 * scale):
-            return kept_index.astype(np.int32), restored.astype(np.float32)
     return index, weight
 
 

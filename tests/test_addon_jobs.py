@@ -48,7 +48,18 @@ def test_jobs_imports_and_solves_without_bpy():
 def test_the_add_on_options_become_lbc_core_options_in_one_place():
     assert jobs.core_options(OPTIONS) == BindOptions(cells=1000, method="delaunay")
     tuned = jobs.core_options({**OPTIONS, "cells": 0, "tolerance": 1e-3, "threshold": 2e-3, "epsilon": 0.5})
-    assert tuned == BindOptions(tolerance=1e-3, threshold=2e-3, epsilon=0.5, method="delaunay")
+    assert tuned == BindOptions(tolerance=1e-3, epsilon=0.5, method="delaunay")  # the threshold is the add-on's
+
+
+def test_solve_thins_the_weights_by_the_threshold_and_the_max_influences():
+    results = {name: jobs.solve(request(**options)) for name, options in
+               (("every", {"threshold": 1e-12}), ("thinned", {"threshold": 0.05}),
+                ("capped", {"threshold": 1e-12, "influences": 4}))}
+    counts = {name: np.count_nonzero(result.weight, axis=1).mean() for name, result in results.items()}
+    assert counts["thinned"] < counts["every"] and counts["capped"] < counts["every"]
+    for result in results.values():
+        np.testing.assert_allclose(result.weight.sum(axis=1), 1.0, atol=1e-5)
+        np.testing.assert_allclose(result.rest, request().points, atol=1e-5)
 
 
 def test_solve_gives_slots_that_sum_to_one_and_reproduce_the_points():

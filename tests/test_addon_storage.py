@@ -41,35 +41,3 @@ def test_write_read_remove_round_trip_leaves_the_mesh_as_it_was():
 
 def test_memory_is_eight_bytes_per_slot_and_twelve_for_the_rest_offset():
     assert storage.memory_bytes(1000, 16) == 1000 * (16 * 8 + 12)
-
-
-def test_cap_slots_keeps_the_largest_weights_and_restores_the_constraints():
-    rng = np.random.default_rng(1)
-    cage = rng.random((12, 3))
-    count, slots = 200, 10
-    index = np.stack([rng.permutation(12)[:slots] for _ in range(count)]).astype(np.int32)
-    weight = rng.random((count, slots)) ** 3
-    weight[:, -2:] = 0.0  # padded slots
-    weight = (weight / weight.sum(axis=1, keepdims=True)).astype(np.float32)
-    reproduced = storage.rest_offsets(index, weight, cage)
-    capped_index, capped_weight = storage.cap_slots(index, weight, cage, reproduced, 6)
-    assert capped_index.shape == capped_weight.shape == (count, 6)
-    assert capped_index.dtype == np.int32 and capped_weight.dtype == np.float32
-    largest = np.argsort(-weight, axis=1, kind="stable")[:, :6]
-    assert np.array_equal(capped_index, np.take_along_axis(index, largest, axis=1))
-    assert capped_weight.min() >= 0
-    np.testing.assert_allclose(capped_weight.sum(axis=1), 1.0, atol=1e-6)
-    np.testing.assert_allclose(storage.rest_offsets(capped_index, capped_weight, cage), reproduced, atol=1e-5)
-    assert storage.cap_slots(index, weight, cage, reproduced, 10)[1] is weight  # within the cap: unchanged
-
-
-def test_cap_slots_grows_the_cap_where_the_largest_weights_cannot_reproduce_the_vertex():
-    # A vertex at (0.5, 0.4, 0) weighted on a square's corners: its two largest weights (opposite corners, on the
-    # diagonal x = y) cannot reproduce it; three (a triangle around it) can.
-    cage = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]])
-    index = np.array([[0, 2, 1, 3, 4]], dtype=np.int32)
-    weight = np.array([[0.35, 0.25, 0.25, 0.15, 0.0]], dtype=np.float32)
-    reproduced = storage.rest_offsets(index, weight, cage)
-    capped_index, capped_weight = storage.cap_slots(index, weight, cage, reproduced, 2)
-    assert capped_index.shape == (1, 3)
-    np.testing.assert_allclose(storage.rest_offsets(capped_index, capped_weight, cage), reproduced, atol=1e-6)
