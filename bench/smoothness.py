@@ -1,10 +1,13 @@
 """Issue 12's figures, measured in one process: smoothness on the bent capsule, and where speed and locality stand.
 
-    .venv/bin/python bench/smoothness.py [--capsule] [--speed] [--l08] [--iterations]     (no flag: --capsule)
+    .venv/bin/python bench/smoothness.py [--capsule] [--addon] [--speed] [--l08] [--iterations]  (no flag: --capsule)
 
 --capsule     the issue's table on the capsule scene (bench/capsule.py): LBC at 8000 cells (the default, smoothed)
               and the same solve evaluated piecewise linearly, LBC at 32000 cells both ways, Mesh Deform precision 5
               through bpy, mean value coordinates; bind seconds, kinks, influences per point.
+--addon       the capsule bound through the Blender add-on (lbc_addon.api.bind, its thinned weights in float32
+              slots) and deformed by its Geometry Nodes deformer: its defaults and other Threshold / Max Influences
+              settings (``--settings 0.002:0,0.005:12``), against Mesh Deform precision 5 in the same process.
 --speed       item 2: default bind of the demo gargoyle (subdivided to 64k vertices, cage L10) and of Suzanne
               subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process.
 --l08         item 3: gargoyle cage L08 (168 control points) at 8000 and 32000 cells.
@@ -87,6 +90,40 @@ def bench_capsule(cells_list=(8000, 32000)):
     mvc = bind_mvc(cage, cage_faces, mesh)
     row("mean value coordinates", time.perf_counter() - start, capsule.kink_figures(mesh, mvc.deform(posed), faces),
         f"{len(cage)} (dense)")
+    print(f"  ({load()})")
+
+
+def bench_addon(settings):
+    """Kinks of the bent capsule as the add-on deforms it: one bind per (threshold, influences) setting."""
+    import bpy
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from blender_scenes import evaluated_positions, register_addon
+
+    from lbc_addon import api
+
+    register_addon()
+    mesh, faces = capsule.capsule()
+    cage, cage_faces = capsule.cage()
+    posed = capsule.bend(cage)
+    print(f"capsule through the add-on: {len(mesh)} vertices; cage: {len(cage)} vertices; bent 90°; {load()}")
+    print("| add-on setting (Threshold : Max Influences) | bind | kink mean / p99 / max | edges creased > 2° "
+          "| influences per vertex, mean / max |")
+    print("| --- | --- | --- | --- | --- |")
+    for threshold, influences in settings:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        mesh_obj = capsule.blender_object(bpy, "Capsule", mesh, faces)
+        cage_obj = capsule.blender_object(bpy, "Cage", cage, cage_faces)
+        start = time.perf_counter()
+        summary = api.bind(mesh_obj, cage_obj, threshold=threshold, influences=influences)
+        seconds = time.perf_counter() - start
+        cage_obj.data.vertices.foreach_set("co", posed.astype(np.float32).ravel())
+        cage_obj.data.update()
+        name = f"{threshold:g} : {influences}" + (" (defaults)" if (threshold, influences) == (0.0, 0) else "")
+        row(name, seconds, capsule.kink_figures(mesh, evaluated_positions(mesh_obj), faces),
+            f"{summary['mean_influences']:.1f} / {summary['slots']}")
+    seconds, moved = capsule.mesh_deform(mesh, faces, cage, cage_faces, posed, precision=5)
+    row("Mesh Deform, precision 5", seconds, capsule.kink_figures(mesh, moved, faces), "—")
     print(f"  ({load()})")
 
 
@@ -227,16 +264,21 @@ def render_picture(path):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for flag in ("capsule", "speed", "l08", "iterations"):
+    for flag in ("capsule", "addon", "speed", "l08", "iterations"):
         parser.add_argument(f"--{flag}", action="store_true")
+    parser.add_argument("--settings", default="0:0,1e-12:0,0.002:0,0.01:0,0.005:12,0.005:16",
+                        help="--addon: comma-separated Threshold:Max Influences settings (0:0 is the defaults, "
+                        "1e-12:0 every weight)")
     parser.add_argument("--picture", type=Path)
     args = parser.parse_args(argv)
     if args.picture:
         render_picture(args.picture)
-    elif not (args.speed or args.l08 or args.iterations):
+    elif not (args.addon or args.speed or args.l08 or args.iterations):
         args.capsule = True
     if args.capsule:
         bench_capsule()
+    if args.addon:
+        bench_addon([(float(value.split(":")[0]), int(value.split(":")[1])) for value in args.settings.split(",")])
     if args.speed:
         bench_speed()
     if args.l08:
