@@ -136,13 +136,14 @@ def tilt(prior, controls, positions, extent, iterations=40):
         if not len(active):
             break
         weights = tilted(active, multipliers[active])
-        gradient = np.einsum("mk,mki->mi", weights, affine[active]) - target
+        rows = affine[active]
+        gradient = (weights[:, None, :] @ rows)[:, 0] - target
         # A point outside the hull of its prior's support has no solution: λ runs off (weights grown e^50-fold).
         settled = (np.abs(gradient).max(axis=1) <= 1e-12) | ~(np.abs(multipliers[active]).max(axis=1) < 50)
-        active, weights, gradient = active[~settled], weights[~settled], gradient[~settled]
+        active, weights, gradient, rows = active[~settled], weights[~settled], gradient[~settled], rows[~settled]
         if not len(active):
             break
-        hessian = np.einsum("mk,mki,mkj->mij", weights, affine[active], affine[active])
+        hessian = np.swapaxes(weights[:, :, None] * rows, 1, 2) @ rows
         hessian += 1e-14 * np.eye(d + 1)
         step = np.linalg.solve(hessian, gradient[:, :, None])[:, :, 0]
         dual = weights.sum(axis=1) - multipliers[active, d]
