@@ -239,7 +239,7 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells):
     default = copy_object(mesh, "default")
     bpy.context.scene.collection.objects.link(default)
     start = time.perf_counter()
-    summary = api.bind(mesh, cage, threshold=EVERY_WEIGHT)  # every weight: the other variants are thinned from it
+    summary = api.bind(mesh, cage, thinning=EVERY_WEIGHT)  # every weight: the other variants are thinned from it
     full = summary["slots"]
     print(f"  LBC bound in {time.perf_counter() - start:.1f} s with every weight: K = {full}, "
           f"{summary['mean_influences']:.1f} influences per vertex on average, {summary['outside']} outside")
@@ -266,7 +266,7 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells):
         bpy.context.scene.collection.objects.link(fine)
         storage.remove(fine.data)
         start = time.perf_counter()
-        api.bind(fine, cage, cells=reference_cells, threshold=EVERY_WEIGHT)
+        api.bind(fine, cage, cells=reference_cells, thinning=EVERY_WEIGHT)
         print(f"  LBC at {reference_cells} cells bound in {time.perf_counter() - start:.1f} s")
         bpy.context.scene.collection.objects.unlink(fine)
         compare(f"LBC {reference_cells} cells", mesh, "the default resolution's")

@@ -115,7 +115,7 @@ def bench_addon(settings):
         mesh_obj = capsule.blender_object(bpy, "Capsule", mesh, faces)
         cage_obj = capsule.blender_object(bpy, "Cage", cage, cage_faces)
         start = time.perf_counter()
-        summary = api.bind(mesh_obj, cage_obj, threshold=threshold, influences=influences)
+        summary = api.bind(mesh_obj, cage_obj, thinning=threshold, influences=influences)
         seconds = time.perf_counter() - start
         cage_obj.data.vertices.foreach_set("co", posed.astype(np.float32).ravel())
         cage_obj.data.update()

@@ -16,7 +16,7 @@ from .core import CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, e
 from .properties import DEFAULT_INFLUENCES, bound_to, is_bound
 
 
-def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, threshold=0.0,
+def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, thinning=0.0,
          influences=DEFAULT_INFLUENCES, mode="AUTO", progress=None, cancel=None):
     """Bind ``mesh_obj`` to ``cage_obj`` (replacing an existing binding) and add the deformer.
 
@@ -36,7 +36,7 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
         When ``cancel()`` turned true.
     """
     request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), cells=cells,
-                                weighting=weighting, epsilon=epsilon, tolerance=tolerance, threshold=threshold,
+                                weighting=weighting, epsilon=epsilon, tolerance=tolerance, thinning=thinning,
                                 influences=influences, mode=mode)
     result = jobs.solve(request, progress, cancel)
     bound = writing.apply(request, result)

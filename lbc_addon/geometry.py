@@ -67,7 +67,7 @@ def cage_to_mesh_matrix(cage_obj, mesh_obj):
 
 
 def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
-             threshold=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
+             thinning=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
     """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
     if mesh_obj.type != "MESH":
         raise CageError(f"'{mesh_obj.name}' is not a mesh: only meshes can be bound")
@@ -104,7 +104,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         cage_faces=cage_faces,
         flat=flat,
         options={"cells": cells, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
-                 "threshold": threshold, "influences": influences, "mode": mode},
+                 "thinning": thinning, "influences": influences, "mode": mode},
         cage_topology=cage_topology,
         mesh_topology=topology_fingerprint(mesh_obj.data),
     )

@@ -28,8 +28,9 @@ from .core import DEFAULT_FLOOR, lbc_core, thin_weights
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
 KEPT_BINDINGS = 4
-# The bind options that must match the previous binding's for a warm start (Max Influences is applied after the bind).
-_SOLVE_OPTIONS = ("cells", "weighting", "epsilon", "tolerance", "threshold", "mode")
+# The bind options that must match the previous binding's for a warm start (Thinning and Max Influences are applied
+# after the bind).
+_SOLVE_OPTIONS = ("cells", "weighting", "epsilon", "tolerance", "mode")
 
 
 @dataclass
@@ -88,7 +89,7 @@ def core_options(options):
     Parameters
     ----------
     options : dict
-        ``cells``, ``weighting``, ``epsilon``, ``tolerance`` as stored in ``Object.lbc`` (``threshold`` and
+        ``cells``, ``weighting``, ``epsilon``, ``tolerance`` as stored in ``Object.lbc`` (``thinning`` and
         ``influences`` are the add-on's own: :func:`solve` thins the weights with them).
     """
     return lbc_core.BindOptions(
@@ -119,7 +120,7 @@ def solve(request, progress=None, cancel=None):
     column_vertex = column_base[binding.control_input_index]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
     rest = binding.rest_cage_vertices
-    floor = request.options["threshold"] or DEFAULT_FLOOR
+    floor = request.options["thinning"] or DEFAULT_FLOOR
     weights = thin_weights(binding.weights, rest, binding.weights @ rest, floor, request.options["influences"])
     index, weight = storage.slot_arrays(weights, column_vertex)
     return BindResult(

@@ -195,7 +195,7 @@ class OBJECT_OT_lbc_bind(_Binder, BindOptions, bpy.types.Operator):
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
-        for name in ("mode", "cells", "weighting", "epsilon", "tolerance", "threshold", "influences"):
+        for name in ("mode", "cells", "weighting", "epsilon", "tolerance", "thinning", "influences"):
             layout.prop(self, name)
 
 

@@ -68,8 +68,8 @@ class BindOptions:
         soft_max=0.01,
         precision=6,
     )
-    threshold: FloatProperty(
-        name="Threshold",
+    thinning: FloatProperty(
+        name="Thinning",
         description="Every weight is lowered by this and those that reach 0 are dropped; the others are then made "
         f"to sum to 1 and reproduce the vertex again, so weights fade in and out without creases. 0 uses "
         f"{DEFAULT_FLOOR:g}. Larger: fewer influences per vertex, a faster deformer, a less smooth deformation",
@@ -96,7 +96,7 @@ class BindOptions:
             "weighting": self.weighting,
             "epsilon": self.epsilon,
             "tolerance": self.tolerance,
-            "threshold": self.threshold,
+            "thinning": self.thinning,
             "influences": self.influences,
             "mode": self.mode,
         }

@@ -14,7 +14,7 @@ from lbc_core.planar import flatten
 ROOT = Path(__file__).resolve().parents[1]
 BOX = np.array([[x, y, z] for x in (-1.2, 1.2) for y in (-1.1, 1.3) for z in (-1.0, 1.4)])
 BOX_FACES = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
-OPTIONS = {"cells": 1000, "weighting": "quadratic", "epsilon": 0.0, "tolerance": 0.0, "threshold": 0.0,
+OPTIONS = {"cells": 1000, "weighting": "quadratic", "epsilon": 0.0, "tolerance": 0.0, "thinning": 0.0,
            "influences": 0, "mode": "AUTO"}
 
 
@@ -34,7 +34,7 @@ def test_jobs_imports_and_solves_without_bpy():
         "from lbc_addon import jobs\n"
         "box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)\n"
         "faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]\n"
-        "options = dict(cells=300, weighting='quadratic', epsilon=0.0, tolerance=0.0, threshold=0.0,\n"
+        "options = dict(cells=300, weighting='quadratic', epsilon=0.0, tolerance=0.0, thinning=0.0,\n"
         "               influences=0, mode='AUTO')\n"
         "request = jobs.BindRequest(1, 2, 'Mesh', np.full((3, 3), 0.5), box, faces, None, options, '', '')\n"
         "print(jobs.solve(request).weight.shape[0])\n"
@@ -47,14 +47,14 @@ def test_jobs_imports_and_solves_without_bpy():
 
 def test_the_add_on_options_become_lbc_core_options_in_one_place():
     assert jobs.core_options(OPTIONS) == BindOptions(cells=1000, method="delaunay")
-    tuned = jobs.core_options({**OPTIONS, "cells": 0, "tolerance": 1e-3, "threshold": 2e-3, "epsilon": 0.5})
-    assert tuned == BindOptions(tolerance=1e-3, epsilon=0.5, method="delaunay")  # the threshold is the add-on's
+    tuned = jobs.core_options({**OPTIONS, "cells": 0, "tolerance": 1e-3, "thinning": 2e-3, "epsilon": 0.5})
+    assert tuned == BindOptions(tolerance=1e-3, epsilon=0.5, method="delaunay")  # thinning is the add-on's
 
 
-def test_solve_thins_the_weights_by_the_threshold_and_the_max_influences():
+def test_solve_thins_the_weights_by_thinning_and_the_max_influences():
     results = {name: jobs.solve(request(**options)) for name, options in
-               (("every", {"threshold": 1e-12}), ("thinned", {"threshold": 0.05}),
-                ("capped", {"threshold": 1e-12, "influences": 4}))}
+               (("every", {"thinning": 1e-12}), ("thinned", {"thinning": 0.05}),
+                ("capped", {"thinning": 1e-12, "influences": 4}))}
     counts = {name: np.count_nonzero(result.weight, axis=1).mean() for name, result in results.items()}
     assert counts["thinned"] < counts["every"] and counts["capped"] < counts["every"]
     for result in results.values():

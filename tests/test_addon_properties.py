@@ -13,13 +13,13 @@ def test_weighting_choices_are_lbc_cores():
 
 def test_bind_options_are_stored_and_reused_by_rebind(monkeypatch):
     mesh, cage = sphere_in_box_scene()
-    options = {"cells": 800, "weighting": "linear", "epsilon": 0.01, "tolerance": 1e-3, "threshold": 2e-3,
+    options = {"cells": 800, "weighting": "linear", "epsilon": 0.01, "tolerance": 1e-3, "thinning": 2e-3,
                "influences": 5, "mode": "3D"}
     assert bind(mesh, cage, **options) == {"FINISHED"}
     stored = mesh.lbc.bind_options()
     assert stored["cells"] == 800 and stored["weighting"] == "linear" and stored["mode"] == "3D"
     assert stored["influences"] == 5 and mesh.lbc.slots <= 5
-    assert abs(stored["epsilon"] - 0.01) < 1e-7 and abs(stored["threshold"] - 2e-3) < 1e-9
+    assert abs(stored["epsilon"] - 0.01) < 1e-7 and abs(stored["thinning"] - 2e-3) < 1e-9
     from lbc_addon import geometry
 
     seen = []
