@@ -121,7 +121,8 @@ def solve(request, progress=None, cancel=None):
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
     rest = binding.rest_cage_vertices
     floor = request.options["thinning"] or DEFAULT_FLOOR
-    weights = thin_weights(binding.weights, rest, binding.weights @ rest, floor, request.options["influences"])
+    weights = thin_weights(binding.weights, rest, binding.weights @ rest, floor, request.options["influences"],
+                           cancel=cancel)
     index, weight = storage.slot_arrays(weights, column_vertex)
     return BindResult(
         index=index,

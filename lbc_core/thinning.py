@@ -14,16 +14,19 @@ import numpy as np
 import scipy.sparse as sp
 
 from .constraints import csr_from_padded, padded_rows
-from .reduction import ROWS_PER_CHUNK
+from .progress import Progress
 
 # Default floor: the largest that keeps issue 12's capsule no more creased than Mesh Deform (bench/RESULTS.md).
 DEFAULT_FLOOR = 0.005
+
+# Rows thinned between two cancel polls (about 0.1 s each).
+ROWS_PER_CHUNK = 8192
 
 # Times a point's threshold is relaxed (floor / 4, cap + 1) where its kept weights cannot reproduce it.
 RELAXATIONS = 6
 
 
-def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influences=0):
+def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influences=0, progress=None, cancel=None):
     """Each point's weights lowered by a threshold and clamped at 0, then made to sum to 1 and reproduce it again.
 
     Parameters
@@ -38,6 +41,9 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
         τ, subtracted from every weight (weights are fractions of 1; 0 keeps every weight).
     max_influences : int
         K > 0: τ is at least each point's (K+1)-th largest weight, so at most K weights stay; 0: no cap.
+    progress : callable(fraction, message) or Progress, optional
+    cancel : callable() -> bool, optional
+        Polled between chunks of :data:`ROWS_PER_CHUNK` rows; True stops with :class:`lbc_core.Cancelled`.
 
     Returns
     -------
@@ -50,8 +56,12 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     weights = sp.csr_matrix(weights, dtype=float)
     controls = np.asarray(controls, dtype=float)
     positions = np.asarray(positions, dtype=float)
-    chunks = [_thin_rows(weights[start:start + ROWS_PER_CHUNK], controls, positions[start:start + ROWS_PER_CHUNK],
-                         floor, max_influences) for start in range(0, weights.shape[0], ROWS_PER_CHUNK)]
+    progress = Progress.of(progress, cancel)
+    chunks = []
+    for start in range(0, weights.shape[0], ROWS_PER_CHUNK):
+        progress(start / weights.shape[0], "thinning the weights")
+        chunks.append(_thin_rows(weights[start:start + ROWS_PER_CHUNK], controls,
+                                 positions[start:start + ROWS_PER_CHUNK], floor, max_influences))
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
 
 

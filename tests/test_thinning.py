@@ -1,6 +1,7 @@
 """Thinning: fewer influences per point, continuous in the weights, the constraints kept exactly."""
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
@@ -96,3 +97,14 @@ def test_a_point_the_kept_weights_cannot_reproduce_keeps_more():
 
 def test_empty_input():
     assert thin_weights(sp.csr_matrix((0, 8)), CUBE, np.zeros((0, 3))).shape == (0, 8)
+
+
+def test_cancel_stops_between_chunks_of_rows(monkeypatch):
+    from lbc_core import Cancelled, thinning
+
+    monkeypatch.setattr(thinning, "ROWS_PER_CHUNK", 10)
+    controls, weights, positions = random_weights(3, 30)
+    polls = []
+    with pytest.raises(Cancelled):
+        thin_weights(sp.csr_matrix(weights), controls, positions, cancel=lambda: polls.append(1) or len(polls) > 2)
+    assert len(polls) == 3  # the third chunk never ran
