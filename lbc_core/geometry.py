@@ -257,17 +257,27 @@ def radius_ratios(vertices, tets):
     -------
     (T,) float array
     """
-    corners = vertices[tets]
+    return np.abs(signed_radius_ratios(vertices[tets]))
+
+
+def signed_radius_ratios(corners):
+    """Radius ratios (see :func:`radius_ratios`) of tetrahedra given by their corners (T, 4, 3), negative for the
+    negatively oriented ones.
+
+    Returns
+    -------
+    (T,) float array
+    """
     edges = corners[:, 1:] - corners[:, :1]
-    volume = np.abs(np.linalg.det(edges)) / 6.0
-    faces = [(1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2)]
-    area = sum(0.5 * np.linalg.norm(np.cross(corners[:, b] - corners[:, a], corners[:, c] - corners[:, a]), axis=1)
-               for a, b, c in faces)
+    normals = [np.cross(edges[:, i], edges[:, j]) for i, j in ((1, 2), (2, 0), (0, 1))]
+    signed = np.einsum("td,td->t", edges[:, 0], normals[0]) / 6.0  # the triple product: no LU per 3 x 3 matrix
+    volume = np.abs(signed)
+    # The normals at corner 0 are twice the area vectors of three faces; their sum is the fourth's.
+    area = 0.5 * (np.linalg.norm(sum(normals), axis=1) + sum(np.linalg.norm(n, axis=1) for n in normals))
     lengths2 = np.einsum("tkd,tkd->tk", edges, edges)
-    numerator = (lengths2[:, 0, None] * np.cross(edges[:, 1], edges[:, 2]) + lengths2[:, 1, None]
-                 * np.cross(edges[:, 2], edges[:, 0]) + lengths2[:, 2, None] * np.cross(edges[:, 0], edges[:, 1]))
+    numerator = sum(lengths2[:, k, None] * normals[k] for k in range(3))
     circumradius = np.linalg.norm(numerator, axis=1) / (12.0 * np.maximum(volume, np.finfo(float).tiny))
-    return 9.0 * volume / (area * np.maximum(circumradius, np.finfo(float).tiny))
+    return np.sign(signed) * 9.0 * volume / (area * np.maximum(circumradius, np.finfo(float).tiny))
 
 
 def bary_positions(cage, facet, bary):

@@ -6,18 +6,17 @@ surface triangles (the sphere centred in the triangle's plane through its corner
 triangle is a face of the 3D Delaunay tetrahedralisation). Surface triangles missing from the tetrahedralisation are
 refined (circumcentre insertion, or the split of the feature-edge piece it encroaches, as in Ruppert's algorithm)
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
-the cage's winding number around it is 1. The lattice points then take two optimal-Delaunay smoothing steps and one
-sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming
-tetrahedralisation. When the cell count misses the target by more than 15 % (thin or small cages), everything is
-done once more with a corrected size.
+the cage's winding number around it is 1. The lattice corners of poor tetrahedra are then moved, the tetrahedra
+kept, where that raises the least radius ratio around them (:func:`_polish`): one tetrahedralisation in all, where
+smoothing and sliver perturbation by new tetrahedralisations took four. When the cell count misses the target by
+more than 15 % (thin or small cages), everything is done once more with a corrected size.
 
 Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells,
 the last guard), and a cancel check in each round. Refinement whose missing triangles keep growing, on course to
 pass the sample budget (parts of the cage nearly touching, far closer than the sampling), is refused at once,
 naming the faces. When recovery runs out of its budget (feature edges meeting at very small angles can make
-Ruppert-style refinement cascade), the last conforming tetrahedralisation of the smoothing rounds is kept if there
-is one; else the mesh is made again with fresh jitter and a coarser surface, and only then is the cage refused,
-naming the faces where it failed.
+Ruppert-style refinement cascade), the mesh is made again with fresh jitter and a coarser surface, and only then is
+the cage refused, naming the faces where it failed.
 """
 
 import time
@@ -29,20 +28,24 @@ from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import CageError
 from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, signed_measures
+from ..geometry import signed_radius_ratios
 from ..geometry import winding_numbers
 from .common import far_points, on_common, raw_mesh, rows_in
 from .surface import JITTER, OutOfBudget, Surface
 
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
-# along the surface and the smoothing, the meshes of the test cages have 7.9 to 11.4 per a^3 at 4k, 8.4 to 9.8 at 10k.
-_TETS_PER_CUBE = 8.5
+# along the surface, the corpus's meshes have 8.2 to 10.8 per a^3 at 8000 cells (7.1 to 13.9 at 2000).
+_TETS_PER_CUBE = 9.5
 _COUNT_TOLERANCE = 0.15  # beyond this relative miss of the target cell count, mesh again with a corrected size
 _SURFACE_SPACING = 1.0  # surface sample spacing, × the lattice cube side
 _BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage surface
-_ODT_SWEEPS = 2  # optimal-Delaunay smoothing steps of the lattice points
-_SLIVER_ROUNDS = 1  # then rounds of random moves of the lattice corners of slivers ...
-_SLIVER_RATIO = 0.15  # ... tetrahedra with a radius ratio below this
-_PERTURBATION = 0.15  # the largest move per coordinate, × the lattice cube side
+# Then the lattice corners of poor tetrahedra (radius ratio below _POLISH_RATIO) are moved, the tetrahedra kept, where
+# that raises the least radius ratio around them: _POLISH_ROUNDS rounds of _POLISH_TRIES random positions each, up
+# to _POLISH_STEP × the lattice cube side away per coordinate.
+_POLISH_RATIO = 0.25
+_POLISH_ROUNDS = 4
+_POLISH_TRIES = 16
+_POLISH_STEP = 0.3
 _RECOVERY_ROUNDS = 40  # rounds of surface refinement per tetrahedralisation
 # Refinement may make at most this many times the initial surface samples (plus a few thousand for small cages).
 _SAMPLE_BUDGET = 6
@@ -127,42 +130,21 @@ def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     except OutOfBudget:
         raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
     lattice = _bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
+    steps(0.5, "tetrahedralising (Delaunay)")
     far = far_points(cage.vertices)
-    rounds = _ODT_SWEEPS + _SLIVER_ROUNDS + 1
-    best = None
-    for round_ in range(rounds):
-        steps((round_ + 1) / (rounds + 1), "tetrahedralising (Delaunay)")
-        try:
-            samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
-        except _NotConforming:
-            if best is None:
-                raise
-            break  # a smoothing round lost conformity: keep the last conforming mesh
-        n_surface = len(samples.points)
-        vertices = np.concatenate([samples.points, lattice, far])
-        tets = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, steps)
-        used = np.unique(tets)
-        if len(np.setdiff1d(np.arange(n_surface), used)) or not _conforms(tets, samples.triangles):
-            if best is None:
-                raise _NotConforming(np.arange(len(cage.facets)))
-            break
-        renumber = np.full(len(vertices), -1)
-        renumber[used] = np.arange(len(used))  # the surface samples keep their numbers
-        surface.last = samples
-        best = (vertices[used], orient_positive(vertices[used], renumber[tets]))
-        if round_ < _ODT_SWEEPS:
-            # Lattice points outside the cage are dropped; the inside ones move to improve the tetrahedra.
-            lattice = _odt_positions(vertices, tets, used[used >= n_surface])
-        elif round_ < rounds - 1:
-            # Sliver perturbation: Delaunay keeps slivers (flat tetrahedra with well-spaced corners) when their
-            # corners are nearly co-spherical; moving a lattice corner a little makes most of them go away.
-            bad = tets[radius_ratios(vertices, tets) < _SLIVER_RATIO]
-            movable = np.unique(bad[bad >= n_surface]) - n_surface
-            if len(movable) == 0:
-                break
-            lattice = lattice.copy()
-            lattice[movable] += _PERTURBATION * side * rng.uniform(-1.0, 1.0, (len(movable), 3))
-    return surface, *best
+    samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
+    n_surface = len(samples.points)
+    vertices = np.concatenate([samples.points, lattice, far])
+    tets = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, steps)
+    used = np.unique(tets)
+    if len(used) < n_surface or used[n_surface - 1] != n_surface - 1 or not _conforms(tets, samples.triangles):
+        raise _NotConforming(np.arange(len(cage.facets)))
+    renumber = np.full(len(vertices), -1)
+    renumber[used] = np.arange(len(used))  # the surface samples keep their numbers
+    surface.last = samples
+    vertices, tets = vertices[used], orient_positive(vertices[used], renumber[tets])
+    steps(0.9, "improving the tetrahedra")
+    return surface, _polish(vertices, tets, n_surface, side, rng, steps), tets
 
 
 def _initial_count(cage, spacing):
@@ -231,32 +213,62 @@ def _conforms(tets, triangles):
     return len(boundary) == len(expected) and np.isin(expected, boundary).all()
 
 
-def _odt_positions(vertices, tets, movable):
-    """One optimal-Delaunay-triangulation smoothing step (Chen 2004): each movable vertex goes to the
-    volume-weighted mean of the circumcentres of its tetrahedra.
+def _polish(vertices, tets, n_fixed, side, rng, steps):
+    """Move the free corners of poor tetrahedra where that raises the least radius ratio around them.
+
+    The tetrahedra stay as they are and the surface samples do not move, so the mesh still follows the surface; a
+    move is kept only when every tetrahedron around the vertex stays positively oriented (with the boundary fixed,
+    the mesh then stays a valid filling of the cage) and their least radius ratio rises. This does what a round of
+    sliver perturbation followed by a new Delaunay tetrahedralisation did, for a fraction of its cost.
 
     Parameters
     ----------
     vertices : (N, 3) float array
-    tets : (T, 4) int array
-    movable : (M,) int array, vertices not on the cage
+    tets : (T, 4) int array, positively oriented
+    n_fixed : int, the first vertices (the surface samples) never move
+    side : float, the lattice cube side (length)
 
     Returns
     -------
-    (M, 3) float array, their new positions
+    (N, 3) float array
     """
-    corners = vertices[tets]
-    edges = corners[:, 1:] - corners[:, :1]  # (T, 3, 3)
-    volume = np.abs(np.linalg.det(edges)) / 6.0
-    # The circumcentre c solves 2 (p_k - p_0) . (c - p_0) = |p_k - p_0|^2; a flat tetrahedron has weight 0.
-    flat = volume <= 1e-12 * np.einsum("tkd,tkd->t", edges, edges) ** 1.5
-    edges[flat] = np.eye(3)
-    centres = corners[:, 0] + np.linalg.solve(2.0 * edges, np.einsum("tkd,tkd->tk", edges, edges)[..., None])[..., 0]
-    volume[flat] = 0.0
-    weight = np.bincount(tets.ravel(), np.repeat(volume, 4), minlength=len(vertices))
-    moved = np.stack([np.bincount(tets.ravel(), np.repeat(volume * centres[:, d], 4), minlength=len(vertices))
-                      for d in range(3)], axis=1)
-    return moved[movable] / weight[movable, None]
+    vertices = vertices.copy()
+    owner = np.repeat(np.arange(len(tets)), 4)
+    star = sp.csr_matrix((np.ones(tets.size), (tets.ravel(), owner)), shape=(len(vertices), len(tets)))
+    scale = _POLISH_STEP * side * 0.5 ** (np.arange(_POLISH_TRIES) % 4)  # large and small moves alike
+    ratio = radius_ratios(vertices, tets)
+    for _ in range(_POLISH_ROUNDS):
+        steps.check()
+        poor = np.flatnonzero(ratio < _POLISH_RATIO)
+        # Worst first; no two vertices moved together share a tetrahedron, so each move is judged on its own.
+        corners = tets[poor[np.argsort(ratio[poor])]].ravel()
+        candidates = corners[corners >= n_fixed]
+        candidates = candidates[np.sort(np.unique(candidates, return_index=True)[1])]
+        taken = np.zeros(len(tets), dtype=bool)
+        chosen = []
+        for v in candidates:
+            around = star.indices[star.indptr[v]:star.indptr[v + 1]]
+            if not taken[around].any():
+                chosen.append(v)
+                taken[around] = True
+        if not chosen:
+            break
+        chosen = np.array(chosen)
+        rows = star[chosen]
+        around = rows.indices  # the tetrahedra around each chosen vertex, vertex by vertex
+        vertex_of = np.repeat(np.arange(len(chosen)), np.diff(rows.indptr))
+        slot = np.argmax(tets[around] == chosen[vertex_of, None], axis=1)
+        moves = scale[:, None, None] * rng.uniform(-1.0, 1.0, (_POLISH_TRIES, len(chosen), 3))
+        moves[0] = 0.0  # the current position
+        corners = np.broadcast_to(vertices[tets[around]], (_POLISH_TRIES, len(around), 4, 3)).copy()
+        corners[:, np.arange(len(around)), slot] = vertices[chosen][None, vertex_of] + moves[:, vertex_of]
+        quality = np.maximum(signed_radius_ratios(corners.reshape(-1, 4, 3)), -1.0).reshape(_POLISH_TRIES, -1)
+        least = np.minimum.reduceat(quality, rows.indptr[:-1], axis=1)
+        best = np.argmax(least, axis=0)
+        better = least[best, np.arange(len(chosen))] > least[0]
+        vertices[chosen[better]] += moves[best[better], np.flatnonzero(better)]
+        ratio[around] = quality[best[vertex_of], np.arange(len(around))]
+    return vertices
 
 
 def _outside_protecting_spheres(lattice, points, triangles):
