@@ -28,8 +28,7 @@ from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import CageError
 from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, signed_measures
-from ..geometry import signed_radius_ratios
-from ..geometry import winding_numbers
+from ..geometry import signed_radius_ratios, triangle_normals, unit, winding_numbers
 from .common import far_points, on_common, raw_mesh, rows_in
 from .surface import JITTER, OutOfBudget, Surface
 
@@ -379,10 +378,14 @@ def _surface_distance(corners, points, reach, steps):
     """
     centres = corners.mean(axis=1)
     radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
-    # Only the (point, facet) pairs closer than `reach` + the facet's radius to the facet's centre can be in reach.
-    near = cKDTree(centres).query_ball_point(points, reach + radii.max())
-    point = np.repeat(np.arange(len(points)), [len(n) for n in near])
-    facet = np.concatenate([np.asarray(n, dtype=np.int64) for n in near] + [np.zeros(0, np.int64)])
+    # Only the (point, facet) pairs closer than `reach` + the facet's radius to the facet's centre can be in reach,
+    # and only those within `reach` of the facet's plane (most are not; the exact closest point costs far more).
+    pairs = cKDTree(points).sparse_distance_matrix(cKDTree(centres), reach + radii.max(), output_type="ndarray")
+    point, facet = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    normals = unit(triangle_normals(corners))
+    height = np.einsum("ij,ij->i", points[point] - centres[facet], normals[facet])
+    close = (pairs["v"] < reach + radii[facet]) & (np.abs(height) < reach)
+    point, facet = point[close], facet[close]
     best = np.full(len(points), np.inf)
     for chunk in np.array_split(np.arange(len(point)), max(1, len(point) // 500_000)):
         steps.check()
