@@ -140,7 +140,8 @@ def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
     n_surface = len(samples.points)
     vertices = np.concatenate([samples.points, lattice, far])
-    tets = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, steps)
+    vertex_side = np.repeat([-1, 1, 0], [n_surface, len(lattice), len(far)])
+    tets = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, vertex_side, steps)
     used = np.unique(tets)
     if len(used) < n_surface or used[n_surface - 1] != n_surface - 1 or not _conforms(tets, samples.triangles):
         raise _NotConforming(np.arange(len(cage.facets)))
@@ -326,7 +327,7 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     return points[keep & inside]
 
 
-def _inside_pieces(cage, points, keep, ends_a, ends_b, steps, priority=None):
+def _inside_pieces(cage, points, keep, ends_a, ends_b, steps):
     """Whether each point lies inside the cage, for graphs whose connected pieces are all inside or all outside.
 
     Parameters
@@ -334,8 +335,6 @@ def _inside_pieces(cage, points, keep, ends_a, ends_b, steps, priority=None):
     points : (P, 3) float array
     keep : (P,) bool array, the points to classify (the others come out False)
     ends_a, ends_b : (L,) int arrays, the graph's links between kept points
-    priority : (P,) float array or None
-        The winding number is evaluated at the point of highest priority of each piece (default: any point).
 
     Returns
     -------
@@ -344,8 +343,6 @@ def _inside_pieces(cage, points, keep, ends_a, ends_b, steps, priority=None):
     graph = sp.coo_matrix((np.ones(len(ends_a)), (ends_a, ends_b)), shape=(len(points),) * 2)
     _, piece = connected_components(graph, directed=False)
     candidates = np.flatnonzero(keep)
-    if priority is not None:
-        candidates = candidates[np.argsort(-priority[candidates], kind="stable")]
     pieces, first = np.unique(piece[candidates], return_index=True)
     winding = winding_numbers(cage.vertices, cage.facets, points[candidates[first]], steps.check)
     _check_winding(winding)
@@ -404,31 +401,52 @@ def _cell_faces(tets):
     return np.sort(np.concatenate([np.delete(tets, k, axis=1) for k in range(4)]), axis=1)
 
 
-def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, steps):
+def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, vertex_side, steps):
     """The tetrahedra inside the cage, once every surface triangle is a face of the tetrahedralisation.
 
-    The surface triangles cut the tetrahedra into connected pieces, each inside or outside as a whole.
-    Tetrahedra with all four corners on one planar region are flat and belong to neither.
+    No tetrahedron then crosses the surface: one with a corner strictly inside (a lattice point) is inside, one with
+    a corner outside (a far point) is outside. The rest, all four corners on the surface, are classified by
+    connection: the surface triangles cut them into connected pieces, each inside or outside as a whole, as the
+    tetrahedra with a corner off the surface next to it say (the winding number where none does). Tetrahedra with
+    all four corners on one planar region are flat and belong to neither.
 
     Parameters
     ----------
     vertices : (N, 3) float array, the surface samples first
     tets, neighbours : (T, 4) int arrays, as scipy.spatial.Delaunay's simplices and neighbors
     samples : surface.Samples
+    vertex_side : (N,) int array, 1 for a vertex inside the cage, 0 outside, -1 on its surface
 
     Returns
     -------
     (T', 4) int array
     """
-    cut = rows_in(_cell_faces(tets), np.sort(samples.triangles, axis=1)).reshape(4, len(tets)).T
-    flat = on_common(samples.incidence, tets)
-    link = (neighbours >= 0) & ~cut & ~flat[:, None]
-    link[link] = ~flat[neighbours[link]]
-    owner = np.repeat(np.arange(len(tets))[:, None], 4, axis=1)
-    # The winding number is evaluated at the centroid of each piece's largest tetrahedron, well off the surface.
-    inside = _inside_pieces(cage, vertices[tets].mean(axis=1), ~flat, owner[link], neighbours[link], steps,
-                            priority=np.abs(signed_measures(vertices, tets)))
-    return tets[inside]
+    side = vertex_side[tets].max(axis=1)  # 1 or 0 from a corner off the surface, -1 for none
+    on_surface = np.flatnonzero(side < 0)
+    flat = np.zeros(len(tets), dtype=bool)
+    flat[on_surface] = on_common(samples.incidence, tets[on_surface])
+    cut = rows_in(_cell_faces(tets[on_surface]), np.sort(samples.triangles, axis=1)).reshape(4, -1).T
+    across = neighbours[on_surface]
+    link = (across >= 0) & ~cut & ~flat[on_surface, None]
+    link[link] = ~flat[across[link]]
+    ends = np.repeat(on_surface[:, None], 4, axis=1)[link]
+    graph = sp.coo_matrix((np.ones(len(ends)), (ends, across[link])), shape=(len(tets),) * 2)
+    _, piece = connected_components(graph, directed=False)
+    off = side >= 0
+    low, high = np.full(piece.max() + 1, 2), np.full(piece.max() + 1, -1)
+    np.minimum.at(low, piece[off], side[off])
+    np.maximum.at(high, piece[off], side[off])
+    if np.any(low[high >= 0] != high[high >= 0]):  # a piece both inside and outside: some triangle leaks
+        raise _NotConforming(np.arange(len(cage.facets)))
+    # Pieces of tetrahedra on the surface alone: the winding number at the centroid of each one's largest.
+    alone = on_surface[~flat[on_surface] & (high[piece[on_surface]] < 0)]
+    if len(alone):
+        alone = alone[np.argsort(-np.abs(signed_measures(vertices, tets[alone])), kind="stable")]
+        pieces, first = np.unique(piece[alone], return_index=True)
+        winding = winding_numbers(cage.vertices, cage.facets, vertices[tets[alone[first]]].mean(axis=1), steps.check)
+        _check_winding(winding)
+        high[pieces] = winding > 0.5
+    return tets[(high[piece] == 1) & ~flat]
 
 
 def _diagnose(cage, facets):
