@@ -141,9 +141,11 @@ def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     n_surface = len(samples.points)
     vertices = np.concatenate([samples.points, lattice, far])
     vertex_side = np.repeat([-1, 1, 0], [n_surface, len(lattice), len(far)])
-    tets = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, vertex_side, steps)
-    used = np.unique(tets)
-    if len(used) < n_surface or used[n_surface - 1] != n_surface - 1 or not _conforms(tets, samples.triangles):
+    inside = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, vertex_side, steps)
+    tets = delaunay.simplices[inside]
+    used = np.flatnonzero(np.bincount(tets.ravel(), minlength=len(vertices)))
+    if (len(used) < n_surface or used[n_surface - 1] != n_surface - 1
+            or not _conforms(tets, delaunay.neighbors[inside], inside, samples.triangles)):
         raise _NotConforming(np.arange(len(cage.facets)))
     renumber = np.full(len(vertices), -1)
     renumber[used] = np.arange(len(used))  # the surface samples keep their numbers
@@ -208,15 +210,19 @@ def _runs_away(missing, n_samples, budget):
     return n_samples + missing[-1] * (1.0 + growth) > budget
 
 
-def _conforms(tets, triangles):
-    """Whether the tetrahedra's boundary triangles (faces of one tetrahedron) are exactly the surface triangles."""
-    base = int(tets.max()) + 1  # a sorted face (i, j, k) is the number (i base + j) base + k: exact below 2^63
-    faces = _cell_faces(tets).astype(np.int64)
-    keys, counts = np.unique((faces[:, 0] * base + faces[:, 1]) * base + faces[:, 2], return_counts=True)
-    boundary = keys[counts == 1]
-    triangles = np.sort(triangles, axis=1).astype(np.int64)
-    expected = (triangles[:, 0] * base + triangles[:, 1]) * base + triangles[:, 2]
-    return len(boundary) == len(expected) and np.isin(expected, boundary).all()
+def _conforms(tets, across, inside, triangles):
+    """Whether the tetrahedra's boundary triangles are exactly the surface triangles.
+
+    Parameters
+    ----------
+    tets, across : (T, 4) int arrays, the tetrahedra kept and their neighbours (-1: none) in the tetrahedralisation
+    inside : (T_all,) bool array, which tetrahedra of the tetrahedralisation are kept
+    triangles : (S, 3) int array
+    """
+    # Face k, opposite corner k, is on the boundary when the tetrahedron across it is not kept.
+    open_face = ~np.r_[inside, False][across]
+    boundary = _cell_faces(tets)[open_face.T.ravel()]
+    return len(boundary) == len(triangles) and rows_in(np.sort(triangles, axis=1), boundary).all()
 
 
 def _polish(vertices, tets, n_fixed, side, rng, steps):
@@ -308,8 +314,8 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     points += JITTER * side * rng.uniform(-1.0, 1.0, points.shape)
     # The nearest surface sample is at most one circumradius farther than the surface itself: only the points in
     # between need the exact distance.
-    nearest, _ = cKDTree(surface_points).query(points)
     cover = circumspheres(surface_points, triangles)[1].max()
+    nearest, _ = cKDTree(surface_points).query(points, distance_upper_bound=band + cover)  # inf beyond
     keep = nearest >= band
     unsure = np.flatnonzero(keep & (nearest < band + cover))
     # The regions' triangles tile the surface the tetrahedra will follow; being small (about the spacing), each
@@ -419,7 +425,7 @@ def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, vertex_side, s
 
     Returns
     -------
-    (T', 4) int array
+    (T,) bool array
     """
     side = vertex_side[tets].max(axis=1)  # 1 or 0 from a corner off the surface, -1 for none
     on_surface = np.flatnonzero(side < 0)
@@ -446,7 +452,7 @@ def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, vertex_side, s
         winding = winding_numbers(cage.vertices, cage.facets, vertices[tets[alone[first]]].mean(axis=1), steps.check)
         _check_winding(winding)
         high[pieces] = winding > 0.5
-    return tets[(high[piece] == 1) & ~flat]
+    return (high[piece] == 1) & ~flat
 
 
 def _diagnose(cage, facets):
