@@ -104,6 +104,11 @@ class Surface:
         self.edges = edges[feature]  # (K, 2) feature edges, low index first
         self.edge_facet = edge_facets[feature, 0]
         self.edge_regions = region[edge_facets[feature]]  # (K, 2)
+        # Each region's boundary as directed edges of its facets (counter-clockwise in its frame), region by region.
+        rows = np.flatnonzero(feature[inverse])
+        rows = rows[np.argsort(region[rows // 3], kind="stable")]
+        split = np.searchsorted(region[rows // 3], np.arange(1, self.n_regions))
+        self.convex = np.array([self._convex(r, directed[part]) for r, part in enumerate(np.split(rows, split))])
         self.region_edges = [np.flatnonzero(np.any(self.edge_regions == r, axis=1)) for r in range(self.n_regions)]
         lengths = np.linalg.norm(cage.vertices[self.edges[:, 1]] - cage.vertices[self.edges[:, 0]], axis=1)
         self.edge_length = lengths
@@ -153,6 +158,14 @@ class Surface:
         inside = best_low > -1e-12
         bary = np.maximum(best_bary, 0.0)
         return best_facet, bary / bary.sum(axis=1, keepdims=True), inside
+
+    def _convex(self, r, boundary):
+        """Whether region r is convex: every vertex of it on the inner (left) side of each of its directed boundary
+        edges (E, 2), within round-off."""
+        xy = self.to_plane(r, self.cage.vertices[self.region_vertices[r]])
+        start, end = (self.to_plane(r, self.cage.vertices[boundary[:, k]]) for k in (0, 1))
+        turn = cross2(end[:, None] - start[:, None], xy[None] - start[:, None])  # (E, V)
+        return bool(np.all(turn >= -1e-12 * np.linalg.norm(end - start, axis=1)[:, None]))
 
     def _boundary_segments(self, r):
         """2D start and end points (S, 2) of region r's boundary: its feature edges, unsplit."""
@@ -284,8 +297,10 @@ class Surface:
         corners = xy[simplices]
         area = 0.5 * cross2(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         simplices = simplices[np.abs(area) > 1e-10 * self.spacing**2]  # collinear boundary samples
-        _, _, inside = self.locate(r, xy[simplices].mean(axis=1))
-        simplices = orient_positive(xy, simplices[inside])
+        if not self.convex[r]:  # a convex region holds every triangle of its points
+            _, _, inside = self.locate(r, xy[simplices].mean(axis=1))
+            simplices = simplices[inside]
+        simplices = orient_positive(xy, simplices)
         pairs, labels = self._pieces(r)
         position = np.full(len(self.points), -1)
         position[local] = np.arange(len(local))
