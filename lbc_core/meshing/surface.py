@@ -20,7 +20,7 @@ from scipy.spatial import Delaunay, cKDTree
 
 from ..geometry import circumcircles, cross2, distance_to_segments, orient_positive, triangle_normals, unit
 from . import COPLANAR_ANGLE
-from .common import bary_positions, cell_edges, far_points, rows_in, split_counts
+from .common import bary_positions, far_points, rows_in, split_counts
 
 JITTER = 0.05  # random shift of samples, × their spacing: breaks co-circular and co-spherical ties
 # Region samples stay this far (× spacing) from the region's boundary and from the cage vertices in it: beyond
@@ -115,6 +115,8 @@ class Surface:
         self.shell_scale = 1.0 + 0.1 * rng.uniform(-1.0, 1.0, len(lengths))
         # At least two pieces per edge, slightly uneven: evenly split edges give co-circular samples whose
         # Delaunay triangulation is ambiguous, and no sample-free sphere may run through a box's corners.
+        # The corner of edge_facet holding each feature edge's lower and higher vertex: (K, 2).
+        self.edge_corner = np.argmax(facets[self.edge_facet][:, None, :] == self.edges[:, :, None], axis=2)
         counts = np.maximum(2, split_counts(lengths, spacing))
         self.edge_params = [np.sort((np.arange(1, m) + JITTER * rng.uniform(-1.0, 1.0, m - 1)) / m) for m in counts]
         self.inner = [self._region_lattice(r) for r in range(self.n_regions)]  # (facet, bary) per region
@@ -199,6 +201,7 @@ class Surface:
         self.edge_start = np.cumsum([n] + [len(p) for p in self.edge_params])
         self.region_start = np.cumsum([self.edge_start[-1]] + [len(f) for f, _ in self.inner])
         self._local = {}  # local_points per region, valid until the next numbering
+        self._region_pieces = {}  # _pieces per region, likewise
         if self.region_start[-1] > self.budget:
             raise OutOfBudget(f"{self.region_start[-1]} surface samples")
 
@@ -228,23 +231,19 @@ class Surface:
         """
         cage = self.cage
         n, n_facets = cage.n_control_points, len(cage.facets)
+        facet_of_vertex = np.empty(n, dtype=np.int64)
+        corner_of_vertex = np.empty(n, dtype=np.int64)
+        facet_of_vertex[cage.facets.ravel()] = np.repeat(np.arange(n_facets), 3)
+        corner_of_vertex[cage.facets.ravel()] = np.tile(np.arange(3), n_facets)
         for _ in range(_ROUNDS_2D):
             steps.check()
-            facet_of_vertex = np.empty(n, dtype=np.int64)
-            corner_of_vertex = np.empty(n, dtype=np.int64)
-            facet_of_vertex[cage.facets.ravel()] = np.repeat(np.arange(n_facets), 3)
-            corner_of_vertex[cage.facets.ravel()] = np.tile(np.arange(3), n_facets)
-            facet, bary = [facet_of_vertex], [np.eye(3)[corner_of_vertex]]
-            for k, params in enumerate(self.edge_params):
-                f = self.edge_facet[k]
-                b = np.zeros((len(params), 3))
-                low, high = (np.flatnonzero(cage.facets[f] == v)[0] for v in self.edges[k])
-                b[:, low], b[:, high] = 1.0 - params, params
-                facet.append(np.full(len(params), f))
-                bary.append(b)
-            for f, b in self.inner:
-                facet.append(f)
-                bary.append(b)
+            params = np.concatenate(self.edge_params)
+            edge = np.repeat(np.arange(len(self.edges)), [len(p) for p in self.edge_params])
+            on_edges = np.zeros((len(params), 3))
+            on_edges[np.arange(len(params)), self.edge_corner[edge, 0]] = 1.0 - params
+            on_edges[np.arange(len(params)), self.edge_corner[edge, 1]] = params
+            facet = [facet_of_vertex, self.edge_facet[edge]] + [f for f, _ in self.inner]
+            bary = [np.eye(3)[corner_of_vertex], on_edges] + [b for _, b in self.inner]
             facet, bary = np.concatenate(facet), np.concatenate(bary)
             self.points = bary_positions(cage, facet, bary)
             missing = []
@@ -280,12 +279,14 @@ class Surface:
 
     def _pieces(self, r):
         """Region r's boundary pieces: (K, 2) point index pairs and their (feature edge, piece index) labels."""
-        pairs, labels = [], []
-        for k in self.region_edges[r]:
-            chain = self._chain(k)
-            pairs.append(np.stack([chain[:-1], chain[1:]], axis=1))
-            labels += [(int(k), i) for i in range(len(chain) - 1)]
-        return np.concatenate(pairs), labels
+        if r not in self._region_pieces:
+            pairs, labels = [], []
+            for k in self.region_edges[r]:
+                chain = self._chain(k)
+                pairs.append(np.stack([chain[:-1], chain[1:]], axis=1))
+                labels += [(int(k), i) for i in range(len(chain) - 1)]
+            self._region_pieces[r] = np.concatenate(pairs), labels
+        return self._region_pieces[r]
 
     def _triangulate(self, r):
         """Region r's 2D Delaunay triangles in local numbering, oriented outward, and the (edge, piece) labels of
@@ -304,7 +305,8 @@ class Surface:
         pairs, labels = self._pieces(r)
         position = np.full(len(self.points), -1)
         position[local] = np.arange(len(local))
-        present = rows_in(np.sort(position[pairs], axis=1), cell_edges(simplices))
+        edges = np.sort(simplices[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)  # each inner edge twice
+        present = rows_in(np.sort(position[pairs], axis=1), edges)
         return simplices, [labels[i] for i in np.flatnonzero(~present)]
 
     # --- refinement ------------------------------------------------------------------------------------------
