@@ -18,7 +18,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
-from ..geometry import circumcircles, cross2, distance_to_segments, orient_positive, triangle_normals, unit
+from ..geometry import circumcircles, closest_on_segments, cross2, distance_to_segments, orient_positive
+from ..geometry import triangle_normals, unit
 from . import COPLANAR_ANGLE
 from .common import bary_positions, far_points, rows_in, split_counts
 
@@ -352,26 +353,28 @@ class Surface:
             triangle_pieces.append({sides[key] for key in (tuple(sorted((int(p), int(q))))
                                                            for p, q in zip(t, np.roll(t, -1))) if key in sides})
         split.update(self._encroached_by_samples(set().union(*triangle_pieces)))
+        centres, radii, inside, encroached = self._circumcentres(np.asarray(missing), steps)
         inserted = {}
-        for s, pieces in zip(missing, triangle_pieces):
+        for i, (s, pieces) in enumerate(zip(missing, triangle_pieces)):
             steps.check()
             if time.perf_counter() > self.deadline:
                 raise OutOfBudget("out of time")
             if split & pieces:
                 continue
             r = self.triangle_region[s]
-            centre, radius = circumcircles(self.to_plane(r, self.points[self.triangles[s]])[None])
-            centre, radius = centre[0], radius[0]
-            encroached = self._encroached_pieces(r, centre)
-            _, _, inside = self.locate(r, centre[None])
-            if encroached or not inside[0] or not np.isfinite(radius):
-                split.update(encroached or [self._nearest_piece(r, centre)])
+            centre, radius = centres[i], radii[i]
+            if encroached[i] or not inside[i] or not np.isfinite(radius):
+                split.update(encroached[i] or [self._nearest_piece(r, centre)])
                 continue
-            accepted = inserted.setdefault(r, [])  # missing neighbours can share a circumcircle: insert it once
-            if all(np.linalg.norm(centre - c) > 0.5 * radius for c in accepted):
-                accepted.append(centre)
-        for r, centres in inserted.items():
-            facet, bary, _ = self.locate(r, np.array(centres))
+            # Missing neighbours can share a circumcircle: insert it once. The centres accepted so far in region r
+            # fill the first rows of one array (a loop over them made a thousand missing triangles cost 10 s).
+            accepted, count = inserted.get(r, (np.empty((len(missing), 2)), 0))
+            if count == 0 or np.min(np.linalg.norm(accepted[:count] - centre, axis=1)) > 0.5 * radius:
+                accepted[count] = centre
+                count += 1
+            inserted[r] = accepted, count
+        for r, (accepted, count) in inserted.items():
+            facet, bary, _ = self.locate(r, accepted[:count])
             self.inner[r] = (np.r_[self.inner[r][0], facet], np.concatenate([self.inner[r][1], bary]))
             self.triangulations[r] = None
         for k, piece in split:
@@ -392,14 +395,36 @@ class Surface:
         pairs, labels = self._pieces(r)
         return self.to_plane(r, self.points[pairs[:, 0]]), self.to_plane(r, self.points[pairs[:, 1]]), labels
 
-    def _encroached_pieces(self, r, centre):
-        """(edge, piece) labels of region r's boundary pieces whose diametral circle holds the 2D point ``centre``."""
-        start, end, labels = self._piece_ends_2d(r)
-        middle, half = 0.5 * (start + end), 0.5 * np.linalg.norm(end - start, axis=1)
-        return [labels[i] for i in np.flatnonzero(np.linalg.norm(centre - middle, axis=1) < half)]
+    def _circumcentres(self, missing, steps):
+        """The missing triangles' circumcircles in their regions' planes, region by region at once.
+
+        Returns
+        -------
+        centres : (M, 2) float array, each in its region's frame
+        radii : (M,) float array, inf for a flat triangle (its centre is then its first corner)
+        inside : (M,) bool array, whether the centre lies in the region
+        encroached : list of M lists of the (edge, piece) labels of the region's boundary pieces whose diametral
+            circle holds the centre
+        """
+        region = self.triangle_region[missing]
+        centres, radii = np.empty((len(missing), 2)), np.empty(len(missing))
+        inside, encroached = np.empty(len(missing), dtype=bool), [None] * len(missing)
+        for r in np.unique(region):
+            steps.check()
+            at = np.flatnonzero(region == r)
+            corners = self.to_plane(r, self.points[self.triangles[missing[at]]].reshape(-1, 3)).reshape(-1, 3, 2)
+            centres[at], radii[at] = circumcircles(corners)
+            inside[at] = self.locate(r, centres[at])[2]
+            start, end, labels = self._piece_ends_2d(r)
+            middle, half = 0.5 * (start + end), 0.5 * np.linalg.norm(end - start, axis=1)
+            for chunk in np.array_split(at, max(1, len(at) * len(middle) // 1_000_000)):
+                hits = np.linalg.norm(centres[chunk, None] - middle[None], axis=2) < half  # (chunk, pieces)
+                for i, row in zip(chunk, hits):
+                    encroached[i] = [labels[k] for k in np.flatnonzero(row)]
+        return centres, radii, inside, encroached
 
     def _nearest_piece(self, r, centre):
         """(edge, piece) label of region r's boundary piece nearest to the 2D point ``centre``."""
         start, end, labels = self._piece_ends_2d(r)
-        distance = [distance_to_segments(centre[None], start[i:i + 1], end[i:i + 1])[0] for i in range(len(start))]
-        return labels[int(np.argmin(distance))]
+        squared, _ = closest_on_segments(np.broadcast_to(centre, start.shape), start, end)
+        return labels[int(np.argmin(squared))]

@@ -19,6 +19,7 @@ Ruppert-style refinement cascade), the mesh is made again with fresh jitter and 
 the cage refused, naming the faces where it failed.
 """
 
+import itertools
 import time
 
 import numpy as np
@@ -293,7 +294,7 @@ def _outside_protecting_spheres(lattice, points, triangles):
         return lattice
     centres, radii = circumspheres(points, triangles)
     near = cKDTree(lattice).query_ball_point(centres, radii * (1.0 + 1e-6))
-    drop = np.unique(np.concatenate([np.asarray(i, dtype=np.int64) for i in near] + [np.zeros(0, np.int64)]))
+    drop = np.unique(np.fromiter(itertools.chain.from_iterable(near), dtype=np.int64))
     return np.delete(lattice, drop, axis=0)
 
 
