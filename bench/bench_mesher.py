@@ -36,6 +36,8 @@ FAMILIES = [
     ("bent tube, 12-gon caps", "bent-tube", "as-made"),
     ("thin plate (aspect 0.02)", "thin-plate", "as-made"),
     ("subdivided box, top nudged by 1e-4", "near-coplanar-quads", "as-made"),
+    ("cube scaled by 1e-6", "cube", "scaled-1e-6"),
+    ("cube dented by 1e-5", "cube", "dented-1e-5"),
     ("cylinder moved to 1e6", "cylinder-32-ngon", "moved-1e6"),
     ("cylinder squashed to aspect 1e-3", "cylinder-32-ngon", "squashed-1e-3"),
     ("cylinder dented by 1e-8", "cylinder-32-ngon", "dented-1e-8"),
