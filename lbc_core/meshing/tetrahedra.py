@@ -315,9 +315,12 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     points += JITTER * side * rng.uniform(-1.0, 1.0, points.shape)
     # The nearest surface sample is at most one circumradius farther than the surface itself: only the points in
     # between need the exact distance.
+    # The turned lattice's box is larger than the cage's: the points outside the cage's box are outside the cage.
+    keep = np.all((points > cage.vertices.min(axis=0)) & (points < cage.vertices.max(axis=0)), axis=1)
     cover = circumspheres(surface_points, triangles)[1].max()
-    nearest, _ = cKDTree(surface_points).query(points, distance_upper_bound=band + cover)  # inf beyond
-    keep = nearest >= band
+    nearest = np.full(len(points), np.inf)
+    nearest[keep] = cKDTree(surface_points).query(points[keep], distance_upper_bound=band + cover)[0]  # inf beyond
+    keep &= nearest >= band
     unsure = np.flatnonzero(keep & (nearest < band + cover))
     # The regions' triangles tile the surface the tetrahedra will follow; being small (about the spacing), each
     # unsure point meets only a few of them, where a cage's large facets would meet every point.
