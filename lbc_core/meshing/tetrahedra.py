@@ -328,7 +328,7 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     # A lattice edge (centre to one of its cube's corners) between two kept points stays within its half length
     # (at most 0.52 side with the jitter; band = 0.7 side) of one of them, so it cannot cross the surface: the kept
     # points connected by lattice edges are all inside or all outside, which one winding number per piece decides.
-    centre = np.flatnonzero(np.all(index < shape - 1, axis=1))
+    centre = np.flatnonzero(np.all(index < shape - 1, axis=1) & keep[len(index):])
     offsets = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
     corner = np.ravel_multi_index((index[centre][:, None, :] + offsets[None]).reshape(-1, 3).T, shape)
     centre = np.repeat(centre + len(index), len(offsets))
