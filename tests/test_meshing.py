@@ -149,7 +149,9 @@ def bent_angle(cage):
     owner = np.tile(np.arange(len(cage.facets)), 3)
     order = np.lexsort((edges[:, 1], edges[:, 0]))
     pairs = owner[order].reshape(-1, 2)
-    angles = np.arccos(np.clip(np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]), -1.0, 1.0))
+    first, second = normals[pairs[:, 0]], normals[pairs[:, 1]]
+    # atan2 of sine and cosine: arccos of the cosine reads a bend below about 1e-8 rad as 0.
+    angles = np.arctan2(np.linalg.norm(np.cross(first, second), axis=1), np.einsum("ij,ij->i", first, second))
     bent = angles[(angles < meshing.COPLANAR_ANGLE) & (angles > 1e-12)]
     return float(bent.max()) if len(bent) else 0.0
 
