@@ -165,3 +165,10 @@ def test_a_narrow_valid_slot_still_meshes():
     meshes too, in 26 s at 8000 cells, too slow for the suite)."""
     cage = slotted_prism(1e-2)
     check_contract(cage, meshing.mesh_domain(cage, cells=8000))
+
+
+def test_the_three_sided_prism_dented_by_1e_8():
+    """Found by meshing every corpus cage and variant at 8000 cells: this one meshes, but the contract check read its
+    1e-8 rad bend as no bend (arccos of a cosine that rounds to 1) and held its volume to 1e-11 instead of 1e-7."""
+    cage = corpus_cage("cylinder-3-ngon", "dented-1e-8")
+    check_contract(cage, meshing.mesh_domain(cage, cells=2000))

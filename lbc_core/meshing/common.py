@@ -32,7 +32,7 @@ def finish(cage, vertices, cells, boundary_vertices, boundary_facet, boundary_ba
     vertices[control_vertices] = cage.vertices
     cells = np.asarray(cells, dtype=np.int64)
     flat = signed_measures(vertices, cells) <= 0
-    unused = np.setdiff1d(np.arange(len(vertices)), cells)
+    unused = np.flatnonzero(np.bincount(cells.ravel(), minlength=len(vertices)) == 0)
     if len(cells) == 0 or flat.any() or len(unused):
         near = np.isin(boundary_vertices, np.r_[cells[flat].ravel(), unused])
         faces = np.unique(cage.facet_face[boundary_facet[near]])

@@ -18,9 +18,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
-from ..geometry import circumcircles, cross2, distance_to_segments, orient_positive, triangle_normals, unit
+from ..geometry import circumcircles, closest_on_segments, cross2, distance_to_segments, orient_positive
+from ..geometry import triangle_normals, unit
 from . import COPLANAR_ANGLE
-from .common import bary_positions, cell_edges, far_points, rows_in, split_counts
+from .common import bary_positions, far_points, rows_in, split_counts
 
 JITTER = 0.05  # random shift of samples, × their spacing: breaks co-circular and co-spherical ties
 # Region samples stay this far (× spacing) from the region's boundary and from the cage vertices in it: beyond
@@ -104,12 +105,19 @@ class Surface:
         self.edges = edges[feature]  # (K, 2) feature edges, low index first
         self.edge_facet = edge_facets[feature, 0]
         self.edge_regions = region[edge_facets[feature]]  # (K, 2)
+        # Each region's boundary as directed edges of its facets (counter-clockwise in its frame), region by region.
+        rows = np.flatnonzero(feature[inverse])
+        rows = rows[np.argsort(region[rows // 3], kind="stable")]
+        split = np.searchsorted(region[rows // 3], np.arange(1, self.n_regions))
+        self.convex = np.array([self._convex(r, directed[part]) for r, part in enumerate(np.split(rows, split))])
         self.region_edges = [np.flatnonzero(np.any(self.edge_regions == r, axis=1)) for r in range(self.n_regions)]
         lengths = np.linalg.norm(cage.vertices[self.edges[:, 1]] - cage.vertices[self.edges[:, 0]], axis=1)
         self.edge_length = lengths
         self.shell_scale = 1.0 + 0.1 * rng.uniform(-1.0, 1.0, len(lengths))
         # At least two pieces per edge, slightly uneven: evenly split edges give co-circular samples whose
         # Delaunay triangulation is ambiguous, and no sample-free sphere may run through a box's corners.
+        # The corner of edge_facet holding each feature edge's lower and higher vertex: (K, 2).
+        self.edge_corner = np.argmax(facets[self.edge_facet][:, None, :] == self.edges[:, :, None], axis=2)
         counts = np.maximum(2, split_counts(lengths, spacing))
         self.edge_params = [np.sort((np.arange(1, m) + JITTER * rng.uniform(-1.0, 1.0, m - 1)) / m) for m in counts]
         self.inner = [self._region_lattice(r) for r in range(self.n_regions)]  # (facet, bary) per region
@@ -154,6 +162,14 @@ class Surface:
         bary = np.maximum(best_bary, 0.0)
         return best_facet, bary / bary.sum(axis=1, keepdims=True), inside
 
+    def _convex(self, r, boundary):
+        """Whether region r is convex: every vertex of it on the inner (left) side of each of its directed boundary
+        edges (E, 2), within round-off."""
+        xy = self.to_plane(r, self.cage.vertices[self.region_vertices[r]])
+        start, end = (self.to_plane(r, self.cage.vertices[boundary[:, k]]) for k in (0, 1))
+        turn = cross2(end[:, None] - start[:, None], xy[None] - start[:, None])  # (E, V)
+        return bool(np.all(turn >= -1e-12 * np.linalg.norm(end - start, axis=1)[:, None]))
+
     def _boundary_segments(self, r):
         """2D start and end points (S, 2) of region r's boundary: its feature edges, unsplit."""
         ends = self.cage.vertices[self.edges[self.region_edges[r]]]
@@ -186,6 +202,7 @@ class Surface:
         self.edge_start = np.cumsum([n] + [len(p) for p in self.edge_params])
         self.region_start = np.cumsum([self.edge_start[-1]] + [len(f) for f, _ in self.inner])
         self._local = {}  # local_points per region, valid until the next numbering
+        self._region_pieces = {}  # _pieces per region, likewise
         if self.region_start[-1] > self.budget:
             raise OutOfBudget(f"{self.region_start[-1]} surface samples")
 
@@ -215,23 +232,19 @@ class Surface:
         """
         cage = self.cage
         n, n_facets = cage.n_control_points, len(cage.facets)
+        facet_of_vertex = np.empty(n, dtype=np.int64)
+        corner_of_vertex = np.empty(n, dtype=np.int64)
+        facet_of_vertex[cage.facets.ravel()] = np.repeat(np.arange(n_facets), 3)
+        corner_of_vertex[cage.facets.ravel()] = np.tile(np.arange(3), n_facets)
         for _ in range(_ROUNDS_2D):
             steps.check()
-            facet_of_vertex = np.empty(n, dtype=np.int64)
-            corner_of_vertex = np.empty(n, dtype=np.int64)
-            facet_of_vertex[cage.facets.ravel()] = np.repeat(np.arange(n_facets), 3)
-            corner_of_vertex[cage.facets.ravel()] = np.tile(np.arange(3), n_facets)
-            facet, bary = [facet_of_vertex], [np.eye(3)[corner_of_vertex]]
-            for k, params in enumerate(self.edge_params):
-                f = self.edge_facet[k]
-                b = np.zeros((len(params), 3))
-                low, high = (np.flatnonzero(cage.facets[f] == v)[0] for v in self.edges[k])
-                b[:, low], b[:, high] = 1.0 - params, params
-                facet.append(np.full(len(params), f))
-                bary.append(b)
-            for f, b in self.inner:
-                facet.append(f)
-                bary.append(b)
+            params = np.concatenate(self.edge_params)
+            edge = np.repeat(np.arange(len(self.edges)), [len(p) for p in self.edge_params])
+            on_edges = np.zeros((len(params), 3))
+            on_edges[np.arange(len(params)), self.edge_corner[edge, 0]] = 1.0 - params
+            on_edges[np.arange(len(params)), self.edge_corner[edge, 1]] = params
+            facet = [facet_of_vertex, self.edge_facet[edge]] + [f for f, _ in self.inner]
+            bary = [np.eye(3)[corner_of_vertex], on_edges] + [b for _, b in self.inner]
             facet, bary = np.concatenate(facet), np.concatenate(bary)
             self.points = bary_positions(cage, facet, bary)
             missing = []
@@ -267,12 +280,14 @@ class Surface:
 
     def _pieces(self, r):
         """Region r's boundary pieces: (K, 2) point index pairs and their (feature edge, piece index) labels."""
-        pairs, labels = [], []
-        for k in self.region_edges[r]:
-            chain = self._chain(k)
-            pairs.append(np.stack([chain[:-1], chain[1:]], axis=1))
-            labels += [(int(k), i) for i in range(len(chain) - 1)]
-        return np.concatenate(pairs), labels
+        if r not in self._region_pieces:
+            pairs, labels = [], []
+            for k in self.region_edges[r]:
+                chain = self._chain(k)
+                pairs.append(np.stack([chain[:-1], chain[1:]], axis=1))
+                labels += [(int(k), i) for i in range(len(chain) - 1)]
+            self._region_pieces[r] = np.concatenate(pairs), labels
+        return self._region_pieces[r]
 
     def _triangulate(self, r):
         """Region r's 2D Delaunay triangles in local numbering, oriented outward, and the (edge, piece) labels of
@@ -284,12 +299,15 @@ class Surface:
         corners = xy[simplices]
         area = 0.5 * cross2(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         simplices = simplices[np.abs(area) > 1e-10 * self.spacing**2]  # collinear boundary samples
-        _, _, inside = self.locate(r, xy[simplices].mean(axis=1))
-        simplices = orient_positive(xy, simplices[inside])
+        if not self.convex[r]:  # a convex region holds every triangle of its points
+            _, _, inside = self.locate(r, xy[simplices].mean(axis=1))
+            simplices = simplices[inside]
+        simplices = orient_positive(xy, simplices)
         pairs, labels = self._pieces(r)
         position = np.full(len(self.points), -1)
         position[local] = np.arange(len(local))
-        present = rows_in(np.sort(position[pairs], axis=1), cell_edges(simplices))
+        edges = np.sort(simplices[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)  # each inner edge twice
+        present = rows_in(np.sort(position[pairs], axis=1), edges)
         return simplices, [labels[i] for i in np.flatnonzero(~present)]
 
     # --- refinement ------------------------------------------------------------------------------------------
@@ -335,26 +353,28 @@ class Surface:
             triangle_pieces.append({sides[key] for key in (tuple(sorted((int(p), int(q))))
                                                            for p, q in zip(t, np.roll(t, -1))) if key in sides})
         split.update(self._encroached_by_samples(set().union(*triangle_pieces)))
+        centres, radii, inside, encroached = self._circumcentres(np.asarray(missing), steps)
         inserted = {}
-        for s, pieces in zip(missing, triangle_pieces):
+        for i, (s, pieces) in enumerate(zip(missing, triangle_pieces)):
             steps.check()
             if time.perf_counter() > self.deadline:
                 raise OutOfBudget("out of time")
             if split & pieces:
                 continue
             r = self.triangle_region[s]
-            centre, radius = circumcircles(self.to_plane(r, self.points[self.triangles[s]])[None])
-            centre, radius = centre[0], radius[0]
-            encroached = self._encroached_pieces(r, centre)
-            _, _, inside = self.locate(r, centre[None])
-            if encroached or not inside[0] or not np.isfinite(radius):
-                split.update(encroached or [self._nearest_piece(r, centre)])
+            centre, radius = centres[i], radii[i]
+            if encroached[i] or not inside[i] or not np.isfinite(radius):
+                split.update(encroached[i] or [self._nearest_piece(r, centre)])
                 continue
-            accepted = inserted.setdefault(r, [])  # missing neighbours can share a circumcircle: insert it once
-            if all(np.linalg.norm(centre - c) > 0.5 * radius for c in accepted):
-                accepted.append(centre)
-        for r, centres in inserted.items():
-            facet, bary, _ = self.locate(r, np.array(centres))
+            # Missing neighbours can share a circumcircle: insert it once. The centres accepted so far in region r
+            # fill the first rows of one array (a loop over them made a thousand missing triangles cost 10 s).
+            accepted, count = inserted.get(r, (np.empty((len(missing), 2)), 0))
+            if count == 0 or np.min(np.linalg.norm(accepted[:count] - centre, axis=1)) > 0.5 * radius:
+                accepted[count] = centre
+                count += 1
+            inserted[r] = accepted, count
+        for r, (accepted, count) in inserted.items():
+            facet, bary, _ = self.locate(r, accepted[:count])
             self.inner[r] = (np.r_[self.inner[r][0], facet], np.concatenate([self.inner[r][1], bary]))
             self.triangulations[r] = None
         for k, piece in split:
@@ -375,14 +395,36 @@ class Surface:
         pairs, labels = self._pieces(r)
         return self.to_plane(r, self.points[pairs[:, 0]]), self.to_plane(r, self.points[pairs[:, 1]]), labels
 
-    def _encroached_pieces(self, r, centre):
-        """(edge, piece) labels of region r's boundary pieces whose diametral circle holds the 2D point ``centre``."""
-        start, end, labels = self._piece_ends_2d(r)
-        middle, half = 0.5 * (start + end), 0.5 * np.linalg.norm(end - start, axis=1)
-        return [labels[i] for i in np.flatnonzero(np.linalg.norm(centre - middle, axis=1) < half)]
+    def _circumcentres(self, missing, steps):
+        """The missing triangles' circumcircles in their regions' planes, region by region at once.
+
+        Returns
+        -------
+        centres : (M, 2) float array, each in its region's frame
+        radii : (M,) float array, inf for a flat triangle (its centre is then its first corner)
+        inside : (M,) bool array, whether the centre lies in the region
+        encroached : list of M lists of the (edge, piece) labels of the region's boundary pieces whose diametral
+            circle holds the centre
+        """
+        region = self.triangle_region[missing]
+        centres, radii = np.empty((len(missing), 2)), np.empty(len(missing))
+        inside, encroached = np.empty(len(missing), dtype=bool), [None] * len(missing)
+        for r in np.unique(region):
+            steps.check()
+            at = np.flatnonzero(region == r)
+            corners = self.to_plane(r, self.points[self.triangles[missing[at]]].reshape(-1, 3)).reshape(-1, 3, 2)
+            centres[at], radii[at] = circumcircles(corners)
+            inside[at] = self.locate(r, centres[at])[2]
+            start, end, labels = self._piece_ends_2d(r)
+            middle, half = 0.5 * (start + end), 0.5 * np.linalg.norm(end - start, axis=1)
+            for chunk in np.array_split(at, max(1, len(at) * len(middle) // 1_000_000)):
+                hits = np.linalg.norm(centres[chunk, None] - middle[None], axis=2) < half  # (chunk, pieces)
+                for i, row in zip(chunk, hits):
+                    encroached[i] = [labels[k] for k in np.flatnonzero(row)]
+        return centres, radii, inside, encroached
 
     def _nearest_piece(self, r, centre):
         """(edge, piece) label of region r's boundary piece nearest to the 2D point ``centre``."""
         start, end, labels = self._piece_ends_2d(r)
-        distance = [distance_to_segments(centre[None], start[i:i + 1], end[i:i + 1])[0] for i in range(len(start))]
-        return labels[int(np.argmin(distance))]
+        squared, _ = closest_on_segments(np.broadcast_to(centre, start.shape), start, end)
+        return labels[int(np.argmin(squared))]

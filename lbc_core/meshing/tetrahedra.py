@@ -6,20 +6,20 @@ surface triangles (the sphere centred in the triangle's plane through its corner
 triangle is a face of the 3D Delaunay tetrahedralisation). Surface triangles missing from the tetrahedralisation are
 refined (circumcentre insertion, or the split of the feature-edge piece it encroaches, as in Ruppert's algorithm)
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
-the cage's winding number around it is 1. The lattice points then take two optimal-Delaunay smoothing steps and one
-sliver-perturbation round (more rounds removed no more slivers on the corpus), each followed by the same conforming
-tetrahedralisation. When the cell count misses the target by more than 15 % (thin or small cages), everything is
-done once more with a corrected size.
+the cage's winding number around it is 1. The lattice corners of poor tetrahedra are then moved, the tetrahedra
+kept, where that raises the least radius ratio around them (:func:`_polish`): one tetrahedralisation in all, where
+smoothing and sliver perturbation by new tetrahedralisations took four. When the cell count misses the target by
+more than 15 % (thin or small cages), everything is done once more with a corrected size.
 
 Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells,
 the last guard), and a cancel check in each round. Refinement whose missing triangles keep growing, on course to
 pass the sample budget (parts of the cage nearly touching, far closer than the sampling), is refused at once,
 naming the faces. When recovery runs out of its budget (feature edges meeting at very small angles can make
-Ruppert-style refinement cascade), the last conforming tetrahedralisation of the smoothing rounds is kept if there
-is one; else the mesh is made again with fresh jitter and a coarser surface, and only then is the cage refused,
-naming the faces where it failed.
+Ruppert-style refinement cascade), the mesh is made again with fresh jitter and a coarser surface, and only then is
+the cage refused, naming the faces where it failed.
 """
 
+import itertools
 import time
 
 import numpy as np
@@ -29,20 +29,29 @@ from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import CageError
 from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, signed_measures
-from ..geometry import winding_numbers
+from ..geometry import signed_radius_ratios, triangle_normals, unit, winding_numbers
 from .common import far_points, on_common, raw_mesh, rows_in
 from .surface import JITTER, OutOfBudget, Surface
 
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
-# along the surface and the smoothing, the meshes of the test cages have 7.9 to 11.4 per a^3 at 4k, 8.4 to 9.8 at 10k.
-_TETS_PER_CUBE = 8.5
+# along the surface, the corpus's meshes have 8.2 to 10.8 per a^3 at 8000 cells (7.1 to 13.9 at 2000).
+_TETS_PER_CUBE = 9.5
+# The lattice's axes (columns), turned away from the coordinate axes: the faces of boxes, cylinders and most cages
+# made in Blender are parallel to those, and a lattice aligned with a face puts whole layers of points at one
+# distance from it, where the band leaves slivers (the cube: 5 instead of 0, measured).
+_LATTICE_AXES = np.linalg.qr(np.array([[3.0, 1.0, 2.0], [-1.0, 3.0, 1.0], [1.0, -2.0, 3.0]]))[0]
 _COUNT_TOLERANCE = 0.15  # beyond this relative miss of the target cell count, mesh again with a corrected size
 _SURFACE_SPACING = 1.0  # surface sample spacing, × the lattice cube side
 _BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage surface
-_ODT_SWEEPS = 2  # optimal-Delaunay smoothing steps of the lattice points
-_SLIVER_ROUNDS = 1  # then rounds of random moves of the lattice corners of slivers ...
-_SLIVER_RATIO = 0.15  # ... tetrahedra with a radius ratio below this
-_PERTURBATION = 0.15  # the largest move per coordinate, × the lattice cube side
+# Then the lattice corners of poor tetrahedra (radius ratio below _POLISH_RATIO) are moved, the tetrahedra kept, where
+# that raises the least radius ratio around them: _POLISH_ROUNDS rounds of _POLISH_TRIES positions each (the
+# centroid of its neighbours, random ones up to _POLISH_STEP × the lattice cube side away per coordinate). Measured at
+# 8000 cells on the cube, the gargoyle's L12 and L08 and the clothing: 1 to 6 slivers (radius ratio < 0.1), 0 to 4
+# with a corner off the cage; ratio 0.25, 4 rounds of 16 left 0 to 3, for 2 to 4 times the time.
+_POLISH_RATIO = 0.2
+_POLISH_ROUNDS = 3
+_POLISH_TRIES = 8
+_POLISH_STEP = 0.3
 _RECOVERY_ROUNDS = 40  # rounds of surface refinement per tetrahedralisation
 # Refinement may make at most this many times the initial surface samples (plus a few thousand for small cages).
 _SAMPLE_BUDGET = 6
@@ -53,8 +62,8 @@ _GROWING_ROUNDS = 2
 _ATTEMPTS = 3  # fresh jitter and a coarser surface (× 1.5 spacing each time) before a cage is refused
 # Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells), the last guard: nearly
 # touching parts are refused earlier, when refinement runs away. The slowest valid mesh measured, a 1e-3 slot, takes
-# 26 s at 8000 cells, at the deadline's edge (its first attempt fails, the second conforms), so a more loaded
-# machine may refuse it; the corpus's slowest takes 33 s at 64000 cells.
+# 13 to 17 s at 8000 cells on a loaded machine (twice a conforming mesh: the refinement along the slot puts the
+# cell count 56 to 77 % over the target, and the second, coarser lattice cannot bring it back), half the deadline.
 _SECONDS = 10.0
 _SECONDS_PER_1000 = 2.0
 
@@ -127,42 +136,24 @@ def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     except OutOfBudget:
         raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
     lattice = _bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
+    steps(0.5, "tetrahedralising (Delaunay)")
     far = far_points(cage.vertices)
-    rounds = _ODT_SWEEPS + _SLIVER_ROUNDS + 1
-    best = None
-    for round_ in range(rounds):
-        steps((round_ + 1) / (rounds + 1), "tetrahedralising (Delaunay)")
-        try:
-            samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
-        except _NotConforming:
-            if best is None:
-                raise
-            break  # a smoothing round lost conformity: keep the last conforming mesh
-        n_surface = len(samples.points)
-        vertices = np.concatenate([samples.points, lattice, far])
-        tets = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, steps)
-        used = np.unique(tets)
-        if len(np.setdiff1d(np.arange(n_surface), used)) or not _conforms(tets, samples.triangles):
-            if best is None:
-                raise _NotConforming(np.arange(len(cage.facets)))
-            break
-        renumber = np.full(len(vertices), -1)
-        renumber[used] = np.arange(len(used))  # the surface samples keep their numbers
-        surface.last = samples
-        best = (vertices[used], orient_positive(vertices[used], renumber[tets]))
-        if round_ < _ODT_SWEEPS:
-            # Lattice points outside the cage are dropped; the inside ones move to improve the tetrahedra.
-            lattice = _odt_positions(vertices, tets, used[used >= n_surface])
-        elif round_ < rounds - 1:
-            # Sliver perturbation: Delaunay keeps slivers (flat tetrahedra with well-spaced corners) when their
-            # corners are nearly co-spherical; moving a lattice corner a little makes most of them go away.
-            bad = tets[radius_ratios(vertices, tets) < _SLIVER_RATIO]
-            movable = np.unique(bad[bad >= n_surface]) - n_surface
-            if len(movable) == 0:
-                break
-            lattice = lattice.copy()
-            lattice[movable] += _PERTURBATION * side * rng.uniform(-1.0, 1.0, (len(movable), 3))
-    return surface, *best
+    samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
+    n_surface = len(samples.points)
+    vertices = np.concatenate([samples.points, lattice, far])
+    vertex_side = np.repeat([-1, 1, 0], [n_surface, len(lattice), len(far)])
+    inside = _inside_tetrahedra(cage, vertices, delaunay.simplices, delaunay.neighbors, samples, vertex_side, steps)
+    tets = delaunay.simplices[inside]
+    used = np.flatnonzero(np.bincount(tets.ravel(), minlength=len(vertices)))
+    if (len(used) < n_surface or used[n_surface - 1] != n_surface - 1
+            or not _conforms(tets, delaunay.neighbors[inside], inside, samples.triangles)):
+        raise _NotConforming(np.arange(len(cage.facets)))
+    renumber = np.full(len(vertices), -1)
+    renumber[used] = np.arange(len(used))  # the surface samples keep their numbers
+    surface.last = samples
+    vertices, tets = vertices[used], orient_positive(vertices[used], renumber[tets])
+    steps(0.9, "improving the tetrahedra")
+    return surface, _polish(vertices, tets, n_surface, side, rng, steps), tets
 
 
 def _initial_count(cage, spacing):
@@ -220,43 +211,81 @@ def _runs_away(missing, n_samples, budget):
     return n_samples + missing[-1] * (1.0 + growth) > budget
 
 
-def _conforms(tets, triangles):
-    """Whether the tetrahedra's boundary triangles (faces of one tetrahedron) are exactly the surface triangles."""
-    base = int(tets.max()) + 1  # a sorted face (i, j, k) is the number (i base + j) base + k: exact below 2^63
-    faces = _cell_faces(tets).astype(np.int64)
-    keys, counts = np.unique((faces[:, 0] * base + faces[:, 1]) * base + faces[:, 2], return_counts=True)
-    boundary = keys[counts == 1]
-    triangles = np.sort(triangles, axis=1).astype(np.int64)
-    expected = (triangles[:, 0] * base + triangles[:, 1]) * base + triangles[:, 2]
-    return len(boundary) == len(expected) and np.isin(expected, boundary).all()
+def _conforms(tets, across, inside, triangles):
+    """Whether the tetrahedra's boundary triangles are exactly the surface triangles.
+
+    Parameters
+    ----------
+    tets, across : (T, 4) int arrays, the tetrahedra kept and their neighbours (-1: none) in the tetrahedralisation
+    inside : (T_all,) bool array, which tetrahedra of the tetrahedralisation are kept
+    triangles : (S, 3) int array
+    """
+    # Face k, opposite corner k, is on the boundary when the tetrahedron across it is not kept.
+    open_face = ~np.r_[inside, False][across]
+    boundary = _cell_faces(tets)[open_face.T.ravel()]
+    return len(boundary) == len(triangles) and rows_in(np.sort(triangles, axis=1), boundary).all()
 
 
-def _odt_positions(vertices, tets, movable):
-    """One optimal-Delaunay-triangulation smoothing step (Chen 2004): each movable vertex goes to the
-    volume-weighted mean of the circumcentres of its tetrahedra.
+def _polish(vertices, tets, n_fixed, side, rng, steps):
+    """Move the free corners of poor tetrahedra where that raises the least radius ratio around them.
+
+    The tetrahedra stay as they are and the surface samples do not move, so the mesh still follows the surface; a
+    move is kept only when every tetrahedron around the vertex stays positively oriented (with the boundary fixed,
+    the mesh then stays a valid filling of the cage) and their least radius ratio rises. This does what a round of
+    sliver perturbation followed by a new Delaunay tetrahedralisation did, for a fraction of its cost.
 
     Parameters
     ----------
     vertices : (N, 3) float array
-    tets : (T, 4) int array
-    movable : (M,) int array, vertices not on the cage
+    tets : (T, 4) int array, positively oriented
+    n_fixed : int, the first vertices (the surface samples) never move
+    side : float, the lattice cube side (length)
 
     Returns
     -------
-    (M, 3) float array, their new positions
+    (N, 3) float array
     """
-    corners = vertices[tets]
-    edges = corners[:, 1:] - corners[:, :1]  # (T, 3, 3)
-    volume = np.abs(np.linalg.det(edges)) / 6.0
-    # The circumcentre c solves 2 (p_k - p_0) . (c - p_0) = |p_k - p_0|^2; a flat tetrahedron has weight 0.
-    flat = volume <= 1e-12 * np.einsum("tkd,tkd->t", edges, edges) ** 1.5
-    edges[flat] = np.eye(3)
-    centres = corners[:, 0] + np.linalg.solve(2.0 * edges, np.einsum("tkd,tkd->tk", edges, edges)[..., None])[..., 0]
-    volume[flat] = 0.0
-    weight = np.bincount(tets.ravel(), np.repeat(volume, 4), minlength=len(vertices))
-    moved = np.stack([np.bincount(tets.ravel(), np.repeat(volume * centres[:, d], 4), minlength=len(vertices))
-                      for d in range(3)], axis=1)
-    return moved[movable] / weight[movable, None]
+    vertices = vertices.copy()
+    owner = np.repeat(np.arange(len(tets)), 4)
+    star = sp.csr_matrix((np.ones(tets.size), (tets.ravel(), owner)), shape=(len(vertices), len(tets)))
+    scale = _POLISH_STEP * side * 0.5 ** (np.arange(_POLISH_TRIES) % 4)  # large and small moves alike
+    ratio = radius_ratios(vertices, tets)
+    for _ in range(_POLISH_ROUNDS):
+        steps.check()
+        poor = np.flatnonzero(ratio < _POLISH_RATIO)
+        # Worst first; no two vertices moved together share a tetrahedron, so each move is judged on its own.
+        corners = tets[poor[np.argsort(ratio[poor])]].ravel()
+        candidates = corners[corners >= n_fixed]
+        candidates = candidates[np.sort(np.unique(candidates, return_index=True)[1])]
+        taken = np.zeros(len(tets), dtype=bool)
+        chosen = []
+        for v in candidates:
+            around = star.indices[star.indptr[v]:star.indptr[v + 1]]
+            if not taken[around].any():
+                chosen.append(v)
+                taken[around] = True
+        if not chosen:
+            break
+        chosen = np.array(chosen)
+        rows = star[chosen]
+        around = rows.indices  # the tetrahedra around each chosen vertex, vertex by vertex
+        vertex_of = np.repeat(np.arange(len(chosen)), np.diff(rows.indptr))
+        slot = np.argmax(tets[around] == chosen[vertex_of, None], axis=1)
+        moves = scale[:, None, None] * rng.uniform(-1.0, 1.0, (_POLISH_TRIES, len(chosen), 3))
+        moves[0] = 0.0  # the current position
+        # and the centroid of the star's other corners (a Laplacian smoothing step)
+        others = vertices[tets[around]].sum(axis=1) - vertices[chosen][vertex_of]
+        centroid = np.stack([np.bincount(vertex_of, others[:, d]) for d in range(3)], axis=1)
+        moves[1] = centroid / (3.0 * np.diff(rows.indptr))[:, None] - vertices[chosen]
+        corners = np.broadcast_to(vertices[tets[around]], (_POLISH_TRIES, len(around), 4, 3)).copy()
+        corners[:, np.arange(len(around)), slot] = vertices[chosen][None, vertex_of] + moves[:, vertex_of]
+        quality = np.maximum(signed_radius_ratios(corners.reshape(-1, 4, 3)), -1.0).reshape(_POLISH_TRIES, -1)
+        least = np.minimum.reduceat(quality, rows.indptr[:-1], axis=1)
+        best = np.argmax(least, axis=0)
+        better = least[best, np.arange(len(chosen))] > least[0]
+        vertices[chosen[better]] += moves[best[better], np.flatnonzero(better)]
+        ratio[around] = quality[best[vertex_of], np.arange(len(around))]
+    return vertices
 
 
 def _outside_protecting_spheres(lattice, points, triangles):
@@ -265,7 +294,7 @@ def _outside_protecting_spheres(lattice, points, triangles):
         return lattice
     centres, radii = circumspheres(points, triangles)
     near = cKDTree(lattice).query_ball_point(centres, radii * (1.0 + 1e-6))
-    drop = np.unique(np.concatenate([np.asarray(i, dtype=np.int64) for i in near] + [np.zeros(0, np.int64)]))
+    drop = np.unique(np.fromiter(itertools.chain.from_iterable(near), dtype=np.int64))
     return np.delete(lattice, drop, axis=0)
 
 
@@ -277,17 +306,21 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     -------
     (I, 3) float array
     """
-    low = cage.vertices.min(axis=0) - side
-    shape = np.ceil((cage.vertices.max(axis=0) + side - low) / side).astype(np.int64) + 1
+    turned = cage.vertices @ _LATTICE_AXES  # the cage in the lattice's axes
+    low = turned.min(axis=0) - side
+    shape = np.ceil((turned.max(axis=0) + side - low) / side).astype(np.int64) + 1
     index = np.stack(np.meshgrid(*[np.arange(m) for m in shape], indexing="ij"), axis=-1).reshape(-1, 3)
     # Corners (i, j, k) then cube centres (i, j, k) + 1/2, numbered alike.
-    points = low + side * np.concatenate([index, index + 0.5])
+    points = (low + side * np.concatenate([index, index + 0.5])) @ _LATTICE_AXES.T
     points += JITTER * side * rng.uniform(-1.0, 1.0, points.shape)
     # The nearest surface sample is at most one circumradius farther than the surface itself: only the points in
     # between need the exact distance.
-    nearest, _ = cKDTree(surface_points).query(points)
+    # The turned lattice's box is larger than the cage's: the points outside the cage's box are outside the cage.
+    keep = np.all((points > cage.vertices.min(axis=0)) & (points < cage.vertices.max(axis=0)), axis=1)
     cover = circumspheres(surface_points, triangles)[1].max()
-    keep = nearest >= band
+    nearest = np.full(len(points), np.inf)
+    nearest[keep] = cKDTree(surface_points).query(points[keep], distance_upper_bound=band + cover)[0]  # inf beyond
+    keep &= nearest >= band
     unsure = np.flatnonzero(keep & (nearest < band + cover))
     # The regions' triangles tile the surface the tetrahedra will follow; being small (about the spacing), each
     # unsure point meets only a few of them, where a cage's large facets would meet every point.
@@ -295,7 +328,7 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     # A lattice edge (centre to one of its cube's corners) between two kept points stays within its half length
     # (at most 0.52 side with the jitter; band = 0.7 side) of one of them, so it cannot cross the surface: the kept
     # points connected by lattice edges are all inside or all outside, which one winding number per piece decides.
-    centre = np.flatnonzero(np.all(index < shape - 1, axis=1))
+    centre = np.flatnonzero(np.all(index < shape - 1, axis=1) & keep[len(index):])
     offsets = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
     corner = np.ravel_multi_index((index[centre][:, None, :] + offsets[None]).reshape(-1, 3).T, shape)
     centre = np.repeat(centre + len(index), len(offsets))
@@ -304,7 +337,7 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     return points[keep & inside]
 
 
-def _inside_pieces(cage, points, keep, ends_a, ends_b, steps, priority=None):
+def _inside_pieces(cage, points, keep, ends_a, ends_b, steps):
     """Whether each point lies inside the cage, for graphs whose connected pieces are all inside or all outside.
 
     Parameters
@@ -312,8 +345,6 @@ def _inside_pieces(cage, points, keep, ends_a, ends_b, steps, priority=None):
     points : (P, 3) float array
     keep : (P,) bool array, the points to classify (the others come out False)
     ends_a, ends_b : (L,) int arrays, the graph's links between kept points
-    priority : (P,) float array or None
-        The winding number is evaluated at the point of highest priority of each piece (default: any point).
 
     Returns
     -------
@@ -322,8 +353,6 @@ def _inside_pieces(cage, points, keep, ends_a, ends_b, steps, priority=None):
     graph = sp.coo_matrix((np.ones(len(ends_a)), (ends_a, ends_b)), shape=(len(points),) * 2)
     _, piece = connected_components(graph, directed=False)
     candidates = np.flatnonzero(keep)
-    if priority is not None:
-        candidates = candidates[np.argsort(-priority[candidates], kind="stable")]
     pieces, first = np.unique(piece[candidates], return_index=True)
     winding = winding_numbers(cage.vertices, cage.facets, points[candidates[first]], steps.check)
     _check_winding(winding)
@@ -356,10 +385,14 @@ def _surface_distance(corners, points, reach, steps):
     """
     centres = corners.mean(axis=1)
     radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
-    # Only the (point, facet) pairs closer than `reach` + the facet's radius to the facet's centre can be in reach.
-    near = cKDTree(centres).query_ball_point(points, reach + radii.max())
-    point = np.repeat(np.arange(len(points)), [len(n) for n in near])
-    facet = np.concatenate([np.asarray(n, dtype=np.int64) for n in near] + [np.zeros(0, np.int64)])
+    # Only the (point, facet) pairs closer than `reach` + the facet's radius to the facet's centre can be in reach,
+    # and only those within `reach` of the facet's plane (most are not; the exact closest point costs far more).
+    pairs = cKDTree(points).sparse_distance_matrix(cKDTree(centres), reach + radii.max(), output_type="ndarray")
+    point, facet = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    normals = unit(triangle_normals(corners))
+    height = np.einsum("ij,ij->i", points[point] - centres[facet], normals[facet])
+    close = (pairs["v"] < reach + radii[facet]) & (np.abs(height) < reach)
+    point, facet = point[close], facet[close]
     best = np.full(len(points), np.inf)
     for chunk in np.array_split(np.arange(len(point)), max(1, len(point) // 500_000)):
         steps.check()
@@ -378,31 +411,52 @@ def _cell_faces(tets):
     return np.sort(np.concatenate([np.delete(tets, k, axis=1) for k in range(4)]), axis=1)
 
 
-def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, steps):
+def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, vertex_side, steps):
     """The tetrahedra inside the cage, once every surface triangle is a face of the tetrahedralisation.
 
-    The surface triangles cut the tetrahedra into connected pieces, each inside or outside as a whole.
-    Tetrahedra with all four corners on one planar region are flat and belong to neither.
+    No tetrahedron then crosses the surface: one with a corner strictly inside (a lattice point) is inside, one with
+    a corner outside (a far point) is outside. The rest, all four corners on the surface, are classified by
+    connection: the surface triangles cut them into connected pieces, each inside or outside as a whole, as the
+    tetrahedra with a corner off the surface next to it say (the winding number where none does). Tetrahedra with
+    all four corners on one planar region are flat and belong to neither.
 
     Parameters
     ----------
     vertices : (N, 3) float array, the surface samples first
     tets, neighbours : (T, 4) int arrays, as scipy.spatial.Delaunay's simplices and neighbors
     samples : surface.Samples
+    vertex_side : (N,) int array, 1 for a vertex inside the cage, 0 outside, -1 on its surface
 
     Returns
     -------
-    (T', 4) int array
+    (T,) bool array
     """
-    cut = rows_in(_cell_faces(tets), np.sort(samples.triangles, axis=1)).reshape(4, len(tets)).T
-    flat = on_common(samples.incidence, tets)
-    link = (neighbours >= 0) & ~cut & ~flat[:, None]
-    link[link] = ~flat[neighbours[link]]
-    owner = np.repeat(np.arange(len(tets))[:, None], 4, axis=1)
-    # The winding number is evaluated at the centroid of each piece's largest tetrahedron, well off the surface.
-    inside = _inside_pieces(cage, vertices[tets].mean(axis=1), ~flat, owner[link], neighbours[link], steps,
-                            priority=np.abs(signed_measures(vertices, tets)))
-    return tets[inside]
+    side = vertex_side[tets].max(axis=1)  # 1 or 0 from a corner off the surface, -1 for none
+    on_surface = np.flatnonzero(side < 0)
+    flat = np.zeros(len(tets), dtype=bool)
+    flat[on_surface] = on_common(samples.incidence, tets[on_surface])
+    cut = rows_in(_cell_faces(tets[on_surface]), np.sort(samples.triangles, axis=1)).reshape(4, -1).T
+    across = neighbours[on_surface]
+    link = (across >= 0) & ~cut & ~flat[on_surface, None]
+    link[link] = ~flat[across[link]]
+    ends = np.repeat(on_surface[:, None], 4, axis=1)[link]
+    graph = sp.coo_matrix((np.ones(len(ends)), (ends, across[link])), shape=(len(tets),) * 2)
+    _, piece = connected_components(graph, directed=False)
+    off = side >= 0
+    low, high = np.full(piece.max() + 1, 2), np.full(piece.max() + 1, -1)
+    np.minimum.at(low, piece[off], side[off])
+    np.maximum.at(high, piece[off], side[off])
+    if np.any(low[high >= 0] != high[high >= 0]):  # a piece both inside and outside: some triangle leaks
+        raise _NotConforming(np.arange(len(cage.facets)))
+    # Pieces of tetrahedra on the surface alone: the winding number at the centroid of each one's largest.
+    alone = on_surface[~flat[on_surface] & (high[piece[on_surface]] < 0)]
+    if len(alone):
+        alone = alone[np.argsort(-np.abs(signed_measures(vertices, tets[alone])), kind="stable")]
+        pieces, first = np.unique(piece[alone], return_index=True)
+        winding = winding_numbers(cage.vertices, cage.facets, vertices[tets[alone[first]]].mean(axis=1), steps.check)
+        _check_winding(winding)
+        high[pieces] = winding > 0.5
+    return (high[piece] == 1) & ~flat
 
 
 def _diagnose(cage, facets):
