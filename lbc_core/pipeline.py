@@ -123,21 +123,42 @@ def bind(
                                      tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
     lap("reduction")
     progress(1.0, "bound")
+    return lbc_binding(frame, cage, domain, result, weights, outside, points,
+                       _options_record(request, len(domain.cells), threshold), timings)
+
+
+def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, options, timings):
+    """The :class:`Binding` of an LBC solve made in the unit ``frame``: the domain and objective in the cage's units.
+
+    Parameters
+    ----------
+    frame : UnitFrame
+    cage : Cage
+        The cage in the caller's units.
+    unit_domain : DomainMesh
+        The domain mesh in the unit frame.
+    solution : SolveResult
+        The solve on ``unit_domain`` (its objective in the unit frame).
+    weights : (m, n) scipy.sparse.csr_matrix
+    outside : (m,) bool array
+    points : (m, d) float array
+    options, timings : dict
+    """
     return Binding(
         cage=cage,
         rest_cage_vertices=cage.vertices.copy(),
         weights=weights,
-        domain=frame.domain_from_unit(domain, cage),
-        domain_weights=result.weights,
+        domain=frame.domain_from_unit(unit_domain, cage),
+        domain_weights=solution.weights,
         outside=outside,
         points=points,
         scheme="lbc",
-        options=_options_record(request, len(domain.cells), threshold),
+        options=options,
         timings=timings,
-        iterations=result.iterations,
-        converged=result.converged,
-        objective=result.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
-        solver_state=result.state,
+        iterations=solution.iterations,
+        converged=solution.converged,
+        objective=solution.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
+        solver_state=solution.state,
     )
 
 

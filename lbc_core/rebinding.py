@@ -20,12 +20,12 @@ is a cold bind with the previous options, and ``Binding.options["rebind"]`` says
 """
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .binding import Binding
 from .cage import make_cage
 from .errors import CageError
 from .fem import boundary_facets
@@ -37,7 +37,7 @@ from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE, DomainMesh
 from .objective import tv_objective
 from .options import BindOptions
-from .pipeline import REPRODUCTION_TOLERANCE, bind, check_points
+from .pipeline import REPRODUCTION_TOLERANCE, bind, check_points, lbc_binding
 from .progress import Progress
 from .reduction import interpolate_and_reduce
 from .smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation, median_edge
@@ -137,24 +137,11 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
         weights, outside = _merged_rows(previous, again, weights_again, outside_again)
     timings["reduction"] = time.perf_counter() - clock
     progress(1.0, "bound again from the previous solution")
-    return Binding(
-        cage=cage,
-        rest_cage_vertices=cage.vertices.copy(),
-        weights=weights,
-        domain=frame.domain_from_unit(carried, cage),
-        domain_weights=result.weights,
-        outside=outside,
-        points=points,
-        scheme="lbc",
-        options=dict(previous.options, start=WARM,
-                     rebind=f"bound again from the previous binding: {solved} of {len(carried.cells)} cells solved, "
-                            f"{len(again)} of {len(points)} points evaluated"),
-        timings=timings,
-        iterations=result.iterations,
-        converged=result.converged,
-        objective=objective * frame.scale ** (cage.dim - 1),
-        solver_state=state,
-    )
+    options = dict(previous.options, start=WARM,
+                   rebind=f"bound again from the previous binding: {solved} of {len(carried.cells)} cells solved, "
+                          f"{len(again)} of {len(points)} points evaluated")
+    return lbc_binding(frame, cage, carried, replace(result, objective=objective, state=state), weights, outside,
+                       points, options, timings)
 
 
 def _solve_near(previous, carried, unit_cage, moved, progress):
