@@ -50,7 +50,7 @@ print(json.dumps({{"n": b.cage.n_control_points, "cells": len(b.domain.cells), "
 
 
 def print_3d(results):
-    stages = ["meshing", "geodesics", "factorisation", "solve", "interpolation", "reduction"]
+    stages = ["checks", "meshing", "geodesics", "factorisation", "solve", "interpolation", "reduction"]
     print(f"{'cage':6s} {'n':>4s} {'tets':>6s} {'total s':>8s} " + " ".join(f"{s[:8]:>8s}" for s in stages)
           + f" {'iters':>6s} {'infl mean/max':>14s} {'peak MB':>8s}")
     for level, r in results.items():

@@ -93,6 +93,7 @@ def bind(
     request = BindOptions.of(options, cells=cells, weighting=weighting, epsilon=epsilon, threshold=threshold,
                              method=method, tolerance=tolerance, max_iterations=max_iterations)
     cage, points = check_request(cage_vertices, cage_faces, points, request, progress)
+    lap("checks")
     threshold = request.threshold_for(cage.n_control_points)
     # Every stage computes in the unit frame; the weights are the same in any frame.
     frame = UnitFrame.of(cage)
