@@ -10,8 +10,8 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 from .core import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D, DEFAULT_FLOOR, DEFAULT_TOLERANCE
 
 # Influences per mesh vertex by default (bench/RESULTS.md, "Blender deformer"): every weight lowered by the
-# Thinning floor (DEFAULT_FLOOR) and no cap on the count. A cap ranks the weights of each vertex, and where the ranks swap
-# the thinned weights bend: even continuous, a cap of 12 creases issue 12's bent capsule (p99 3.4°, max 19°), the
+# Thinning floor (DEFAULT_FLOOR) and no cap on the count. A cap ranks the weights of each vertex, and where the ranks
+# swap the thinned weights bend: even continuous, a cap of 12 creases issue 12's bent capsule (p99 3.4°, max 19°), the
 # floor alone does not (1.4° / 2.8°, Mesh Deform 2.1° / 3.3°).
 DEFAULT_INFLUENCES = 0
 
