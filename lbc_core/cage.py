@@ -799,6 +799,12 @@ def _check_self_intersection(vertices, triangles, triangle_face, zero, defects):
     if len(triangles) < 2:
         return
     pairs = _intersecting_triangles(vertices, triangles, zero)
+    # The ear-clipped triangles of one n-gon tile its outline in the plane of its normal without overlapping, so they
+    # cannot cross in 3D (a crossing point would project into both): a hit between them is rounding, as in a cap left
+    # 6e-8 out of plane by Blender's float32 positions.
+    in_ngon = np.bincount(triangle_face)[triangle_face] > 2
+    same_ngon = (triangle_face[pairs[:, 0]] == triangle_face[pairs[:, 1]]) & in_ngon[pairs[:, 0]]
+    pairs = pairs[~same_ngon]
     if len(pairs):
         faces = np.unique(np.sort(triangle_face[pairs], axis=1), axis=0)
         listed = _listed([f"{a} and {b}" if a != b else f"{a} with itself" for a, b in faces])

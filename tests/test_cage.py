@@ -675,3 +675,18 @@ def _meet_beyond_shared(first, second, shared):
     if result.status != 0:
         return False
     return shared == 0 or result.fun < 1 - 1e-7
+
+
+def test_an_ngon_cap_left_out_of_plane_by_float32_rounding_is_not_a_self_intersection():
+    """Blender's Cylinder after G Z .3 then G Z -.3 on four cap vertices: float32 leaves them 6e-8 below the cap's
+    plane, and the 32-gon's ear-clipped triangles were reported as crossing each other (found trying the add-on)."""
+    import cage_corpus
+
+    vertices, faces = cage_corpus.load("cylinder-32-ngon")
+    vertices = np.array(vertices, dtype=np.float32)
+    cap = np.flatnonzero(vertices[:, 2] > 0.5)[:4]
+    vertices[cap, 2] += np.float32(0.3)
+    vertices[cap, 2] -= np.float32(0.3)
+    assert np.any(vertices[cap, 2] != 1.0)  # the round trip is not exact
+    cage = make_cage(vertices.astype(float), faces)
+    assert cage.n_control_points == 64 and not cage.warnings
