@@ -26,7 +26,9 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
     Returns
     -------
     dict
-        ``dimension``, ``control_points``, ``slots`` (K), ``mean_influences``, ``outside``, ``warnings``, ``seconds``.
+        ``dimension``, ``control_points``, ``slots`` (K), ``mean_influences``, ``outside``, ``warnings``, ``seconds``,
+        and ``rebind``: for a mesh bound before in this session, how it went (from its previous binding, or from
+        scratch and why); "" for a first bind. With no ``progress`` in background mode, progress lines are printed.
 
     Raises
     ------
@@ -34,7 +36,12 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
         With lbc_core's message, for a cage or mesh that cannot be bound (``api.CageError``, a ValueError).
     Cancelled
         When ``cancel()`` turned true.
+    RuntimeError
+        When the extension is installed but not enabled (before any work).
     """
+    _require_enabled()
+    if progress is None and bpy.app.background:
+        progress = jobs.printed_progress()
     request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), cells=cells,
                                 weighting=weighting, epsilon=epsilon, tolerance=tolerance, thinning=thinning,
                                 influences=influences, mode=mode)
@@ -49,6 +56,7 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
         "outside": settings.outside,
         "warnings": list(result.warnings),
         "seconds": settings.bind_seconds,
+        "rebind": result.rebind,
     }
 
 
@@ -61,6 +69,7 @@ def unbind(mesh_obj):
         The bound objects sharing the mesh data (linked duplicates), for which the weights stay in it; empty when
         they were removed with the binding.
     """
+    _require_enabled()
     return writing.remove(mesh_obj) if is_bound(mesh_obj) else []
 
 
@@ -70,6 +79,7 @@ def rebind_all(cage_obj, progress=None, cancel=None):
     Returns the summaries of :func:`bind`, one per mesh; raises as :func:`bind` does, the meshes bound before the
     error keeping their new binding.
     """
+    _require_enabled()
     meshes = bound_to(cage_obj, bpy.context.scene.objects)
     return [bind(mesh_obj, cage_obj, **mesh_obj.lbc.bind_options(), progress=progress, cancel=cancel)
             for mesh_obj in meshes]
@@ -84,6 +94,7 @@ def set_deformer(mesh_obj, **inputs):
     lbc_core.CageError
         When the mesh is not bound or its modifier was removed.
     """
+    _require_enabled()
     modifier = deformer.find_modifier(mesh_obj) if is_bound(mesh_obj) else None
     if modifier is None:
         raise CageError(f"'{mesh_obj.name}' has no LBC modifier: bind it first")
@@ -97,4 +108,15 @@ def set_deformer(mesh_obj, **inputs):
 
 def status(mesh_obj):
     """(ok, message): whether the deformer of a bound mesh works, and if not, why."""
+    _require_enabled()
     return deformer.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
+
+
+def _require_enabled():
+    """Refuse at once when the extension is installed but not enabled (its properties are then not registered), as on
+    a render farm machine whose preferences were never saved; every call would otherwise fail after the work."""
+    if not hasattr(bpy.types.Object, "lbc"):
+        raise RuntimeError(
+            f"the LBC extension is installed but not enabled: call bpy.ops.preferences.addon_enable(module="
+            f"{__package__!r}) first (or enable it in Edit > Preferences > Add-ons and save the preferences)"
+        )

@@ -102,6 +102,19 @@ def core_options(options):
     )
 
 
+def printed_progress():
+    """A progress callback printing "LBC bind: 42% message" lines, each once (background mode has no status bar)."""
+    last = [None]
+
+    def progress(fraction, message):
+        line = f"LBC bind: {100 * fraction:3.0f}% {message}"
+        if line != last[0]:
+            print(line, flush=True)
+            last[0] = line
+
+    return progress
+
+
 def solve(request, progress=None, cancel=None):
     """Compute the weights (no ``bpy`` here: safe in a worker thread). Raises CageError or lbc_core.Cancelled."""
     start = time.perf_counter()

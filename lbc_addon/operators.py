@@ -60,14 +60,7 @@ def _apply_all(operator, pairs):
 
 def _solve_printing(requests):
     """Solve in this thread, printing progress lines (background mode has no status bar)."""
-    last = [None]
-
-    def progress(fraction, message):
-        line = f"LBC bind: {100 * fraction:3.0f}% {message}"
-        if line != last[0]:
-            print(line, flush=True)
-            last[0] = line
-
+    progress = jobs.printed_progress()
     return [(request, jobs.solve(request, progress)) for request in requests]
 
 

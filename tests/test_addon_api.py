@@ -76,3 +76,25 @@ def test_rebind_all_and_the_deformer_inputs_from_a_script():
     assert api.unbind(mesh) == []
     with pytest.raises(lbc_core.CageError, match="has no LBC modifier"):
         api.set_deformer(mesh, strength=1.0)
+
+
+def test_api_prints_progress_in_background_and_says_how_a_rebind_went(capsys):
+    mesh, cage = sphere_in_box_scene()
+    first = api.bind(mesh, cage, cells=1000)
+    assert "LBC bind: 100% bound" in capsys.readouterr().out and first["rebind"] == ""
+    again = api.bind(mesh, cage, cells=1000)
+    assert again["rebind"].startswith("bound again from the previous binding")
+
+
+def test_api_refuses_at_once_when_the_extension_is_not_enabled():
+    import lbc_addon
+    from blender_scenes import register_addon
+
+    mesh, cage = sphere_in_box_scene()
+    lbc_addon.unregister()
+    try:
+        with pytest.raises(RuntimeError, match="installed but not enabled: call bpy.ops.preferences.addon_enable"):
+            api.bind(mesh, cage, cells=1000)
+    finally:
+        register_addon()
+    assert not is_bound(mesh)
