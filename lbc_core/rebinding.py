@@ -26,7 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .cage import make_cage
+from .cage import ZERO_LENGTH, Cage, make_cage
 from .errors import CageError
 from .fem import boundary_facets
 from .frame import UnitFrame
@@ -91,7 +91,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     request = _options_of(previous)
     cage = make_cage(cage_vertices, cage_faces)
     points = previous.points if points is None else check_points(cage, points)
-    reason = _topology_change(previous.cage, cage)
+    cage, reason = _split_as_before(previous.cage, cage)
     carried = None
     if previous.solver_state is None:
         reason = "the previous binding's solver state is not at hand (it is kept in memory only, not in files)"
@@ -270,11 +270,27 @@ def _options_of(previous):
                                   if recorded.get(key) is not None})
 
 
-def _topology_change(old, new):
-    """Why a carried mesh cannot serve the new cage (welding, facets), or None."""
-    if old.fingerprint() != new.fingerprint():
-        return "the cage's vertices, faces or welding changed"
-    return None
+def _split_as_before(old, new):
+    """The edited cage split into the previous cage's facets, and why a carried mesh cannot serve it (or None).
+
+    How a quad or an n-gon is split into triangles follows the positions (a quad's shorter diagonal), so a small edit
+    can change the split alone; the carried mesh lies on the previous facets, which stay a valid surface of the same
+    faces as long as none of them folds against its face or flattens.
+    """
+    if old.fingerprint() == new.fingerprint():
+        return new, None
+    if not (np.array_equal(old.vertex_map, new.vertex_map)
+            and np.array_equal(np.sort(old.facet_face), np.sort(new.facet_face))):
+        return new, "the cage's vertices, faces or welding changed"
+    if new.dim == 3:
+        normals = triangle_normals(new.vertices[old.facets])
+        face_normals = np.zeros((int(new.facet_face.max()) + 1, 3))
+        np.add.at(face_normals, new.facet_face, triangle_normals(new.vertices[new.facets]))
+        facing = np.einsum("ij,ij->i", normals, face_normals[old.facet_face])
+        face_sizes = np.linalg.norm(face_normals[old.facet_face], axis=1)
+        if np.any(facing <= ZERO_LENGTH * new.bbox_diagonal ** 2 * face_sizes):
+            return new, "a cage face bent so far that its previous split into triangles folds"
+    return Cage(new.vertices, old.facets, old.facet_face, new.vertex_map, new.warnings), None
 
 
 def _quality(vertices, cells):

@@ -181,6 +181,27 @@ def test_a_quad_bent_out_of_its_plane_falls_back_to_a_cold_bind():
     assert_guarantees(again, points)
 
 
+def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm():
+    """Scaling a cylinder's top ring keeps its quads flat but changes which diagonal splits them (the shorter one):
+    the carried mesh lies on the previous split, which still fits the same faces."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import cage_corpus
+
+    vertices, faces = cage_corpus.load("cylinder-32-ngon")
+    vertices = np.asarray(vertices, dtype=float)
+    points = vertices.mean(axis=0) + 0.5 * (vertices[::2] - vertices.mean(axis=0))
+    first = lbc_core.bind(vertices, faces, points, cells=2000)
+    edited = vertices.copy()
+    edited[vertices[:, 2] > 0, :2] *= 1.03
+    assert lbc_core.make_cage(edited, faces).fingerprint() != first.cage.fingerprint()
+    again = rebind(first, edited, faces)
+    assert again.options["start"] == "previous solution", again.options["rebind"]
+    assert again.cage.fingerprint() == first.cage.fingerprint()
+    assert_guarantees(again, points)
+
+
 def test_cancel_stops_a_warm_rebind_and_leaves_the_previous_binding_as_it_was(gargoyle):
     cage, faces, points, first = gargoyle
     state, domain_weights = first.solver_state.state.copy(), first.domain_weights.copy()
