@@ -11,6 +11,7 @@ import importlib.util
 _BUNDLED = f"{__package__}.lbc_core"
 
 lbc_core = importlib.import_module(_BUNDLED if importlib.util.find_spec(_BUNDLED) else "lbc_core")
+_cage = importlib.import_module(f"{lbc_core.__name__}.cage")
 _options = importlib.import_module(f"{lbc_core.__name__}.options")
 _planar = importlib.import_module(f"{lbc_core.__name__}.planar")
 _solver = importlib.import_module(f"{lbc_core.__name__}.solver")
@@ -21,6 +22,7 @@ Cancelled = lbc_core.Cancelled
 DEFAULT_CELLS_2D = _options.DEFAULT_CELLS[2]
 DEFAULT_CELLS_3D = _options.DEFAULT_CELLS[3]
 DEFAULT_TOLERANCE = _solver.DEFAULT_TOLERANCE
+POSED_APART = _cage.POSED_APART
 flatten = _planar.flatten
 DEFAULT_FLOOR = _thinning.DEFAULT_FLOOR
 thin_weights = _thinning.thin_weights

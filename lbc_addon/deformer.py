@@ -15,15 +15,20 @@ modifier's "Enabled" input; the panel says why and offers Rebind.
 import functools
 
 import bpy
+import numpy as np
 from bpy.app.handlers import persistent
 
 from . import geometry, storage
+from .core import POSED_APART
 from .properties import is_bound
 
 MODIFIER_NAME = "LBC Deform"
 GROUP_NAME = "LBC Deform"
 
 _COLUMN = 220  # node editor spacing, for a readable node group
+
+# Causes (see :func:`diagnose`) the node group cannot see, so the add-on clears its "Enabled" input.
+STOPPED_HERE = ("topology", "welded apart")
 
 # The modifier inputs that are the artist's (kept when the mesh is bound again); the others are the add-on's.
 USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")
@@ -447,14 +452,29 @@ def set_enabled(mesh_obj, enabled):
     return True
 
 
-def evaluated_cage_topology(cage_obj, depsgraph):
-    """Topology fingerprint and vertex count of the cage as the deformer sees it (modifiers applied)."""
+def evaluated_cage(cage_obj, depsgraph):
+    """Topology fingerprint and (n, 3) vertex positions of the cage as the deformer sees it (modifiers applied)."""
     cage_eval = cage_obj.evaluated_get(depsgraph)
     mesh = cage_eval.to_mesh()
     try:
-        return geometry.topology_fingerprint(mesh), len(mesh.vertices)
+        return geometry.topology_fingerprint(mesh), geometry.vertex_positions(mesh)
     finally:
         cage_eval.to_mesh_clear()
+
+
+def welded_apart(welded, positions):
+    """The first (copy, kept) pair of cage vertices welded at bind time that are now apart, or None.
+
+    ``welded``: the binding's "copy:kept,..." pairs; apart means farther than lbc_core's POSED_APART × the cage's size,
+    the tolerance of ``lbc deform``.
+    """
+    if not welded:
+        return None
+    pairs = np.array([pair.split(":") for pair in welded.split(",")], dtype=np.int64)
+    size = float(np.linalg.norm(np.ptp(positions, axis=0)))
+    offset = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
+    apart = np.flatnonzero(offset > POSED_APART * size)
+    return tuple(pairs[apart[0]].tolist()) if len(apart) else None
 
 
 def status(mesh_obj, depsgraph):
@@ -472,8 +492,8 @@ def diagnose(mesh_obj, depsgraph):
     """Why a bound object's deformer cannot work: (cause, message), cause None when it works.
 
     ``cause`` is one of "modifier", "weights", "mesh vertices", "cage deleted", "cage type", "cage vertices",
-    "topology", "modifier error" (an error the node group raised for what only it sees). Only "topology" needs the
-    add-on to stop the deformer; the node group itself stops for the others.
+    "topology", "welded apart", "modifier error" (an error the node group raised for what only it sees). Only the
+    causes in :data:`STOPPED_HERE` need the add-on to stop the deformer; the node group itself stops for the others.
     """
     settings = mesh_obj.lbc
     modifier = find_modifier(mesh_obj)
@@ -495,7 +515,8 @@ def diagnose(mesh_obj, depsgraph):
         )
     if cage.type != "MESH":
         return "cage type", f"The cage '{cage.name}' is no longer a mesh: Rebind with a mesh cage"
-    topology, count = evaluated_cage_topology(cage, depsgraph)
+    topology, positions = evaluated_cage(cage, depsgraph)
+    count = len(positions)
     if count != settings.cage_vertex_count:
         return "cage vertices", (
             f"The cage '{cage.name}' has {count} vertices, it was bound with {settings.cage_vertex_count}: "
@@ -506,8 +527,16 @@ def diagnose(mesh_obj, depsgraph):
             f"The topology of the cage '{cage.name}' changed since binding (same vertex count): the mesh stays "
             "undeformed. Rebind"
         )
+    apart = welded_apart(settings.welded, positions)
+    if apart is not None:
+        return "welded apart", (
+            f"Cage vertices {apart[0]} and {apart[1]} of '{cage.name}' were one point when bound and are now apart: "
+            "the mesh stays at rest. Move them together again, or merge them (Merge by Distance) and Rebind"
+        )
     # What only the modifier sees: e.g. a modifier above it that changes the vertex count (Blender 4.3 and newer).
-    for warning in getattr(modifier, "node_warnings", ()):
+    # While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone by now.
+    warnings = getattr(modifier, "node_warnings", ()) if inputs(modifier).get("Enabled", True) else ()
+    for warning in warnings:
         if warning.message.startswith("LBC: "):
             return "modifier error", warning.message[len("LBC: "):].capitalize()
     return None, f"Following '{cage.name}'"
@@ -535,7 +564,7 @@ def check_bindings(depsgraph, changed=None):
         if changed is not None and cage is not None and not {obj.name_full, cage.name_full} & changed:
             continue
         cause, message = diagnose(obj, depsgraph)
-        set_enabled(obj, cause != "topology")
+        set_enabled(obj, cause not in STOPPED_HERE)
         if obj.lbc.status != message:  # writing the same value would trigger another depsgraph update
             obj.lbc.state = "FOLLOWING" if cause is None else "STOPPED"
             obj.lbc.status = message

@@ -78,6 +78,7 @@ class BindResult:
     core_fingerprint: str
     warnings: list = field(default_factory=list)
     seconds: float = 0.0
+    welded: str = ""  # "copy:kept,..." cage vertices welded into one control point (the deformer reads the kept one)
     binding: object = None  # the lbc_core.Binding, kept for a later warm re-bind once applied
     rebind: str = ""  # for a bind that had a previous binding to start from: how it went (lbc_core.rebind)
 
@@ -100,6 +101,20 @@ def core_options(options):
         # Shewchuk's Triangle is not bundled (its licence is not GPL-compatible): use lbc_core's own mesher.
         method="delaunay",
     )
+
+
+def welded_pairs(copies, kept):
+    """The cage vertices welded into another one's control point, as "copy:kept" pairs joined by commas.
+
+    Parameters
+    ----------
+    copies : (n_input,) int array
+        Each input cage vertex's index in the Blender cage.
+    kept : (n_input,) int array
+        The Blender cage vertex the deformer reads for that vertex's control point.
+    """
+    apart = copies != kept
+    return ",".join(f"{copy}:{keep}" for copy, keep in zip(copies[apart].tolist(), kept[apart].tolist()))
 
 
 def printed_progress():
@@ -145,6 +160,7 @@ def solve(request, progress=None, cancel=None):
         outside=int(np.count_nonzero(binding.outside)),
         core_fingerprint=binding.cage.fingerprint(),
         warnings=list(binding.cage.warnings),
+        welded=welded_pairs(column_base, column_vertex[binding.cage.vertex_map]),
         seconds=time.perf_counter() - start,
         binding=binding,
         rebind=binding.options.get("rebind", ""),

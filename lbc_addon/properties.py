@@ -114,6 +114,8 @@ class LBC_PG_binding(BindOptions, bpy.types.PropertyGroup):
     mesh_vertex_count: IntProperty(name="Mesh Vertices", description="The mesh's vertex count at bind time")
     cage_topology: StringProperty(name="Cage Topology", description="Fingerprint of the cage's topology at bind time")
     core_fingerprint: StringProperty(name="Core Fingerprint", description="lbc_core's fingerprint of the welded cage")
+    welded: StringProperty(name="Welded", description="Cage vertices that were one point at bind time, as copy:kept "
+                           "pairs: the deformer reads the kept one, so the copies must stay with it")
     control_points: IntProperty(name="Control Points", description="Cage vertices after welding duplicates")
     slots: IntProperty(name="Slots", description="K: the largest number of cage vertices moving one mesh vertex")
     mean_influences: FloatProperty(name="Mean Influences")

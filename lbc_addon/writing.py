@@ -60,6 +60,7 @@ def _store_settings(settings, request, result, cage_obj, group):
     settings.mesh_vertex_count = len(request.points)
     settings.cage_topology = request.cage_topology
     settings.core_fingerprint = result.core_fingerprint
+    settings.welded = result.welded
     settings.control_points = result.control_points
     settings.slots = result.index.shape[1]
     settings.mean_influences = float(np.count_nonzero(result.weight, axis=1).mean()) if len(result.weight) else 0.0

@@ -364,3 +364,27 @@ def test_with_an_event_loop_the_deleted_cage_is_removed_by_a_timer_outside_the_h
     assert timers[0]() is None  # run once, not again
     assert "Cage" not in bpy.data.objects
     assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
+
+
+def test_welded_cage_vertices_posed_apart_stop_the_deformer_until_they_meet_again():
+    """Two cage vertices at one point are one control point; the deformer reads the first, so moving the other alone
+    would be ignored: the add-on stops the deformer and says so, as ``lbc deform`` refuses such a pose."""
+    from blender_scenes import CAGE_MATRIX, bind, mesh_object, sphere_in_box_scene
+
+    mesh, box = sphere_in_box_scene()
+    corners = [list(v.co) for v in box.data.vertices] + [list(box.data.vertices[7].co)]
+    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 8, 3]]
+    world = np.array(corners) @ np.array(CAGE_MATRIX)[:3, :3].T + np.array(CAGE_MATRIX)[:3, 3]
+    cage = mesh_object("Welded", world, faces, CAGE_MATRIX)
+    bpy.data.objects.remove(box)
+    assert bind(mesh, cage, cells=600) == {"FINISHED"}
+    assert mesh.lbc.welded == "8:7"
+    cage.data.vertices[8].co.x += 0.5
+    cage.data.update()
+    evaluated_positions(mesh)
+    assert mesh.lbc.state == "STOPPED" and "Cage vertices 8 and 7 of 'Welded' were one point" in mesh.lbc.status
+    assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
+    cage.data.vertices[8].co.x -= 0.5
+    cage.data.update()
+    evaluated_positions(mesh)
+    assert mesh.lbc.state == "FOLLOWING"
