@@ -158,7 +158,7 @@ def _run_bind(args):
 
 def _run_deform(args):
     from .binding import load_binding
-    from .io import FORMATS, check_output, planar, read_mesh, write_mesh
+    from .io import FORMATS, check_output, planar, read_mesh, write_mesh, write_posed_obj
 
     check_output(args.output, FORMATS)
     if args.plot:
@@ -184,7 +184,10 @@ def _run_deform(args):
     start = time.perf_counter()
     deformed = binding.deform(new_vertices)
     seconds = time.perf_counter() - start
-    write_mesh(args.output, deformed, faces)
+    if args.mesh and Path(args.mesh).suffix.lower() == Path(args.output).suffix.lower() == ".obj":
+        write_posed_obj(args.mesh, args.output, deformed)  # its UVs, groups and materials kept
+    else:
+        write_mesh(args.output, deformed, faces)
     if args.plot:
         _plots().plot_deformation(binding, new_vertices, args.plot)
     figures = {"output": str(args.output), "points": int(len(deformed)), "deform_seconds": seconds}

@@ -149,6 +149,48 @@ def write_mesh(path, vertices, faces=None):
         meshio.ply.write(handle, meshio.Mesh(vertices, _cell_blocks(faces)))
 
 
+def write_posed_obj(template, path, vertices):
+    """Write an OBJ mesh as the OBJ file ``template`` with its vertices moved to ``vertices``: texture coordinates,
+    objects, groups, materials and smoothing kept line for line.
+
+    Vertex normals (``vn``, and the normal index of each face corner) are left out: they were the rest pose's, and
+    importers recompute them.
+
+    Parameters
+    ----------
+    template : str or Path
+        The OBJ file the positions belong to (the mesh that was bound).
+    path : str or Path
+    vertices : (m, 3) float array
+        One position per ``v`` line of ``template``, in order.
+
+    Raises
+    ------
+    CageError
+        When ``template`` has another number of vertices, or ``path`` cannot be written.
+    """
+    vertices = np.asarray(vertices, dtype=float)
+    lines, count = [], 0
+    with open(template, encoding="utf-8", errors="replace") as handle:
+        for line in handle:
+            words = line.split("#", 1)[0].split()
+            if words and words[0] == "v":
+                if count < len(vertices):
+                    x, y, z = vertices[count].tolist()
+                    line = " ".join(["v", repr(x), repr(y), repr(z), *words[4:]]) + "\n"
+                count += 1
+            elif words and words[0] == "vn":
+                continue
+            elif words and words[0] == "f":
+                line = " ".join(["f", *("/".join(word.split("/")[:2]).rstrip("/") for word in words[1:])]) + "\n"
+            lines.append(line)
+    if count != len(vertices):
+        raise CageError(f"{template} has {count} vertices, not the {len(vertices)} positions given: give the mesh that "
+                        "was bound")
+    with writing(path) as handle:
+        handle.write("".join(lines).encode("utf-8"))
+
+
 def check_output(path, formats=None):
     """Refuse, before any long work, an output path that cannot be written.
 

@@ -349,3 +349,18 @@ def test_a_flat_cage_with_faces_binds_in_2d_as_in_blender(tmp_path, capsys):
     command_line = np.zeros_like(blender)
     command_line[:, flat.loop[binding.control_input_index]] = binding.weights.toarray()
     np.testing.assert_allclose(blender, command_line, atol=1e-6)
+
+
+def test_deform_of_an_obj_mesh_keeps_its_uvs(tmp_path, capsys):
+    clothing = DATA / "cages-3d" / "clothing"
+    binding, posed = tmp_path / "cloth.npz", tmp_path / "posed.obj"
+    assert run(capsys, "bind", clothing / "cage.obj", clothing / "mesh.obj", "-o", binding, "--cells", 2000)[0] == 0
+    assert run(capsys, "deform", binding, clothing / "cage_deformed.obj", "--mesh", clothing / "mesh.obj",
+               "-o", posed)[0] == 0
+    rest_lines, posed_lines = (path.read_text().splitlines() for path in (clothing / "mesh.obj", posed))
+    uvs = [line for line in rest_lines if line.startswith("vt ")]
+    assert uvs and uvs == [line for line in posed_lines if line.startswith("vt ")]
+    assert [line.split()[1].split("/")[:2] for line in posed_lines if line.startswith("f ")][:3] == \
+        [line.split()[1].split("/")[:2] for line in rest_lines if line.startswith("f ")][:3]
+    vertices, _ = read_mesh(posed)
+    assert not np.allclose(vertices, read_mesh(clothing / "mesh.obj")[0])

@@ -9,7 +9,7 @@ import pytest
 
 from lbc_core.cage import make_cage
 from lbc_core.errors import CageError
-from lbc_core.io import FORMATS, check_output, read_cage, read_mesh, write_mesh
+from lbc_core.io import FORMATS, check_output, read_cage, read_mesh, write_mesh, write_posed_obj
 
 DATA = Path(__file__).parent / "data"
 GARGOYLE = DATA / "cages-3d" / "gargoyle"
@@ -138,3 +138,19 @@ def test_a_full_disk_is_reported_as_such(tmp_path, suffix):
     full.symlink_to("/dev/full")
     with pytest.raises(CageError, match="the disk is full"):
         write_mesh(full, CUBE, MIXED_FACES)
+
+
+def test_a_posed_obj_keeps_the_template_s_uvs_groups_and_materials_without_its_rest_normals(tmp_path):
+    template = tmp_path / "rest.obj"
+    template.write_text("# made by hand\nmtllib body.mtl\no Body\nv 0 0 0\nv 1 0 0 0.5 0.5 0.5\nv 0 1 0\n"
+                        "vt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\nusemtl skin\ns 1\nf 1/1/1 2/2/1 3/3/1\nf 1//1 2//1 3//1\n")
+    posed = np.array([[0.0, 0.0, 1.0], [2.0, 0.0, 1.0], [0.0, 2.0, 1.0]])
+    write_posed_obj(template, tmp_path / "posed.obj", posed)
+    text = (tmp_path / "posed.obj").read_text()
+    assert text.splitlines() == ["# made by hand", "mtllib body.mtl", "o Body", "v 0.0 0.0 1.0",
+                                 "v 2.0 0.0 1.0 0.5 0.5 0.5", "v 0.0 2.0 1.0", "vt 0 0", "vt 1 0", "vt 0 1",
+                                 "usemtl skin", "s 1", "f 1/1 2/2 3/3", "f 1 2 3"]
+    vertices, faces = read_mesh(tmp_path / "posed.obj")
+    np.testing.assert_array_equal(vertices, posed)
+    with pytest.raises(CageError, match="has 3 vertices, not the 2 positions given"):
+        write_posed_obj(template, tmp_path / "other.obj", posed[:2])
