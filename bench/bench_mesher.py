@@ -50,6 +50,12 @@ SHORT = 5.0
 REPEATS = 3
 
 
+def middle_points(vertices, rng, count=1000):
+    """(count, 3) points spread uniformly over the middle half of the cage's bounding box, in each direction."""
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    return 0.5 * (low + high) + 0.25 * (high - low) * rng.uniform(-1.0, 1.0, (count, 3))
+
+
 def main():
     cells = int(sys.argv[1]) if len(sys.argv) > 1 else meshing.DEFAULT_CELLS_3D
     rng = np.random.default_rng(0)
@@ -61,8 +67,7 @@ def main():
             vertices, faces = read_cage(name)
         else:
             vertices, faces = cage_corpus.variant(*cage_corpus.load(name), kind)
-        low, high = vertices.min(axis=0), vertices.max(axis=0)
-        points = 0.5 * (low + high) + 0.25 * (high - low) * rng.uniform(-1.0, 1.0, (1000, 3))
+        points = middle_points(vertices, rng)
         cage = lbc_core.make_cage(vertices, faces)
         alone, total, share = [], [], []
         while len(total) < (REPEATS if not total or total[0] < SHORT else 1):

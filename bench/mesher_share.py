@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests"), str(ROOT / "bench")]
 
 import cage_corpus  # noqa: E402
 import lbc_core  # noqa: E402
+from bench_mesher import middle_points  # noqa: E402
 from lbc_core import meshing  # noqa: E402
 
 REPEATS = 3
@@ -37,8 +38,7 @@ def main():
             continue
         for kind in variants:
             vertices, faces = cage_corpus.variant(*made, kind)
-            low, high = vertices.min(axis=0), vertices.max(axis=0)
-            points = 0.5 * (low + high) + 0.25 * (high - low) * rng.uniform(-1.0, 1.0, (1000, 3))
+            points = middle_points(vertices, rng)
             seconds, meshed = [], []
             for _ in range(REPEATS):
                 clock = time.perf_counter()
