@@ -7,6 +7,7 @@ relative mode).
 
 import hashlib
 
+import bpy
 import numpy as np
 
 from .core import CageError, flatten
@@ -112,8 +113,6 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
 
 def find_object(uid):
     """The object with this ``session_uid``, or None once it was deleted."""
-    import bpy
-
     for obj in bpy.data.objects:
         if obj.session_uid == uid:
             return obj

@@ -2,6 +2,7 @@
 transaction; and taking a binding out again (Unbind).
 """
 
+import bpy
 import numpy as np
 
 from . import deformer, geometry, influence, jobs, storage
@@ -79,8 +80,6 @@ class _SavedBinding:
     """
 
     def __init__(self, mesh_obj):
-        import bpy
-
         mesh = mesh_obj.data
         self.attributes = storage.copy_attributes(mesh, storage.binding_names(mesh) + [influence.ATTRIBUTE_NAME])
         self.active_color = mesh.color_attributes.active_color_name
@@ -93,8 +92,6 @@ class _SavedBinding:
         self.settings = _settings_values(mesh_obj.lbc) if mesh_obj.is_property_set("lbc") else None
 
     def restore(self, mesh_obj):
-        import bpy
-
         for modifier in list(mesh_obj.modifiers):
             if modifier.name not in self.modifiers:
                 deformer.remove_modifier(mesh_obj, modifier)
@@ -148,8 +145,6 @@ def remove(mesh_obj):
 
 def shared_with(mesh_obj):
     """The other bound objects using ``mesh_obj``'s mesh data (linked duplicates)."""
-    import bpy
-
     if mesh_obj.data.users < 2:
         return []
     return [obj for obj in bpy.data.objects if obj != mesh_obj and obj.data == mesh_obj.data and is_bound(obj)]
