@@ -1,6 +1,7 @@
 """Issue 12's figures, measured in one process: smoothness on the bent capsule, and where speed and locality stand.
 
-    .venv/bin/python bench/smoothness.py [--capsule] [--addon] [--speed] [--l08] [--iterations]  (no flag: --capsule)
+    .venv/bin/python bench/smoothness.py [--capsule] [--addon] [--speed] [--l08] [--iterations] [--tolerance]
+                                         (no flag: --capsule)
 
 --capsule     the issue's table on the capsule scene (bench/capsule.py): LBC at 8000 cells (the default, smoothed)
               and the same solve evaluated piecewise linearly, LBC at 32000 cells both ways, Mesh Deform precision 5
@@ -12,6 +13,10 @@
               subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process.
 --l08         item 3: gargoyle cage L08 (168 control points) at 8000 and 32000 cells.
 --iterations  item 4: iterations of every gargoyle cage at the default resolution.
+--tolerance   the 3D stopping tolerance as a lever of item 2: for the capsule and gargoyle cages L10 and L12, binds
+              stopped at several tolerances against a tight one (1e-5): iterations, solve seconds, objective, the
+              deformation's distance from the tight one over three poses, set against what remeshing alone changes
+              (8000 against 9000 cells, same poses), and the capsule's kinks.
 --picture P   renders the bent capsule with LBC (smooth), Mesh Deform and LBC evaluated piecewise linearly side by
               side into the PNG file P (Workbench, smooth shading, a striped reflection that bends at every crease).
 """
@@ -217,6 +222,52 @@ def bench_iterations():
     print(f"median {median:.0f} iterations; most: {worst} with {found[worst]} ({found[worst] / median:.2f}× the median)")
 
 
+def twisted_poses(cage, count=3, seed=0):
+    """``count`` poses of a cage (n, 3): a 30° twist about its z extent plus seeded noise of 3 % of its diagonal per
+    vertex."""
+    rng = np.random.default_rng(seed)
+    centre, low, height = cage.mean(axis=0), cage[:, 2].min(), np.ptp(cage[:, 2])
+    angle = np.radians(30) * (cage[:, 2] - low) / height
+    x, y = cage[:, 0] - centre[0], cage[:, 1] - centre[1]
+    twisted = np.stack([centre[0] + x * np.cos(angle) - y * np.sin(angle),
+                        centre[1] + x * np.sin(angle) + y * np.cos(angle), cage[:, 2]], axis=1)
+    diagonal = np.linalg.norm(np.ptp(cage, axis=0))
+    return [twisted + 0.03 * diagonal * rng.standard_normal(cage.shape) for _ in range(count)]
+
+
+def bench_tolerance(tolerances=(1e-4, 2e-4, 2.5e-4, 3e-4)):
+    mesh, mesh_faces = capsule.capsule()
+    scenes = [("capsule", *capsule.cage(), mesh, mesh_faces)]
+    points, _ = read_mesh(GARGOYLE / "mesh.off")
+    scenes += [(f"gargoyle {level}", *read_cage(GARGOYLE / f"cage_{level}.obj"), points, None)
+               for level in ("L10", "L12")]
+    print("| scene | tolerance | iterations | solve | objective above the tight one "
+          "| deformation from the tight one / diagonal | capsule kinks p99 / max |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for name, cage, cage_faces, scene_points, faces in scenes:
+        poses = twisted_poses(cage)
+        diagonal = np.linalg.norm(np.ptp(cage, axis=0))
+
+        def distance(binding, reference):
+            return max(np.linalg.norm(binding.deform(pose) - reference.deform(pose), axis=1).max()
+                       for pose in poses) / diagonal
+
+        tight = lbc_core.bind(cage, cage_faces, scene_points, tolerance=1e-5)
+        finer = lbc_core.bind(cage, cage_faces, scene_points, tolerance=1e-5, cells=9000)
+        print(f"| {name} | 1e-05 (tight) | {tight.iterations} | {tight.timings['solve']:.2f} s | — "
+              f"| remeshed at 9000 cells: {distance(finer, tight):.2e} | — |", flush=True)
+        for tolerance in tolerances:
+            binding = lbc_core.bind(cage, cage_faces, scene_points, tolerance=tolerance)
+            kinks = "—"
+            if faces is not None:
+                figures = capsule.kink_figures(scene_points, binding.deform(capsule.bend(cage)), faces)
+                kinks = f"{figures['p99']:.2f}° / {figures['max']:.2f}°"
+            print(f"| | {tolerance:g} | {binding.iterations} | {binding.timings['solve']:.2f} s | "
+                  f"{binding.objective / tight.objective - 1:.1e} | {distance(binding, tight):.2e} | {kinks} |",
+                  flush=True)
+    print(f"  ({load()})")
+
+
 def render_picture(path):
     """The bent capsule deformed by the three evaluations side by side, rendered with a striped matcap."""
     import bpy
@@ -264,7 +315,7 @@ def render_picture(path):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for flag in ("capsule", "addon", "speed", "l08", "iterations"):
+    for flag in ("capsule", "addon", "speed", "l08", "iterations", "tolerance"):
         parser.add_argument(f"--{flag}", action="store_true")
     parser.add_argument("--settings", default="0:0,1e-12:0,0.002:0,0.01:0,0.005:12,0.005:16",
                         help="--addon: comma-separated Threshold:Max Influences settings (0:0 is the defaults, "
@@ -273,7 +324,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.picture:
         render_picture(args.picture)
-    elif not (args.addon or args.speed or args.l08 or args.iterations):
+    elif not (args.addon or args.speed or args.l08 or args.iterations or args.tolerance):
         args.capsule = True
     if args.capsule:
         bench_capsule()
@@ -285,6 +336,8 @@ def main(argv=None):
         bench_l08()
     if args.iterations:
         bench_iterations()
+    if args.tolerance:
+        bench_tolerance()
 
 
 if __name__ == "__main__":
