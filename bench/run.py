@@ -30,15 +30,19 @@ def machine():
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
-def bench_3d(level):
-    """Bind the gargoyle mesh to one cage in a child process; return its stage times, counts and peak memory."""
+def bench_3d(level, cells=None, cage_path=None):
+    """Bind the gargoyle mesh to one cage in a child process; return its stage times, counts and peak memory.
+
+    ``level`` names a gargoyle cage (``cage_path`` another OBJ cage instead); ``cells`` None is the default
+    resolution."""
+    cage_path = cage_path or GARGOYLE / f"cage_{level}.obj"
     script = f"""
 import json, resource, time, numpy as np, lbc_core
 from lbc_core.io import read_cage, read_mesh
-cage, faces = read_cage({str(GARGOYLE / f"cage_{level}.obj")!r})
+cage, faces = read_cage({str(cage_path)!r})
 points, _ = read_mesh({str(GARGOYLE / "mesh.off")!r})
 start = time.perf_counter()
-b = lbc_core.bind(cage, faces, points)
+b = lbc_core.bind(cage, faces, points, cells={cells!r})
 total = time.perf_counter() - start
 counts = b.influence_counts()
 print(json.dumps({{"n": b.cage.n_control_points, "cells": len(b.domain.cells), "total": total, "stages": b.timings,

@@ -1,0 +1,119 @@
+"""Issue 12, item 3: how a bind's time and peak memory grow with the control points and with the cells.
+
+    .venv/bin/python bench/scaling.py [--picture PATH] [--quick]
+
+The gargoyle mesh (2674 points) bound to its cages L12 (27 control points), L10 (67), L08 (168) and L09 with every
+triangle split in four at its edges' midpoints (418 control points, the same shape), at 4000 to 128,000 cells
+asked; each bind in a child process, so its peak resident memory is its own (`bench/run.py`'s ``bench_3d``). A bind
+the memory check would refuse on this machine is skipped and said so. Prints a table and the exponents of a
+least-squares fit time ∝ cells^a · n^b (and the same for memory), and draws both against cells, one line per cage,
+on log-log axes into PATH (default out/scaling.png).
+"""
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.run import GARGOYLE, bench_3d  # noqa: E402
+from lbc_core.errors import CageError  # noqa: E402
+from lbc_core.io import read_cage  # noqa: E402
+from lbc_core.solver import check_memory  # noqa: E402
+
+# (cage, cell counts asked): the larger cages stop where a bind would take many minutes on this 2-core machine.
+PLAN = [("L12", (4000, 8000, 16000, 32000, 64000, 128000)), ("L10", (4000, 8000, 16000, 32000, 64000)),
+        ("L08", (4000, 8000, 16000, 32000)), ("L09 split", (4000, 8000, 16000))]
+QUICK_PLAN = [("L12", (4000, 8000)), ("L10", (4000, 8000))]
+
+
+def split_cage(path, out):
+    """Write the triangle cage at ``path`` with every triangle split in four at its edges' midpoints to ``out``.
+
+    Returns the number of vertices written."""
+    vertices, faces = read_cage(path)
+    faces = np.asarray(faces)
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+    middle = len(vertices) + inverse.reshape(3, -1).T  # (F, 3): the midpoints of edges 01, 12, 20
+    vertices = np.vstack([vertices, vertices[unique].mean(axis=1)])
+    a, b, c = faces.T
+    ab, bc, ca = middle.T
+    split = np.concatenate([np.stack(corners, axis=1) for corners in
+                            ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    with open(out, "w") as file:
+        file.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in vertices)
+        file.writelines(f"f {i + 1} {j + 1} {k + 1}\n" for i, j, k in split)
+    return len(vertices)
+
+
+def fit(rows, key):
+    """Exponents (a, b) of ``key`` ≈ C · cells^a · n^b, least squares in log space."""
+    design = np.array([[1.0, np.log(r["cells"]), np.log(r["n"])] for r in rows])
+    values = np.log([r[key] for r in rows])
+    coefficients, *_ = np.linalg.lstsq(design, values, rcond=None)
+    return coefficients[1], coefficients[2]
+
+
+def draw(rows, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for name in dict.fromkeys(r["cage"] for r in rows):
+        own = [r for r in rows if r["cage"] == name]
+        label = f"{name} ({own[0]['n']} control points)"
+        axes[0].loglog([r["cells"] for r in own], [r["total"] for r in own], "o-", label=label)
+        axes[1].loglog([r["cells"] for r in own], [r["peak_mb"] for r in own], "o-", label=label)
+    axes[0].set(xlabel="tetrahedra", ylabel="bind time (s)", title="Bind time")
+    axes[1].set(xlabel="tetrahedra", ylabel="peak resident memory (MB)", title="Peak memory")
+    for axis in axes:
+        axis.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    print(f"wrote {path}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--picture", type=Path, default=ROOT / "out" / "scaling.png")
+    parser.add_argument("--quick", action="store_true", help="two small cages at two resolutions (a smoke run)")
+    args = parser.parse_args(argv)
+    print(f"load average {os.getloadavg()[0]:.1f}")
+    print("| cage | control points | tetrahedra | bind s | solve s | iterations | peak memory |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        split_path = Path(folder) / "cage_L09_split.obj"
+        n_split = split_cage(GARGOYLE / "cage_L09.obj", split_path)
+        for name, cell_counts in (QUICK_PLAN if args.quick else PLAN):
+            path = split_path if name == "L09 split" else GARGOYLE / f"cage_{name}.obj"
+            n = n_split if name == "L09 split" else len(read_cage(path)[0])
+            for cells in cell_counts:
+                try:
+                    check_memory(n, cells, 3)
+                except CageError as error:
+                    print(f"| {name} | {n} | {cells} asked | refused: {error} | | | |", flush=True)
+                    continue
+                r = bench_3d(name, cells=cells, cage_path=path)
+                rows.append(dict(r, cage=name))
+                print(f"| {name} | {r['n']} | {r['cells']} | {r['total']:.1f} | {r['stages']['solve']:.1f} "
+                      f"| {r['iterations']} | {r['peak_mb']:.0f} MB |", flush=True)
+    for key, what in (("total", "bind time"), ("peak_mb", "peak memory")):
+        a, b = fit(rows, key)
+        print(f"{what} ∝ cells^{a:.2f} · control points^{b:.2f}")
+    print(f"load average {os.getloadavg()[0]:.1f}")
+    draw(rows, args.picture)
+
+
+if __name__ == "__main__":
+    main()
