@@ -860,11 +860,12 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         early_check_done = False
         first_distance = first_distance or max(distance, 1.0 + 1e-9)
         # Residuals fall roughly geometrically: show the share of the way, in log scale, to the tolerance.
-        fraction = max(fraction, iteration / max_iterations,
-                       min(0.99, np.log(first_distance / distance) / np.log(first_distance)))
-        # The time left, from the seconds per iteration so far and the share of the way done.
+        by_residual = min(0.99, np.log(first_distance / distance) / np.log(first_distance))
+        fraction = max(fraction, iteration / max_iterations, by_residual)
+        # The time left, from the seconds per iteration so far and the share of the way done; none until the
+        # residual has fallen since the first check (the share of the iteration limit alone said "10 min" for 2 s).
         elapsed = time.perf_counter() - started
-        left = f", {_remaining(elapsed * (1 - fraction) / fraction)}" if fraction > 0 else ""
+        left = f", {_remaining(elapsed * (1 - fraction) / fraction)}" if by_residual > 0 else ""
         progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
     # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries faint
     # tails there until full convergence. Both go back unscaled.

@@ -91,3 +91,12 @@ def test_the_forecast_tells_memory_and_time_before_a_solve():
     large = solve_forecast(1002, 8000, 3)
     assert f"{estimate_memory(1002, 8000, 3) / 2**30:.1f} GiB of memory and roughly" in large and " min" in large
     assert "beyond an hour" in solve_forecast(2000, 64000, 3)
+
+
+def test_progress_says_the_time_left_once_the_residual_has_fallen():
+    messages = []
+    solve_pack(load_pack("woody"), progress=lambda fraction, message: messages.append(message))
+    admm = [message for message in messages if message.startswith("ADMM iteration")]
+    # The first check has nothing to extrapolate from (it used to say minutes for a solve of a second).
+    assert "left" not in admm[0]
+    assert all("left" in message for message in admm[1:]) and len(admm) > 2
