@@ -392,7 +392,18 @@ def input_property(modifier, identifier):
 
 def input_identifier(modifier, name):
     """The socket identifier of the modifier's input called ``name``, or None when its node group has none."""
-    return next((item.identifier for item in _input_items(modifier.node_group) if item.name == name), None)
+    return next((item.identifier for item in modifier.node_group.interface.items_tree
+                 if item.item_type == "SOCKET" and item.in_out == "INPUT" and item.name == name), None)
+
+
+def is_enabled(modifier):
+    """Whether the modifier's "Enabled" input is on (True when its node group has none). Read alone, as the
+    depsgraph handler does after every cage edit: :func:`inputs` reads every input."""
+    identifier = input_identifier(modifier, "Enabled") if modifier.node_group is not None else None
+    if identifier is None:
+        return True
+    data, name = input_property(modifier, identifier)
+    return bool(data[identifier] if name.startswith("[") else getattr(data, name))
 
 
 def _input_items(group):
@@ -445,7 +456,7 @@ def set_enabled(mesh_obj, enabled):
     modifier = find_modifier(mesh_obj)
     if modifier is None:
         return False
-    if bool(inputs(modifier).get("Enabled", True)) == enabled:
+    if is_enabled(modifier) == enabled:
         return False
     set_inputs(modifier, {"Enabled": enabled})
     mesh_obj.update_tag()
@@ -535,7 +546,7 @@ def diagnose(mesh_obj, depsgraph):
         )
     # What only the modifier sees: e.g. a modifier above it that changes the vertex count (Blender 4.3 and newer).
     # While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone by now.
-    warnings = getattr(modifier, "node_warnings", ()) if inputs(modifier).get("Enabled", True) else ()
+    warnings = getattr(modifier, "node_warnings", ()) if is_enabled(modifier) else ()
     for warning in warnings:
         if warning.message.startswith("LBC: "):
             return "modifier error", warning.message[len("LBC: "):].capitalize()
