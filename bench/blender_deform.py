@@ -1,7 +1,7 @@
 """Per-frame cost of the LBC deformer against Blender's Mesh Deform on the same mesh, cage and poses.
 
     PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
-        [--thin 0.002:0,0.005:12] [--sums chain,fma,fma-vector] [--reference-cells 16000]
+        [--thin 0.002:0,0.005:12,0.005:0:0] [--sums chain,fma,fma-vector] [--reference-cells 16000]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
@@ -13,7 +13,8 @@ rounds, the lower and upper quartiles, and the load average before and after.
 Scenes: Suzanne subdivided to 48,612 vertices in a 56-vertex box cage, and the demo's gargoyle (two Catmull-Clark
 levels: 64,130 vertices) in its 67-vertex cage L10. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
 the add-on's defaults, LBC with every weight (bound with a threshold of 1e-12: nothing thinned), LBC with every
-weight thinned by other thresholds and caps (``--thin floor:cap``; see :func:`lbc_core.thinning.thin_weights`), and
+weight thinned by other thresholds and caps (``--thin floor:cap[:rise]``, rise the floor's rise with the weights'
+spread, the default's when left out, 0 a constant floor; see :func:`lbc_core.thinning.thin_weights`), and
 LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`). ``--reference-cells`` also
 prints how far the binding with every weight is from a finer one: the yardstick for the error thinning makes.
 """
@@ -41,7 +42,7 @@ from blender_scenes import (  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
 from lbc_addon import api, deformer, storage  # noqa: E402
-from lbc_core.thinning import thin_weights  # noqa: E402
+from lbc_core.thinning import SPREAD_RISE, thin_weights  # noqa: E402
 
 EVERY_WEIGHT = 1e-12  # a Threshold that thins nothing
 
@@ -90,7 +91,7 @@ def copy_object(mesh, name):
 
 
 def lbc_variant(bound, cage, name, thinning=None, sum_form=None):
-    """A copy of the bound mesh deformed by LBC, its weights thinned by ``thinning`` = (floor, cap) (None: as
+    """A copy of the bound mesh deformed by LBC, its weights thinned by ``thinning`` = (floor, cap, rise) (None: as
     bound; see :func:`lbc_core.thinning.thin_weights`), its weighted sum built as ``sum_form`` (see
     :func:`rebuild_sum`; None: the add-on's)."""
     obj = copy_object(bound, name)
@@ -271,9 +272,9 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells):
         bpy.context.scene.collection.objects.unlink(fine)
         compare(f"LBC {reference_cells} cells", mesh, "the default resolution's")
         del variants[f"LBC {reference_cells} cells"]
-    for floor, cap in thinnings:
-        key = f"LBC thin {floor:g}:{cap}"
-        variants[key] = lbc_variant(mesh, cage, key, (floor, cap))
+    for floor, cap, rise in thinnings:
+        key = f"LBC thin {floor:g}:{cap}:{rise:g}"
+        variants[key] = lbc_variant(mesh, cage, key, (floor, cap, rise))
         compare(key, mesh, "every weight")
         print(f"    (K = {storage.slot_count(variants[key].data)} after thinning)")
     for form in sum_forms:  # at every weight, and as bound by default
@@ -292,13 +293,19 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells):
         print(f"  {variant:26}{columns}")
 
 
+def thinning(text):
+    """(floor, cap, rise) from "floor:cap" or "floor:cap:rise" (rise left out: the default's)."""
+    fields = text.split(":")
+    return float(fields[0]), int(fields[1]), float(fields[2]) if len(fields) > 2 else SPREAD_RISE
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=31, help="timed frames per variant (interleaved rounds)")
     parser.add_argument("--scenes", default="suzanne,gargoyle")
     parser.add_argument("--thin", default="",
-                        help="comma-separated floor:cap thinnings of every weight to measure besides the default "
-                        "(see lbc_core.thinning.thin_weights), e.g. 0.002:0,0.005:12")
+                        help="comma-separated floor:cap[:rise] thinnings of every weight to measure besides the "
+                        "default (see lbc_core.thinning.thin_weights), e.g. 0.002:0,0.005:12,0.005:0:0")
     parser.add_argument("--sums", default="",
                         help="comma-separated other shapes of the weighted sum: chain,fma,fma-vector")
     parser.add_argument("--reference-cells", type=int, default=0,
@@ -306,7 +313,7 @@ def main(argv=None):
     parser.add_argument("--precision", type=int, default=5, help="Mesh Deform precision")
     args = parser.parse_args(argv)
     register_addon()
-    thinnings = [(float(value.split(":")[0]), int(value.split(":")[1])) for value in args.thin.split(",") if value]
+    thinnings = [thinning(value) for value in args.thin.split(",") if value]
     for name in args.scenes.split(","):
         run_scene(name, thinnings, [form for form in args.sums.split(",") if form], args.frames, args.precision,
                   args.reference_cells)

@@ -8,6 +8,11 @@ at 0, so a weight enters and leaves at exactly 0; then partition of unity and re
 closest weights in the Kullback–Leibler sense, w''_j = w'_j exp(λ · (c_j − x, 1)) (d + 1 unknowns per point, a few
 Newton steps), which keeps zeros at zero, stays positive and is smooth in w'. τ is a constant (the floor), smooth in
 the point; a cap on the count raises τ to the (K+1)-th largest weight, continuous but only piecewise smooth.
+
+Where a point's weights reach far, τ rises with their spread s = √(Σ w_j |c_j − x|²) (a fraction of the controls'
+extent, smooth in the point): deep inside a large cage many control points weigh about the same and the coordinates
+vary slowly, so a weight that fades out there bends a surface little. Points whose spread stays below
+:data:`SPREAD_ONSET` (issue 12's capsule: all of them) keep the constant floor.
 """
 
 import numpy as np
@@ -19,6 +24,13 @@ from .progress import Progress
 # Default floor: the largest that keeps issue 12's capsule no more creased than Mesh Deform (bench/RESULTS.md).
 DEFAULT_FLOOR = 0.005
 
+# Where the floor starts to rise: the spread, as a fraction of the controls' extent, above the capsule's largest
+# (0.129); Suzanne deep in its box cage reaches 0.26, the demo gargoyle 0.15 (bench/RESULTS.md, "Blender deformer").
+SPREAD_ONSET = 0.13
+# τ = floor · (1 + rise · max(0, s / onset − 1)²): continuously differentiable in s. 2 takes Suzanne's deformer from 17
+# slots to 15 within the discretisation yardstick; higher rises are undone by the relaxations (RESULTS).
+SPREAD_RISE = 2.0
+
 # Rows thinned between two cancel polls (about 0.1 s each).
 ROWS_PER_CHUNK = 8192
 
@@ -28,7 +40,8 @@ ROWS_PER_CHUNK = 8192
 RELAXATIONS = 12
 
 
-def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influences=0, progress=None, cancel=None):
+def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influences=0, spread_rise=SPREAD_RISE,
+                 progress=None, cancel=None):
     """Each point's weights lowered by a threshold and clamped at 0, then made to sum to 1 and reproduce it again.
 
     Parameters
@@ -43,6 +56,9 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
         τ, subtracted from every weight (weights are fractions of 1; 0 keeps every weight).
     max_influences : int
         K > 0: τ is at least each point's (K+1)-th largest weight, so at most K weights stay; 0: no cap.
+    spread_rise : float
+        How fast the floor rises with the weights' spread beyond :data:`SPREAD_ONSET` (:func:`spread_floors`);
+        0 keeps it constant.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
         Polled between chunks of :data:`ROWS_PER_CHUNK` rows; True stops with :class:`lbc_core.Cancelled`.
@@ -63,11 +79,11 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     for start in range(0, weights.shape[0], ROWS_PER_CHUNK):
         progress(start / weights.shape[0], "thinning the weights")
         chunks.append(_thin_rows(weights[start:start + ROWS_PER_CHUNK], controls,
-                                 positions[start:start + ROWS_PER_CHUNK], floor, max_influences))
+                                 positions[start:start + ROWS_PER_CHUNK], floor, max_influences, spread_rise))
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
 
 
-def _thin_rows(weights, controls, positions, floor, max_influences):
+def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise):
     """:func:`thin_weights` on one chunk of rows."""
     values, columns = padded_rows(weights)
     order = np.argsort(-values, axis=1, kind="stable")
@@ -76,7 +92,7 @@ def _thin_rows(weights, controls, positions, floor, max_influences):
     extent = float(np.linalg.norm(np.ptp(controls, axis=0))) if len(controls) else 1.0
     thinned = values.copy()  # rows that never reproduce keep their input
     pending = np.arange(len(values))
-    floors = np.full(len(values), float(floor))
+    floors = spread_floors(values, controls[columns], positions, extent, floor, spread_rise)
     caps = np.full(len(values), int(max_influences))
     for _ in range(RELAXATIONS + 1):
         if not len(pending):
@@ -88,6 +104,31 @@ def _thin_rows(weights, controls, positions, floor, max_influences):
         floors[pending] /= 4
         caps[pending] += caps[pending] > 0
     return csr_from_padded(thinned, columns, weights.shape[1])
+
+
+def spread_floors(values, slot_controls, positions, extent, floor, rise=SPREAD_RISE):
+    """Each row's floor: ``floor``, raised smoothly where its weights reach far from the point.
+
+    τ = floor · (1 + rise · max(0, s / SPREAD_ONSET − 1)²), s = √(Σ_j w_j |c_j − x|²) / extent.
+
+    Parameters
+    ----------
+    values : (m, L) float array
+        Each row's weights (zero-padded), summing to 1.
+    slot_controls : (m, L, d) float array
+        The control point of each slot.
+    positions : (m, d) float array
+    extent : float
+        Length scale of the controls (their bounding box diagonal).
+    floor, rise : float
+
+    Returns
+    -------
+    (m,) float array
+    """
+    squared = np.einsum("mk,mk->m", values, ((slot_controls - positions[:, None, :]) ** 2).sum(axis=2))
+    beyond = np.maximum(np.sqrt(np.maximum(squared, 0.0)) / (extent * SPREAD_ONSET) - 1.0, 0.0)
+    return float(floor) * (1.0 + rise * beyond ** 2)
 
 
 def thresholds(values, floors, caps):

@@ -7,7 +7,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from lbc_core.constraints import constraint_residuals
-from lbc_core.thinning import thin_weights, thresholds, tilt
+from lbc_core.thinning import SPREAD_ONSET, SPREAD_RISE, spread_floors, thin_weights, thresholds, tilt
 
 CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
 CHECKS = settings(max_examples=40, deadline=None)
@@ -22,12 +22,13 @@ def random_weights(seed, points, extra_controls=6):
     return controls, weights, weights @ controls
 
 
-def first_try_succeeds(weights, controls, positions, floor, cap):
+def first_try_succeeds(weights, controls, positions, floor, cap, rise=SPREAD_RISE):
     """Which rows :func:`thin_weights` can thin at their own threshold, without relaxing it."""
     order = np.argsort(-weights, axis=1, kind="stable")
     values = np.take_along_axis(weights, order, axis=1)
-    prior = np.maximum(values - thresholds(values, np.full(len(values), floor), np.full(len(values), cap))[:, None], 0)
     extent = float(np.linalg.norm(np.ptp(controls, axis=0)))
+    floors = spread_floors(values, controls[order], positions, extent, floor, rise)
+    prior = np.maximum(values - thresholds(values, floors, np.full(len(values), cap))[:, None], 0)
     return tilt(prior, controls[order], positions, extent)[1]
 
 
@@ -55,7 +56,7 @@ def test_at_most_the_cap_stays_except_where_the_kept_weights_cannot_reproduce_th
 
 def test_the_floor_drops_small_weights_and_a_zero_floor_keeps_valid_weights():
     controls, weights, positions = random_weights(3, 200)
-    thinned = thin_weights(sp.csr_matrix(weights), controls, positions, 0.02).toarray()
+    thinned = thin_weights(sp.csr_matrix(weights), controls, positions, 0.02, spread_rise=0.0).toarray()
     assert np.all(thinned[weights <= 0.02] == 0)
     assert np.count_nonzero(thinned) < 0.8 * np.count_nonzero(weights)
     kept = thin_weights(sp.csr_matrix(weights), controls, positions, 0.0).toarray()
@@ -63,10 +64,10 @@ def test_the_floor_drops_small_weights_and_a_zero_floor_keeps_valid_weights():
 
 
 @CHECKS
-@given(st.integers(0, 10_000), st.sampled_from([(0.03, 0), (0.0, 6), (0.02, 7)]), st.floats(0.0, 1.0))
+@given(st.integers(0, 10_000), st.sampled_from([(0.03, 0), (0.0, 6), (0.02, 7), (0.01, 0)]), st.floats(0.0, 1.0))
 def test_small_changes_of_the_weights_give_small_changes_of_the_result(seed, setting, s):
-    # A path between two valid weight sets (valid all along it: the constraints are linear); a rank swap or a
-    # weight crossing the threshold on the way must not make the result jump.
+    # A path between two valid weight sets (valid all along it: the constraints are linear); a rank swap, a weight
+    # crossing the threshold or the spread crossing the floor's onset on the way must not make the result jump.
     floor, cap = setting
     controls, ends, positions = random_weights(seed, 2)
     step = 1e-7
@@ -81,6 +82,36 @@ def test_small_changes_of_the_weights_give_small_changes_of_the_result(seed, set
         assume(first_try_succeeds(weights, controls, position, floor, cap).all())
         results.append(thin_weights(sp.csr_matrix(weights), controls, position, floor, cap).toarray())
     assert np.abs(results[1] - results[0]).max() <= 1e4 * step
+
+
+def spread_of(weights, controls, positions):
+    """Each row's √(Σ w |c − x|²) as a fraction of the controls' extent (what the floor's rise follows)."""
+    squared = np.einsum("mk,mk->m", weights, ((controls[None] - positions[:, None]) ** 2).sum(axis=2))
+    return np.sqrt(squared) / np.linalg.norm(np.ptp(controls, axis=0))
+
+
+def test_the_floor_rises_only_where_the_weights_spread_beyond_the_onset():
+    controls, weights, positions = random_weights(5, 300)
+    # Half the rows concentrated on the nearest corner of their position (little spread), half as drawn.
+    near = np.argmin(((positions[:150, None] - controls[None]) ** 2).sum(axis=2), axis=1)
+    weights[:150] *= 0.05
+    weights[np.arange(150), near] += 0.95
+    positions = weights @ controls
+    spread = spread_of(weights, controls, positions)
+    narrow, wide = spread < SPREAD_ONSET, spread > 1.2 * SPREAD_ONSET
+    assert narrow.sum() > 20 and wide.sum() > 20
+    rising = thin_weights(sp.csr_matrix(weights), controls, positions, 0.005).toarray()
+    constant = thin_weights(sp.csr_matrix(weights), controls, positions, 0.005, spread_rise=0.0).toarray()
+    np.testing.assert_array_equal(rising[narrow], constant[narrow])
+    counts, constant_counts = np.count_nonzero(rising, axis=1), np.count_nonzero(constant, axis=1)
+    # Where the risen floor leaves weights that reproduce the point; elsewhere it is relaxed (floor / 4).
+    held = wide & first_try_succeeds(weights, controls, positions, 0.005, 0)
+    assert held.sum() > 20
+    assert np.all(counts[held] <= constant_counts[held]) and counts[held].sum() < constant_counts[held].sum()
+    extent = float(np.linalg.norm(np.ptp(controls, axis=0)))
+    floors = spread_floors(weights, np.broadcast_to(controls, (len(weights),) + controls.shape), positions, extent,
+                           0.005)
+    np.testing.assert_allclose(floors, 0.005 * (1 + SPREAD_RISE * np.maximum(spread / SPREAD_ONSET - 1, 0) ** 2))
 
 
 def test_a_point_the_kept_weights_cannot_reproduce_keeps_more():
