@@ -1,6 +1,7 @@
 """Issue 12's figures, measured in one process: smoothness on the bent capsule, and where speed and locality stand.
 
-    .venv/bin/python bench/smoothness.py [--capsule] [--addon] [--speed] [--l08] [--iterations] [--tolerance]
+    .venv/bin/python bench/smoothness.py [--capsule] [--addon] [--thinning] [--speed] [--l08] [--iterations]
+                                         [--tolerance]
                                          (no flag: --capsule)
 
 --capsule     the issue's table on the capsule scene (bench/capsule.py): LBC at 8000 cells (the default, smoothed)
@@ -9,6 +10,12 @@
 --addon       the capsule bound through the Blender add-on (lbc_addon.api.bind, its thinned weights in float32
               slots) and deformed by its Geometry Nodes deformer: its defaults and other Threshold / Max Influences
               settings (``--settings 0.002:0,0.005:12``), against Mesh Deform precision 5 in the same process.
+--thinning    the add-on's thinning levers (issue 10, item 6) on the weights of lbc_core binds (float64): the capsule,
+              Suzanne in its box cage and the demo gargoyle (bench/blender_deform.py's scenes); per setting
+              ``--thinnings floor:cap:rise`` (lbc_core.thinning.thin_weights) the influences per point, the capsule's
+              kinks, the kinks a 60° bend of Suzanne's and the gargoyle's cage gains over every weight (Mesh Deform's
+              too, as a yardstick), and the largest distance to every weight over blender_deform.py's three poses,
+              beside every weight's distance to a 16,000-cell bind.
 --speed       item 2: default bind of the demo gargoyle (subdivided to 64k vertices, cage L10) and of Suzanne
               subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process.
 --l08         item 3: gargoyle cage L08 (168 control points) at 8000 and 32000 cells.
@@ -130,6 +137,72 @@ def bench_addon(settings):
     seconds, moved = capsule.mesh_deform(mesh, faces, cage, cage_faces, posed, precision=5)
     row("Mesh Deform, precision 5", seconds, capsule.kink_figures(mesh, moved, faces), "—")
     print(f"  ({load()})")
+
+
+def bench_thinning(settings):
+    import bpy
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from blender_deform import SCENES, pose
+
+    from lbc_core.thinning import thin_weights
+
+    mesh, faces = capsule.capsule()
+    scenes = {"capsule": (mesh, faces, *capsule.cage())}
+    for name in ("suzanne", "gargoyle"):
+        mesh_obj, cage_obj = SCENES[name]()
+        scenes[name] = (world_vertices(mesh_obj), triangles(faces_of(mesh_obj)), world_vertices(cage_obj),
+                        faces_of(cage_obj))
+    print(f"thinning levers; {load()}")
+    print("| scene | setting (floor : cap : rise) | influences mean / max | kinks p99 / max (capsule: of the bend; "
+          "others: gained over every weight) | distance to every weight |")
+    print("| --- | --- | --- | --- | --- |")
+    for name, (points, faces, cage, cage_faces) in scenes.items():
+        binding = lbc_core.bind(cage, cage_faces, points)
+        rest = binding.rest_cage_vertices
+        diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+        bent = capsule.bend(cage) if name == "capsule" else bend_along_z(cage, 60.0)
+
+        def moved(weights, cage_pose):
+            return binding.points + weights @ (binding.cage.control_points_from_input(cage_pose) - rest)
+
+        def distance(weights, reference):
+            return max(float(np.abs(moved(weights - reference, cage_pose) - binding.points).max())
+                       for cage_pose in (pose(cage, phase) for phase in (0.7, 2.1, 4.0))) / diagonal
+
+        every = capsule.kinks(points, moved(binding.weights, bent), faces)
+        if name != "capsule":
+            fine = lbc_core.bind(cage, cage_faces, points, cells=16000)
+            _, deformed = capsule.mesh_deform(points, faces, cage, cage_faces, bent)
+            gained = capsule.kinks(points, deformed, faces) - every
+            print(f"| {name} | every weight, 16,000 cells | — | — | {distance(fine.weights, binding.weights):.2e} |")
+            print(f"| {name} | Mesh Deform, precision 5 | — | {np.percentile(gained, 99):.2f}° / {gained.max():.2f}° "
+                  "| — |")
+        for floor, cap, rise in settings:
+            thinned = thin_weights(binding.weights, rest, binding.weights @ rest, floor, cap, rise)
+            counts = np.diff(thinned.indptr)
+            values = capsule.kinks(points, moved(thinned, bent), faces) - (0 if name == "capsule" else every)
+            print(f"| {name} | {floor:g} : {cap} : {rise:g} | {counts.mean():.1f} / {counts.max()} "
+                  f"| {np.percentile(values, 99):.2f}° / {values.max():.2f}° "
+                  f"| {distance(thinned, binding.weights):.2e} |", flush=True)
+
+
+def bend_along_z(vertices, degrees):
+    """:func:`capsule.bend` of a cage of any size: its z extent mapped onto the capsule cage's, bent, mapped back."""
+    centre = (vertices.max(axis=0) + vertices.min(axis=0)) / 2
+    scale = 2 * capsule.CAGE_HALF_HEIGHT / np.ptp(vertices[:, 2])
+    return capsule.bend((vertices - centre) * scale, degrees) / scale + centre
+
+
+def world_vertices(obj):
+    matrix = np.array(obj.matrix_world)
+    return vertices_of(obj) @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def triangles(polygons):
+    """Polygons split into triangle fans, (F, 3) int array."""
+    return np.array([[polygon[0], polygon[k], polygon[k + 1]] for polygon in polygons
+                     for k in range(1, len(polygon) - 1)])
 
 
 def vertices_of(obj):
@@ -315,21 +388,26 @@ def render_picture(path):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for flag in ("capsule", "addon", "speed", "l08", "iterations", "tolerance"):
+    for flag in ("capsule", "addon", "thinning", "speed", "l08", "iterations", "tolerance"):
         parser.add_argument(f"--{flag}", action="store_true")
     parser.add_argument("--settings", default="0:0,1e-12:0,0.002:0,0.01:0,0.005:12,0.005:16",
                         help="--addon: comma-separated Threshold:Max Influences settings (0:0 is the defaults, "
                         "1e-12:0 every weight)")
+    parser.add_argument("--thinnings", default="0.005:0:0,0.005:0:2,0.005:0:4,0.005:12:0,0.005:14:0",
+                        help="--thinning: comma-separated floor:cap:rise settings (lbc_core.thinning.thin_weights)")
     parser.add_argument("--picture", type=Path)
     args = parser.parse_args(argv)
     if args.picture:
         render_picture(args.picture)
-    elif not (args.addon or args.speed or args.l08 or args.iterations or args.tolerance):
+    elif not (args.addon or args.thinning or args.speed or args.l08 or args.iterations or args.tolerance):
         args.capsule = True
     if args.capsule:
         bench_capsule()
     if args.addon:
         bench_addon([(float(value.split(":")[0]), int(value.split(":")[1])) for value in args.settings.split(",")])
+    if args.thinning:
+        bench_thinning([(float(floor), int(cap), float(rise))
+                        for floor, cap, rise in (value.split(":") for value in args.thinnings.split(","))])
     if args.speed:
         bench_speed()
     if args.l08:
