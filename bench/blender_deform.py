@@ -1,7 +1,7 @@
 """Per-frame cost of the LBC deformer against Blender's Mesh Deform on the same mesh, cage and poses.
 
     PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
-        [--thin 0.002:0,0.005:12,0.005:0:0] [--sums chain,fma,fma-vector] [--reference-cells 16000]
+        [--thin 0.002:0,0.005:12,0.005:0:0] [--sums chain,fma,fma-vector] [--reference-cells 16000] [--handler-off]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
@@ -17,6 +17,8 @@ weight thinned by other thresholds and caps (``--thin floor:cap[:rise]``, rise t
 spread, the default's when left out, 0 a constant floor; see :func:`lbc_core.thinning.thin_weights`), and
 LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`). ``--reference-cells`` also
 prints how far the binding with every weight is from a finer one: the yardstick for the error thinning makes.
+``--handler-off`` also measures the default binding with the add-on's depsgraph handler (its check of every binding
+after a cage edit) unregistered.
 """
 
 import argparse
@@ -208,8 +210,10 @@ def evaluated(obj):
             collection.objects.unlink(obj)
 
 
-def measure(variants, cage, rest, rounds):
+def measure(variants, cage, rest, rounds, without_handler=()):
     """Milliseconds of the depsgraph update after a cage edit, per variant: {name: (wall, cpu) arrays (rounds,)}.
+
+    Variants named in ``without_handler`` are measured with the add-on's handlers unregistered.
 
     Wall time is what the artist waits; the process's CPU time (every thread's) is the work done, which a machine
     shared with other jobs inflates less.
@@ -222,18 +226,22 @@ def measure(variants, cage, rest, rounds):
         for name in names[shift:] + names[:shift]:
             obj = variants[name]
             collection.objects.link(obj)
+            if name in without_handler:
+                deformer.unregister()
             set_cage(cage, pose(rest, 0.37 * number))
             bpy.context.evaluated_depsgraph_get()  # untimed: relations rebuilt after linking
             set_cage(cage, pose(rest, 0.37 * number + 0.2))
             start, cpu = time.perf_counter(), time.process_time()
             bpy.context.evaluated_depsgraph_get()
             times[name].append((1000 * (time.perf_counter() - start), 1000 * (time.process_time() - cpu)))
+            if name in without_handler:
+                deformer.register()
             collection.objects.unlink(obj)
     set_cage(cage, rest)
     return {name: np.array(values) for name, values in times.items()}
 
 
-def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells):
+def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, handler_off=False):
     mesh, cage = SCENES[name]()
     rest = positions(cage.data)
     print(f"\n{name}: {len(mesh.data.vertices)} vertices, cage {len(rest)} vertices")
@@ -281,16 +289,20 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells):
         variants[f"LBC every weight {form}"] = lbc_variant(mesh, cage, form, None, form)
         compare(f"LBC every weight {form}", mesh, "the add-on's tree")
         variants[f"LBC default {form}"] = lbc_variant(default, cage, form, None, form)
+    without_handler = ()
+    if handler_off:  # the default binding again, the add-on's check of it after each cage edit left out
+        without_handler = (f"LBC default K={summary['slots']} no handler",)
+        variants[without_handler[0]] = default
     load = os.getloadavg()[0]
-    times = measure(variants, cage, rest, rounds)
+    times = measure(variants, cage, rest, rounds, without_handler)
     print(f"  {rounds} interleaved frames each, load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
-    print(f"  {'variant':26}{'wall ms: median':>16}{'quartiles':>14}{'CPU ms: median':>16}{'quartiles':>14}")
+    print(f"  {'variant':36}{'wall ms: median':>16}{'quartiles':>14}{'CPU ms: median':>16}{'quartiles':>14}")
     for variant, values in times.items():
         columns = ""
         for kind in (0, 1):
             low, mid, high = np.percentile(values[:, kind], [25, 50, 75])
             columns += f"{mid:16.2f}{f'{low:.2f}-{high:.2f}':>14}"
-        print(f"  {variant:26}{columns}")
+        print(f"  {variant:36}{columns}")
 
 
 def thinning(text):
@@ -311,12 +323,14 @@ def main(argv=None):
     parser.add_argument("--reference-cells", type=int, default=0,
                         help="also bind at this resolution and print how far the default binding is from it")
     parser.add_argument("--precision", type=int, default=5, help="Mesh Deform precision")
+    parser.add_argument("--handler-off", action="store_true",
+                        help="also measure the default binding with the add-on's depsgraph handler unregistered")
     args = parser.parse_args(argv)
     register_addon()
     thinnings = [thinning(value) for value in args.thin.split(",") if value]
     for name in args.scenes.split(","):
         run_scene(name, thinnings, [form for form in args.sums.split(",") if form], args.frames, args.precision,
-                  args.reference_cells)
+                  args.reference_cells, args.handler_off)
 
 
 if __name__ == "__main__":

@@ -114,6 +114,38 @@ def test_the_floor_rises_only_where_the_weights_spread_beyond_the_onset():
     np.testing.assert_allclose(floors, 0.005 * (1 + SPREAD_RISE * np.maximum(spread / SPREAD_ONSET - 1, 0) ** 2))
 
 
+@CHECKS
+@given(st.integers(0, 10_000))
+def test_the_result_is_continuous_where_the_spread_crosses_the_onset(seed):
+    # From weights concentrated on one corner (spread below the onset) to widely spread ones (above it): at the
+    # crossing the floor starts to rise with zero slope, so the thinned weights move as little as the input.
+    controls, weights, _ = random_weights(seed, 1)
+    near = np.zeros_like(weights)
+    near[0, seed % 8] = 0.97
+    near += 0.03 * weights
+    ends = np.vstack([near, weights])
+
+    def at(t):
+        row = (1 - t) * ends[:1] + t * ends[1:]
+        return row, row @ controls
+
+    def spread_at(t):
+        return spread_of(*at(t)[:1], controls, at(t)[1])[0]
+
+    assume(spread_at(0.0) < SPREAD_ONSET < spread_at(1.0))
+    low, high = 0.0, 1.0
+    for _ in range(60):  # the crossing, by bisection (the spread grows along this path)
+        middle = (low + high) / 2
+        low, high = (middle, high) if spread_at(middle) < SPREAD_ONSET else (low, middle)
+    step = 1e-7
+    results = []
+    for t in (low - step, low + step):
+        row, position = at(t)
+        assume(first_try_succeeds(row, controls, position, 0.001, 0).all())
+        results.append(thin_weights(sp.csr_matrix(row), controls, position, 0.001).toarray())
+    assert np.abs(results[1] - results[0]).max() <= 1e4 * step
+
+
 def test_a_point_the_kept_weights_cannot_reproduce_keeps_more():
     # (0.5, 0.4, 0) weighted on a square's corners: its two largest weights (opposite corners, on the diagonal
     # x = y) cannot reproduce it; the threshold is relaxed until a triangle around it is kept.
