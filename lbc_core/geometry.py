@@ -260,7 +260,7 @@ def radius_ratios(vertices, tets):
     -------
     (T,) float array
     """
-    return np.abs(signed_radius_ratios(vertices[tets]))
+    return np.abs(signed_radius_ratios_by_coordinate(vertices.T[:, tets.T]))
 
 
 def signed_radius_ratios(corners):
@@ -271,20 +271,31 @@ def signed_radius_ratios(corners):
     -------
     (T,) float array
     """
+    return signed_radius_ratios_by_coordinate(np.ascontiguousarray(corners.transpose(2, 1, 0)))
+
+
+def signed_radius_ratios_by_coordinate(coordinates):
+    """:func:`signed_radius_ratios` of corners given by coordinate: (3, 4, T), coordinate d of corner k of every
+    tetrahedron in one row, so that each step works on whole rows (4 times faster than on (T, 4, 3) corners, whose
+    rows hold three numbers).
+
+    Returns
+    -------
+    (T,) float array
+    """
     tiny = np.finfo(float).tiny
-    edges = corners[:, 1:] - corners[:, :1]  # (T, 3, 3), from corner 0
-    # normals[:, k] = edges k+1 × edges k+2 (cyclically), all at once: np.cross costs more on short rows.
-    a, b = edges[:, [1, 2, 0]], edges[:, [2, 0, 1]]
-    normals = a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
-    signed = np.einsum("td,td->t", edges[:, 0], normals[:, 0]) / 6.0  # the triple product: no LU per 3 x 3 matrix
+    x, y, z = coordinates[:, 1:] - coordinates[:, :1]  # (3, T) each: the edges from corner 0
+    # normal k = edge k+1 × edge k+2 (cyclically), all three at once
+    xa, ya, za, xb, yb, zb = x[[1, 2, 0]], y[[1, 2, 0]], z[[1, 2, 0]], x[[2, 0, 1]], y[[2, 0, 1]], z[[2, 0, 1]]
+    nx, ny, nz = ya * zb - za * yb, za * xb - xa * zb, xa * yb - ya * xb
+    signed = (x[0] * nx[0] + y[0] * ny[0] + z[0] * nz[0]) / 6.0  # the triple product: no LU per 3 x 3 matrix
     volume = np.abs(signed)
     # The normals at corner 0 are twice the area vectors of three faces; their sum is the fourth's.
-    fourth = normals.sum(axis=1)
-    area = 0.5 * (np.sqrt(np.einsum("td,td->t", fourth, fourth))
-                  + np.sqrt(np.einsum("tkd,tkd->tk", normals, normals)).sum(axis=1))
-    lengths2 = np.einsum("tkd,tkd->tk", edges, edges)
-    numerator = np.einsum("tk,tkd->td", lengths2, normals)
-    circumradius = np.sqrt(np.einsum("td,td->t", numerator, numerator)) / (12.0 * np.maximum(volume, tiny))
+    fx, fy, fz = nx.sum(axis=0), ny.sum(axis=0), nz.sum(axis=0)
+    area = 0.5 * (np.sqrt(fx * fx + fy * fy + fz * fz) + np.sqrt(nx * nx + ny * ny + nz * nz).sum(axis=0))
+    lengths2 = x * x + y * y + z * z
+    ux, uy, uz = (lengths2 * nx).sum(axis=0), (lengths2 * ny).sum(axis=0), (lengths2 * nz).sum(axis=0)
+    circumradius = np.sqrt(ux * ux + uy * uy + uz * uz) / (12.0 * np.maximum(volume, tiny))
     return np.sign(signed) * 9.0 * volume / (area * np.maximum(circumradius, tiny))
 
 
