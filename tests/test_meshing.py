@@ -309,6 +309,36 @@ def test_polish_raises_the_worst_tetrahedra_and_keeps_the_surface():
     assert np.count_nonzero(after < 0.1) < np.count_nonzero(before < 0.1)
 
 
+def test_depth_in_convex_cage_is_the_distance_to_its_surface():
+    """Inside a convex cage the least distance to the facets' planes is the distance to the surface, negative
+    outside; a cage dented by 1e-3 is not convex, one dented by round-off (1e-9) still is."""
+    cage = cube_cage()
+    points = np.random.default_rng(0).uniform(-0.5, 1.5, (500, 3))
+    depth = tetrahedra._depth_in_convex(cage, points)
+    corners = cage.vertices[cage.facets]
+    squared = np.min([closest_on_triangles(points, *np.broadcast_to(c[:, None], (3, len(points), 3)))[0]
+                      for c in corners], axis=0)
+    inside = np.all((points > 0.0) & (points < 1.0), axis=1)
+    assert depth[inside] == pytest.approx(np.sqrt(squared[inside]), abs=1e-12)
+    assert np.all(depth[~inside] < 0.0)
+    for dent, convex in ((1e-3, False), (1e-9, True)):
+        vertices = CUBE_VERTICES.copy()
+        vertices[7] -= dent  # the corner (1, 1, 1) moved towards the centre
+        assert (tetrahedra._depth_in_convex(make_cage(vertices, CUBE_QUADS), points) is not None) == convex
+
+
+@pytest.mark.parametrize("cage", [cube_cage(), make_cage(CUBE_VERTICES[[0, 1, 2, 4]], [[0, 2, 1], [0, 1, 3],
+                                                                                          [0, 3, 2], [1, 2, 3]])],
+                         ids=["cube", "tetrahedron"])
+def test_convex_cages_lattice_as_the_general_band_test(cage, monkeypatch):
+    """The plane-distance shortcut for convex cages keeps exactly the lattice points the general band and inside
+    tests keep: the same mesh, bit for bit."""
+    fast = meshing.mesh_domain(cage, cells=2000)
+    monkeypatch.setattr(tetrahedra, "_depth_in_convex", lambda cage, points: None)
+    general = meshing.mesh_domain(cage, cells=2000)
+    assert np.array_equal(fast.vertices, general.vertices) and np.array_equal(fast.cells, general.cells)
+
+
 def test_3d_coarse_cube_and_deterministic():
     """Ten cells for a cube: almost only the cage itself; the same input always gives the same mesh."""
     cage = cube_cage(scale=3.0, offset=-1.0)
