@@ -203,6 +203,7 @@ class Surface:
         self.region_start = np.cumsum([self.edge_start[-1]] + [len(f) for f, _ in self.inner])
         self._local = {}  # local_points per region, valid until the next numbering
         self._region_pieces = {}  # _pieces per region, likewise
+        self._samples = None  # what samples() returned, likewise
         if self.region_start[-1] > self.budget:
             raise OutOfBudget(f"{self.region_start[-1]} surface samples")
 
@@ -230,6 +231,8 @@ class Surface:
         -------
         Samples
         """
+        if self._samples is not None:  # nothing was refined since
+            return self._samples
         cage = self.cage
         n, n_facets = cage.n_control_points, len(cage.facets)
         facet_of_vertex = np.empty(n, dtype=np.int64)
@@ -265,7 +268,8 @@ class Surface:
         triangles = [self.local_points(r)[t] for r, t in enumerate(self.triangulations)]
         self.triangle_region = np.repeat(np.arange(self.n_regions), [len(t) for t in triangles])
         self.triangles = np.concatenate(triangles)
-        return Samples(self.points, facet, bary, self.triangles, self.triangle_region, self._incidence())
+        self._samples = Samples(self.points, facet, bary, self.triangles, self.triangle_region, self._incidence())
+        return self._samples
 
     def _incidence(self):
         """(P, R) sparse 0/1 matrix: the regions each sample lies on (vertices and edge samples on several)."""
