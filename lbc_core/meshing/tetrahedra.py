@@ -192,7 +192,9 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
             lattice = _outside_protecting_spheres(lattice, samples.points, samples.triangles)
             steps.check()
             delaunay = Delaunay(np.concatenate([samples.points, lattice, far]), qhull_options=_QHULL_OPTIONS)
-            is_face = rows_in(np.sort(samples.triangles, axis=1), _cell_faces(delaunay.simplices))
+            # Only the tetrahedra with three corners or more on the surface have faces with all three there.
+            touching = delaunay.simplices[np.count_nonzero(delaunay.simplices < len(samples.points), axis=1) >= 3]
+            is_face = rows_in(np.sort(samples.triangles, axis=1), _cell_faces(touching))
             if is_face.all():
                 return samples, lattice, delaunay
             missing.append(np.count_nonzero(~is_face))
@@ -233,7 +235,7 @@ def _conforms(tets, across, inside, triangles):
     """
     # Face k, opposite corner k, is on the boundary when the tetrahedron across it is not kept.
     open_face = ~np.r_[inside, False][across]
-    boundary = _cell_faces(tets)[open_face.T.ravel()]
+    boundary = np.sort(np.concatenate([np.delete(tets[open_face[:, k]], k, axis=1) for k in range(4)]), axis=1)
     return len(boundary) == len(triangles) and rows_in(np.sort(triangles, axis=1), boundary).all()
 
 
