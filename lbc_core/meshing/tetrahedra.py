@@ -280,24 +280,29 @@ def _polish(vertices, tets, n_fixed, side, rng, steps):
         if not chosen:
             break
         chosen = np.array(chosen)
-        rows = star[chosen]
-        around = rows.indices  # the tetrahedra around each chosen vertex, vertex by vertex
-        vertex_of = np.repeat(np.arange(len(chosen)), np.diff(rows.indptr))
+        # The tetrahedra around each chosen vertex, vertex by vertex (the star's rows, gathered without scipy's
+        # row indexing, which costs more on these few rows); starts[i] is where vertex i's begin.
+        counts = star.indptr[chosen + 1] - star.indptr[chosen]
+        starts = np.r_[0, np.cumsum(counts)[:-1]]
+        vertex_of = np.repeat(np.arange(len(chosen)), counts)
+        around = star.indices[np.arange(len(vertex_of)) - starts[vertex_of] + star.indptr[chosen][vertex_of]]
         slot = np.argmax(tets[around] == chosen[vertex_of, None], axis=1)
         moves = scale[:, None, None] * rng.uniform(-1.0, 1.0, (_POLISH_TRIES, len(chosen), 3))
         moves[0] = 0.0  # the current position
         # and the centroid of the star's other corners (a Laplacian smoothing step)
         others = vertices[tets[around]].sum(axis=1) - vertices[chosen][vertex_of]
         centroid = np.stack([np.bincount(vertex_of, others[:, d]) for d in range(3)], axis=1)
-        moves[1] = centroid / (3.0 * np.diff(rows.indptr))[:, None] - vertices[chosen]
+        moves[1] = centroid / (3.0 * counts)[:, None] - vertices[chosen]
         # Coordinate d of corner k of tetrahedron a in try t at [d, k, t, a]: the layout the ratios are fastest on.
-        coordinates = np.broadcast_to(vertices.T[:, tets[around].T, None], (3, 4, len(around), _POLISH_TRIES))
+        # Try 0, the current position, has the ratios already known.
+        tries = _POLISH_TRIES - 1
+        coordinates = np.broadcast_to(vertices.T[:, tets[around].T, None], (3, 4, len(around), tries))
         coordinates = np.ascontiguousarray(coordinates.transpose(0, 1, 3, 2))
-        tried = vertices[chosen][None, vertex_of] + moves[:, vertex_of]  # (tries, A, 3)
+        tried = vertices[chosen][None, vertex_of] + moves[1:, vertex_of]  # (tries, A, 3)
         coordinates[:, slot, :, np.arange(len(around))] = tried.transpose(1, 2, 0)
-        quality = signed_radius_ratios_by_coordinate(coordinates.reshape(3, 4, -1)).reshape(_POLISH_TRIES, -1)
-        quality = np.maximum(quality, -1.0)
-        least = np.minimum.reduceat(quality, rows.indptr[:-1], axis=1)
+        quality = signed_radius_ratios_by_coordinate(coordinates.reshape(3, 4, -1)).reshape(tries, -1)
+        quality = np.concatenate([ratio[None, around], np.maximum(quality, -1.0)])
+        least = np.minimum.reduceat(quality, starts, axis=1)
         best = np.argmax(least, axis=0)
         better = least[best, np.arange(len(chosen))] > least[0]
         vertices[chosen[better]] += moves[best[better], np.flatnonzero(better)]
