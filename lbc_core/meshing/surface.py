@@ -27,6 +27,9 @@ JITTER = 0.05  # random shift of samples, × their spacing: breaks co-circular a
 # Region samples stay this far (× spacing) from the region's boundary and from the cage vertices in it: beyond
 # half a boundary piece, so no region sample encroaches a boundary piece to begin with.
 _MARGIN = 0.7
+# qhull joggles its input, as in 3D (see tetrahedra._QHULL_OPTIONS): a region's boundary samples are collinear
+# along its edges, and joggling once costs less than merging; 300 points 0.78 -> 0.51 ms.
+_QHULL_OPTIONS = "QJ Qbb Q3 Q5 Q8"
 _ROUNDS_2D = 30  # rounds of splitting boundary pieces missing from a region's triangulation
 
 Samples = namedtuple("Samples", "points facet bary triangles triangle_region incidence")
@@ -298,7 +301,7 @@ class Surface:
         its boundary pieces missing from them."""
         local = self.local_points(r)
         xy = self.to_plane(r, self.points[local])
-        simplices = Delaunay(np.concatenate([xy, far_points(xy)])).simplices
+        simplices = Delaunay(np.concatenate([xy, far_points(xy)]), qhull_options=_QHULL_OPTIONS).simplices
         simplices = simplices[np.all(simplices < len(xy), axis=1)]
         corners = xy[simplices]
         area = 0.5 * cross2(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
