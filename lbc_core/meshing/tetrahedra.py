@@ -393,9 +393,11 @@ def _depth_in_convex(cage, points):
     offsets = np.einsum("ij,ij->i", normals, corners[:, 0])
     if np.max(cage.vertices @ normals.T - offsets) > _CONVEX_SLACK:
         return None
-    depth = np.empty(len(points))
-    for chunk in np.array_split(np.arange(len(points)), max(1, len(points) * len(normals) // 1_000_000)):
-        depth[chunk] = np.min(offsets - points[chunk] @ normals.T, axis=1)
+    # Facet by facet on coordinate rows: a (P, 3) x (3, F) product costs 3 to 7 times more at these sizes.
+    x, y, z = np.ascontiguousarray(points.T)
+    depth = np.full(len(points), np.inf)
+    for (nx, ny, nz), offset in zip(normals, offsets):
+        np.minimum(depth, offset - (nx * x + ny * y + nz * z), out=depth)
     return depth
 
 
