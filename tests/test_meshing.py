@@ -339,6 +339,19 @@ def test_convex_cages_lattice_as_the_general_band_test(cage, monkeypatch):
     assert np.array_equal(fast.vertices, general.vertices) and np.array_equal(fast.cells, general.cells)
 
 
+def test_small_cages_lattice_as_the_general_band_test(monkeypatch):
+    """A small non-convex cage (a cube with a corner pushed in by a tenth) measures the lattice band against its
+    facets directly; it keeps exactly the points the search through the regions' small triangles keeps."""
+    vertices = CUBE_VERTICES.copy()
+    vertices[7] -= 0.1
+    cage = make_cage(vertices, CUBE_QUADS)
+    assert tetrahedra._depth_in_convex(cage, vertices) is None and len(cage.facets) <= tetrahedra._FEW_FACETS
+    few = meshing.mesh_domain(cage, cells=2000)
+    monkeypatch.setattr(tetrahedra, "_FEW_FACETS", 0)
+    general = meshing.mesh_domain(cage, cells=2000)
+    assert np.array_equal(few.vertices, general.vertices) and np.array_equal(few.cells, general.cells)
+
+
 def test_3d_coarse_cube_and_deterministic():
     """Ten cells for a cube: almost only the cage itself; the same input always gives the same mesh."""
     cage = cube_cage(scale=3.0, offset=-1.0)

@@ -59,6 +59,9 @@ _POLISH_STEP = 0.3
 # up to 1e-4 of the cage's size keep the fast test (the corpus's dents of 1e-8 and 1e-5: the same points as the
 # general test); the distances are then off by as little, against a band of about 2e-2 at 8000 cells.
 _CONVEX_FACETS = 256
+# Other cages with at most this many facets measure the lattice band against their facets directly (see
+# _distance_to_few_facets) instead of against the regions' small triangles through a search tree.
+_FEW_FACETS = 32
 _CONVEX_SLACK = 1e-4
 # qhull joggles its input (QJ: its own copy, by about 1e-11 of the coordinates, the same way each run) instead
 # of merging the facets of degenerate input (scipy's default "Qbb Qc Qz Q12" with Qt): the surface samples of a
@@ -347,16 +350,19 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
     if depth is not None:  # small convex cages (boxes, cones, cylinders of few sides): no search needed
         keep[keep] = depth >= band
         return points[keep]
-    # The nearest surface sample is at most one circumradius farther than the surface itself: only the points in
-    # between need the exact distance.
-    cover = circumspheres(surface_points, triangles)[1].max()
-    nearest = np.full(len(points), np.inf)
-    nearest[keep] = cKDTree(surface_points).query(points[keep], distance_upper_bound=band + cover)[0]  # inf beyond
-    keep &= nearest >= band
-    unsure = np.flatnonzero(keep & (nearest < band + cover))
-    # The regions' triangles tile the surface the tetrahedra will follow; being small (about the spacing), each
-    # unsure point meets only a few of them, where a cage's large facets would meet every point.
-    keep[unsure] = _surface_distance(surface_points[triangles], points[unsure], band, steps) >= band
+    if len(cage.facets) <= _FEW_FACETS:  # small cages: the distance to their few facets, found plane by plane
+        keep[keep] = _distance_to_few_facets(cage.vertices[cage.facets], points[keep], band) >= band
+    else:
+        # The nearest surface sample is at most one circumradius farther than the surface itself: only the points
+        # in between need the exact distance.
+        cover = circumspheres(surface_points, triangles)[1].max()
+        nearest = np.full(len(points), np.inf)
+        nearest[keep] = cKDTree(surface_points).query(points[keep], distance_upper_bound=band + cover)[0]  # inf beyond
+        keep &= nearest >= band
+        unsure = np.flatnonzero(keep & (nearest < band + cover))
+        # The regions' triangles tile the surface the tetrahedra will follow; being small (about the spacing), each
+        # unsure point meets only a few of them, where a cage's large facets would meet every point.
+        keep[unsure] = _surface_distance(surface_points[triangles], points[unsure], band, steps) >= band
     # A lattice edge (centre to one of its cube's corners) between two kept points stays within its half length
     # (at most 0.52 side with the jitter; band = 0.7 side) of one of them, so it cannot cross the surface: the kept
     # points connected by lattice edges are all inside or all outside, which one winding number per piece decides.
@@ -400,6 +406,41 @@ def _depth_in_convex(cage, points):
     for (nx, ny, nz), offset in zip(normals, offsets):
         np.minimum(depth, offset - (nx * x + ny * y + nz * z), out=depth)
     return depth
+
+
+def _distance_to_few_facets(corners, points, reach):
+    """Distance from each point to the nearest of a few triangles, where it is below ``reach`` (inf beyond).
+
+    Triangle by triangle, only the points within ``reach`` of its plane and of its bounding sphere get the exact
+    closest point: for tens of triangles this costs less than pairing the points with them through a search tree,
+    where each large triangle meets every point.
+
+    Parameters
+    ----------
+    corners : (F, 3, 3) float array
+    points : (P, 3) float array
+    reach : float, length
+
+    Returns
+    -------
+    (P,) float array
+    """
+    centres = corners.mean(axis=1)
+    radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
+    normals = unit(triangle_normals(corners))
+    x, y, z = np.ascontiguousarray(points.T)
+    point, facet = [], []
+    for f, ((cx, cy, cz), (nx, ny, nz)) in enumerate(zip(centres, normals)):
+        dx, dy, dz = x - cx, y - cy, z - cz
+        near = np.flatnonzero((np.abs(nx * dx + ny * dy + nz * dz) < reach)
+                              & (dx * dx + dy * dy + dz * dz < (reach + radii[f]) ** 2))
+        point.append(near)
+        facet.append(np.full(len(near), f))
+    point, facet = np.concatenate(point), np.concatenate(facet)
+    best = np.full(len(points), np.inf)
+    squared, _ = closest_on_triangles(points[point], *corners[facet].transpose(1, 0, 2))
+    np.minimum.at(best, point, np.sqrt(squared))
+    return best
 
 
 def _inside_pieces(cage, points, keep, ends_a, ends_b, steps):
