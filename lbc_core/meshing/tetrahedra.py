@@ -59,8 +59,8 @@ _POLISH_STEP = 0.3
 # up to 1e-4 of the cage's size keep the fast test (the corpus's dents of 1e-8 and 1e-5: the same points as the
 # general test); the distances are then off by as little, against a band of about 2e-2 at 8000 cells.
 _CONVEX_FACETS = 256
-# Other cages with at most this many facets measure the lattice band against their facets directly (see
-# _distance_to_few_facets) instead of against the regions' small triangles through a search tree.
+# Other cages with at most this many facets measure the lattice band against their facets directly, found plane by
+# plane (see _surface_distance), instead of against the regions' small triangles through a search tree.
 _FEW_FACETS = 32
 _CONVEX_SLACK = 1e-4
 # qhull joggles its input (QJ: its own copy, by about 1e-11 of the coordinates, the same way each run) instead
@@ -351,7 +351,7 @@ def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
         keep[keep] = depth >= band
         return points[keep]
     if len(cage.facets) <= _FEW_FACETS:  # small cages: the distance to their few facets, found plane by plane
-        keep[keep] = _distance_to_few_facets(cage.vertices[cage.facets], points[keep], band) >= band
+        keep[keep] = _surface_distance(cage.vertices[cage.facets], points[keep], band, steps) >= band
     else:
         # The nearest surface sample is at most one circumradius farther than the surface itself: only the points
         # in between need the exact distance.
@@ -408,41 +408,6 @@ def _depth_in_convex(cage, points):
     return depth
 
 
-def _distance_to_few_facets(corners, points, reach):
-    """Distance from each point to the nearest of a few triangles, where it is below ``reach`` (inf beyond).
-
-    Triangle by triangle, only the points within ``reach`` of its plane and of its bounding sphere get the exact
-    closest point: for tens of triangles this costs less than pairing the points with them through a search tree,
-    where each large triangle meets every point.
-
-    Parameters
-    ----------
-    corners : (F, 3, 3) float array
-    points : (P, 3) float array
-    reach : float, length
-
-    Returns
-    -------
-    (P,) float array
-    """
-    centres = corners.mean(axis=1)
-    radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
-    normals = unit(triangle_normals(corners))
-    x, y, z = np.ascontiguousarray(points.T)
-    point, facet = [], []
-    for f, ((cx, cy, cz), (nx, ny, nz)) in enumerate(zip(centres, normals)):
-        dx, dy, dz = x - cx, y - cy, z - cz
-        near = np.flatnonzero((np.abs(nx * dx + ny * dy + nz * dz) < reach)
-                              & (dx * dx + dy * dy + dz * dz < (reach + radii[f]) ** 2))
-        point.append(near)
-        facet.append(np.full(len(near), f))
-    point, facet = np.concatenate(point), np.concatenate(facet)
-    best = np.full(len(points), np.inf)
-    squared, _ = closest_on_triangles(points[point], *corners[facet].transpose(1, 0, 2))
-    np.minimum.at(best, point, np.sqrt(squared))
-    return best
-
-
 def _inside_pieces(cage, points, keep, ends_a, ends_b, steps):
     """Whether each point lies inside the cage, for graphs whose connected pieces are all inside or all outside.
 
@@ -479,6 +444,10 @@ def _check_winding(winding):
 def _surface_distance(corners, points, reach, steps):
     """Distance from each point to a triangulated surface, where it is below ``reach`` (inf beyond).
 
+    Only the (point, triangle) pairs within ``reach`` of the triangle's plane and of its bounding sphere get the
+    exact closest point. A few triangles (up to _FEW_FACETS: a small cage's own facets) find them plane by plane;
+    many (the regions' small triangles) through a search tree, where each large triangle would meet every point.
+
     Parameters
     ----------
     corners : (F, 3, 3) float array, the surface's triangles
@@ -491,14 +460,23 @@ def _surface_distance(corners, points, reach, steps):
     """
     centres = corners.mean(axis=1)
     radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
-    # Only the (point, facet) pairs closer than `reach` + the facet's radius to the facet's centre can be in reach,
-    # and only those within `reach` of the facet's plane (most are not; the exact closest point costs far more).
-    pairs = cKDTree(points).sparse_distance_matrix(cKDTree(centres), reach + radii.max(), output_type="ndarray")
-    point, facet = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
     normals = unit(triangle_normals(corners))
-    height = np.einsum("ij,ij->i", points[point] - centres[facet], normals[facet])
-    close = (pairs["v"] < reach + radii[facet]) & (np.abs(height) < reach)
-    point, facet = point[close], facet[close]
+    if len(corners) <= _FEW_FACETS:
+        x, y, z = np.ascontiguousarray(points.T)
+        point, facet = [], []
+        for f, ((cx, cy, cz), (nx, ny, nz)) in enumerate(zip(centres, normals)):
+            dx, dy, dz = x - cx, y - cy, z - cz
+            near = np.flatnonzero((np.abs(nx * dx + ny * dy + nz * dz) < reach)
+                                  & (dx * dx + dy * dy + dz * dz < (reach + radii[f]) ** 2))
+            point.append(near)
+            facet.append(np.full(len(near), f))
+        point, facet = np.concatenate(point), np.concatenate(facet)
+    else:
+        pairs = cKDTree(points).sparse_distance_matrix(cKDTree(centres), reach + radii.max(), output_type="ndarray")
+        point, facet = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+        height = np.einsum("ij,ij->i", points[point] - centres[facet], normals[facet])
+        close = (pairs["v"] < reach + radii[facet]) & (np.abs(height) < reach)
+        point, facet = point[close], facet[close]
     best = np.full(len(points), np.inf)
     for chunk in np.array_split(np.arange(len(point)), max(1, len(point) // 500_000)):
         steps.check()
