@@ -59,10 +59,10 @@ _POLISH_STEP = 0.3
 # up to 1e-4 of the cage's size keep the fast test (the corpus's dents of 1e-8 and 1e-5: the same points as the
 # general test); the distances are then off by as little, against a band of about 2e-2 at 8000 cells.
 _CONVEX_FACETS = 256
+_CONVEX_SLACK = 1e-4
 # Other cages with at most this many facets measure the lattice band against their facets directly, found plane by
 # plane (see _surface_distance), instead of against the regions' small triangles through a search tree.
 _FEW_FACETS = 32
-_CONVEX_SLACK = 1e-4
 # qhull joggles its input (QJ: its own copy, by about 1e-11 of the coordinates, the same way each run) instead
 # of merging the facets of degenerate input (scipy's default "Qbb Qc Qz Q12" with Qt): the surface samples of a
 # planar region are coplanar, the jittered lattice nearly cospherical, and merging them costs more than joggling
