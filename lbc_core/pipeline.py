@@ -19,7 +19,7 @@ from .errors import CageError
 from .frame import UnitFrame
 from .geodesics import geodesic_distances, tv_weights
 from .interpolation import interpolation_matrix
-from .meshing import mesh_domain
+from .meshing import mesh_domain, simplex_domain
 from .options import DEFAULT_CELLS, BindOptions
 from .progress import Progress
 from .reduction import interpolate_and_reduce
@@ -99,7 +99,10 @@ def bind(
     frame = UnitFrame.of(cage)
     unit_cage = frame.cage_to_unit(cage)
 
-    domain = mesh_domain(unit_cage, request.cells, request.method, progress=progress.part(*STAGES["meshing"]))
+    if unit_cage.n_control_points == unit_cage.dim + 1:  # nothing to mesh or solve: barycentric coordinates
+        domain = simplex_domain(unit_cage)
+    else:
+        domain = mesh_domain(unit_cage, request.cells, request.method, progress=progress.part(*STAGES["meshing"]))
     fixed = boundary_weights(domain, unit_cage)
     lap("meshing")
 
@@ -124,8 +127,10 @@ def bind(
                                      tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
     lap("reduction")
     progress(1.0, "bound")
+    # A simplex cage's single cell is not a resolution: it records the one asked for, which a re-bind reuses.
+    cells = len(domain.cells) if len(domain.cells) > 1 else request.cells or DEFAULT_CELLS[cage.dim]
     return lbc_binding(frame, cage, domain, result, weights, outside, points,
-                       _options_record(request, len(domain.cells), threshold), timings)
+                       _options_record(request, cells, threshold), timings)
 
 
 def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, options, timings):

@@ -181,6 +181,24 @@ def min_angles(vertices, triangles):
 # ----------------------------------------------------------------------------------------------------------- 2D
 
 
+@pytest.mark.parametrize("vertices, faces", [
+    ([[0, 0], [1, 0], [0.2, 1]], None),
+    ([[0, 0], [0.2, 1], [1, 0]], None),  # clockwise
+    ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]),
+    ([[0, 0, 0], [0, 1, 0], [1, 0, 0], [0, 0, 1]], [[0, 1, 2], [0, 2, 3], [0, 3, 1], [2, 1, 3]]),  # mirrored
+], ids=["triangle", "clockwise triangle", "tetrahedron", "mirrored tetrahedron"])
+def test_simplex_domain_is_the_cage_itself(vertices, faces):
+    cage = make_cage(np.array(vertices, dtype=float), faces)
+    mesh = meshing.simplex_domain(cage)
+    check_contract(cage, mesh)
+    assert len(mesh.cells) == 1 and len(mesh.vertices) == cage.dim + 1
+
+
+def test_simplex_domain_refuses_other_cages():
+    with pytest.raises(ValueError, match="simplex cage has 3 control points, this one 4"):
+        meshing.simplex_domain(make_cage(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float), None))
+
+
 @pytest.mark.parametrize("method", METHODS_2D)
 @pytest.mark.parametrize("path", CAGES_2D, ids=lambda p: p.name.split("-")[0])
 def test_2d_contract_and_size(path, method):

@@ -73,16 +73,19 @@ def test_bad_points_are_refused():
     ids=["triangle", "tetrahedron"],
 )
 def test_simplex_cages_bind(cage, faces):
-    # A simplex leaves the solver nothing to optimise; run in a child process so a crash fails the test, not the run.
+    # A simplex leaves the solver nothing to optimise: the coordinates are the barycentric ones, on a one-cell domain
+    # (nothing is meshed). Run in a child process so a crash fails the test, not the run.
     import subprocess
     import sys
 
     script = (
         "import numpy as np, lbc_core\n"
         f"cage = np.array({cage}, dtype=float)\n"
-        f"b = lbc_core.bind(cage, {faces}, cage.mean(axis=0, keepdims=True), cells=300)\n"
+        "bary = np.random.default_rng(0).dirichlet(np.ones(len(cage)), 200)\n"
+        f"b = lbc_core.bind(cage, {faces}, bary @ cage, cells=300)\n"
         "w = b.weights.toarray()\n"
-        "assert np.allclose(w, 1 / len(cage), atol=1e-9), w\n"
+        "assert np.abs(w - bary).max() <= 1e-12, np.abs(w - bary).max()\n"
+        "assert len(b.domain.cells) == 1 and b.options['cells'] == 300, (len(b.domain.cells), b.options)\n"
     )
     run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, f"bind on a simplex cage failed (exit code {run.returncode}): {run.stderr[-2000:]}"

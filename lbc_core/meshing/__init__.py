@@ -82,6 +82,38 @@ class DomainMesh:
         return self.vertices.shape[1]
 
 
+def simplex_domain(cage):
+    """A simplex cage (a triangle in 2D, a tetrahedron in 3D) as its own domain mesh: one cell.
+
+    With n = d + 1 control points the constraints leave the coordinates no freedom: they are the barycentric
+    coordinates, linear everywhere, so one cell represents them exactly and a finer mesh would add nothing.
+
+    Parameters
+    ----------
+    cage : lbc_core.cage.Cage
+        With ``cage.n_control_points == cage.dim + 1``.
+
+    Returns
+    -------
+    DomainMesh
+        Vertices the control points (in cage order), one positively oriented cell, each vertex on the first facet
+        that holds it.
+    """
+    from .common import finish
+
+    d = cage.dim
+    if cage.n_control_points != d + 1:
+        raise ValueError(f"a {d}D simplex cage has {d + 1} control points, this one {cage.n_control_points}")
+    cell = np.arange(d + 1)
+    corners = cage.vertices[cell]
+    if np.linalg.det(corners[1:] - corners[0]) < 0:
+        cell[[0, 1]] = cell[[1, 0]]
+    facets = np.asarray(cage.facets)
+    facet = np.array([np.flatnonzero((facets == vertex).any(axis=1))[0] for vertex in range(d + 1)])
+    bary = (facets[facet] == np.arange(d + 1)[:, None]).astype(float)
+    return finish(cage, cage.vertices, cell[None, :], np.arange(d + 1), facet, bary)
+
+
 def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
     """Mesh the region enclosed by a cage.
 
