@@ -196,7 +196,8 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     n_cells = options.cells or DEFAULT_CELLS[cage.dim]
     check_memory(cage.n_control_points, n_cells, cage.dim)
     if progress is not None:
-        progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim))
+        progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve"
+                 if cage.n_control_points == cage.dim + 1 else solve_forecast(cage.n_control_points, n_cells, cage.dim))
     return cage, points
 
 

@@ -86,6 +86,9 @@ def test_simplex_cages_bind(cage, faces):
         "w = b.weights.toarray()\n"
         "assert np.abs(w - bary).max() <= 1e-12, np.abs(w - bary).max()\n"
         "assert len(b.domain.cells) == 1 and b.options['cells'] == 300, (len(b.domain.cells), b.options)\n"
+        "told = []\n"
+        f"lbc_core.bind(cage, {faces}, bary @ cage, progress=lambda f, message: told.append(message))\n"
+        "assert told[0].startswith('a simplex cage'), told[0]\n"
     )
     run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, f"bind on a simplex cage failed (exit code {run.returncode}): {run.stderr[-2000:]}"
