@@ -234,3 +234,16 @@ def test_a_baseline_binding_is_refused(gargoyle):
     mvc = lbc_core.bind_mvc(cage, faces, points[:50])
     with pytest.raises(lbc_core.CageError, match="needs an LBC binding"):
         rebind(mvc, cage, faces)
+
+
+def test_a_simplex_cage_binds_again_from_scratch_and_says_why():
+    tetrahedron = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    faces = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
+    bary = np.random.default_rng(0).dirichlet(np.ones(4), 50)
+    first = lbc_core.bind(tetrahedron, faces, bary @ tetrahedron)
+    edited = tetrahedron + [[0, 0, 0], [0.1, 0, 0], [0, 0, 0], [0, 0, 0]]
+    again = rebind(first, edited, faces)
+    assert again.options["rebind"] == "bound from scratch: a simplex cage has nothing to solve"
+    # The points stay where they were bound: their coordinates in the edited tetrahedron.
+    expected = np.linalg.solve(np.c_[edited, np.ones(4)].T, np.c_[bary @ tetrahedron, np.ones(50)].T).T
+    np.testing.assert_allclose(again.weights.toarray(), expected, atol=1e-12)
