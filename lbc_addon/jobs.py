@@ -159,12 +159,19 @@ def solve(request, progress=None, cancel=None):
         control_points=len(column_vertex),
         outside=int(np.count_nonzero(binding.outside)),
         core_fingerprint=binding.cage.fingerprint(),
-        warnings=list(binding.cage.warnings),
+        warnings=list(binding.cage.warnings) + ([] if binding.converged else [_not_converged(binding.iterations)]),
         welded=welded_pairs(column_base, column_vertex[binding.cage.vertex_map]),
         seconds=time.perf_counter() - start,
         binding=binding,
         rebind=binding.options.get("rebind", ""),
     )
+
+
+def _not_converged(iterations):
+    """The warning of a solve stopped at the iteration limit: the weights are valid, only less local."""
+    return (f"the solver stopped at its limit of {iterations} iterations before its tolerance: the weights still sum "
+            "to 1 and reproduce the mesh, but reach further than they would (very thin cages are the usual cause; a "
+            "larger Tolerance stops sooner)")
 
 
 def warm_start(request):

@@ -105,3 +105,15 @@ def test_worker_solves_in_its_thread_reports_progress_and_stops_when_cancelled()
     cancelled.start()
     cancelled.join()
     assert cancelled.cancelled and isinstance(cancelled.error, Cancelled) and cancelled.results == []
+
+
+def test_a_solve_stopped_at_the_iteration_limit_is_a_warning(monkeypatch):
+    from dataclasses import replace
+
+    core_options = jobs.core_options
+    monkeypatch.setattr(jobs, "core_options", lambda options: replace(core_options(options), max_iterations=6))
+    result = jobs.solve(request())
+    assert any("stopped at its limit of 6 iterations" in warning for warning in result.warnings), result.warnings
+    np.testing.assert_allclose(result.weight.sum(axis=1), 1.0, atol=1e-5)
+    monkeypatch.undo()
+    assert not any("iterations" in warning for warning in jobs.solve(request()).warnings)
