@@ -87,6 +87,11 @@ class Cage:
         return len(self.vertices)
 
     @property
+    def is_simplex(self):
+        """A triangle (2D) or tetrahedron (3D): its coordinates are the barycentric ones, nothing to solve."""
+        return self.n_control_points == self.dim + 1
+
+    @property
     def bbox_diagonal(self):
         return float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
 

@@ -99,7 +99,7 @@ def bind(
     frame = UnitFrame.of(cage)
     unit_cage = frame.cage_to_unit(cage)
 
-    if unit_cage.n_control_points == unit_cage.dim + 1:  # nothing to mesh or solve: barycentric coordinates
+    if unit_cage.is_simplex:
         domain = simplex_domain(unit_cage)
     else:
         domain = mesh_domain(unit_cage, request.cells, request.method, progress=progress.part(*STAGES["meshing"]))
@@ -197,7 +197,7 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     check_memory(cage.n_control_points, n_cells, cage.dim)
     if progress is not None:
         progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve"
-                 if cage.n_control_points == cage.dim + 1 else solve_forecast(cage.n_control_points, n_cells, cage.dim))
+                 if cage.is_simplex else solve_forecast(cage.n_control_points, n_cells, cage.dim))
     return cage, points
 
 

@@ -93,7 +93,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     points = previous.points if points is None else check_points(cage, points)
     cage, reason = _split_as_before(previous.cage, cage)
     carried = None
-    if previous.cage.n_control_points == previous.cage.dim + 1:
+    if previous.cage.is_simplex:
         reason = "a simplex cage has nothing to solve"
     elif previous.solver_state is None:
         reason = "the previous binding's solver state is not at hand (it is kept in memory only, not in files)"

@@ -91,7 +91,7 @@ def simplex_domain(cage):
     Parameters
     ----------
     cage : lbc_core.cage.Cage
-        With ``cage.n_control_points == cage.dim + 1``.
+        With ``cage.is_simplex``.
 
     Returns
     -------
@@ -102,7 +102,7 @@ def simplex_domain(cage):
     from .common import finish
 
     d = cage.dim
-    if cage.n_control_points != d + 1:
+    if not cage.is_simplex:
         raise ValueError(f"a {d}D simplex cage has {d + 1} control points, this one {cage.n_control_points}")
     cell = np.arange(d + 1)
     corners = cage.vertices[cell]
