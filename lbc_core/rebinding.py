@@ -34,7 +34,7 @@ from .geodesics import geodesic_distances
 from .geodesics import tv_weights as make_tv_weights
 from .geometry import bary_positions, radius_ratios, signed_measures, triangle_normals, unit
 from .interpolation import interpolation_matrix
-from .meshing import COPLANAR_ANGLE, DomainMesh
+from .meshing import COPLANAR_ANGLE
 from .objective import tv_objective
 from .options import BindOptions
 from .pipeline import REPRODUCTION_TOLERANCE, bind, check_points, lbc_binding
@@ -252,8 +252,7 @@ def carry_domain(previous, unit_cage):
     if len(bent):
         return None, (f"cage face {', '.join(map(str, bent[:5]))} is no longer flat, and the previous mesh has "
                       "faces across it")
-    return DomainMesh(vertices, old.cells, old.boundary_vertices, old.boundary_facet, old.boundary_bary,
-                      old.control_vertices), None
+    return replace(old, vertices=vertices), None
 
 
 def _grown(mask, cells, rings):
