@@ -92,13 +92,14 @@ def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise)
     extent = float(np.linalg.norm(np.ptp(controls, axis=0))) if len(controls) else 1.0
     thinned = values.copy()  # rows that never reproduce keep their input
     pending = np.arange(len(values))
-    floors = spread_floors(values, controls[columns], positions, extent, floor, spread_rise)
+    slot_controls = controls[columns]  # (m, L, d)
+    floors = spread_floors(values, slot_controls, positions, extent, floor, spread_rise)
     caps = np.full(len(values), int(max_influences))
     for _ in range(RELAXATIONS + 1):
         if not len(pending):
             break
         prior = np.maximum(values[pending] - thresholds(values[pending], floors[pending], caps[pending])[:, None], 0.0)
-        tilted, done = tilt(prior, controls[columns[pending]], positions[pending], extent)
+        tilted, done = tilt(prior, slot_controls[pending], positions[pending], extent)
         thinned[pending[done]] = tilted[done]
         pending = pending[~done]
         floors[pending] /= 4
