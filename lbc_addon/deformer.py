@@ -392,8 +392,7 @@ def input_property(modifier, identifier):
 
 def input_identifier(modifier, name):
     """The socket identifier of the modifier's input called ``name``, or None when its node group has none."""
-    return next((item.identifier for item in modifier.node_group.interface.items_tree
-                 if item.item_type == "SOCKET" and item.in_out == "INPUT" and item.name == name), None)
+    return next((item.identifier for item in _input_items(modifier.node_group) if item.name == name), None)
 
 
 def is_enabled(modifier):
@@ -407,8 +406,9 @@ def is_enabled(modifier):
 
 
 def _input_items(group):
-    return [item for item in group.interface.items_tree
-            if item.item_type == "SOCKET" and item.in_out == "INPUT" and item.socket_type != "NodeSocketGeometry"]
+    """The group's input sockets but the geometry, one by one (a lookup by name stops at the first match)."""
+    return (item for item in group.interface.items_tree
+            if item.item_type == "SOCKET" and item.in_out == "INPUT" and item.socket_type != "NodeSocketGeometry")
 
 
 def release_group(group, successor=None):
