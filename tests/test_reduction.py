@@ -64,3 +64,10 @@ def test_reduce_reports_each_chunk_of_rows_and_stops_on_cancel(monkeypatch):
     with pytest.raises(Cancelled):
         reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, cancel=lambda: polls.append(1) or len(polls) > 2)
     assert len(polls) == 3  # stopped before the third chunk
+
+
+def test_the_constraint_restoration_still_imports_from_reduction():
+    from lbc_core import constraints, reduction
+
+    assert reduction.restore_constraints is constraints.restore_constraints
+    assert reduction.constraint_residuals is constraints.constraint_residuals
