@@ -25,7 +25,10 @@ def weight_name(slot):
 
 
 def slot_arrays(weights, column_vertex):
-    """Sparse weights to K padded slots.
+    """Sparse weights to K padded slots, each vertex's largest weights (in magnitude) first.
+
+    The order lets the deformer skip a vertex's last slots when their first is empty (see
+    :func:`deformer.build_node_group`): padding is 0 and always comes last.
 
     Parameters
     ----------
@@ -47,7 +50,8 @@ def slot_arrays(weights, column_vertex):
     weight = np.zeros((weights.shape[0], slots), dtype=np.float32)
     index[rows, position] = np.asarray(column_vertex)[weights.indices]
     weight[rows, position] = weights.data
-    return index, weight
+    order = np.argsort(-np.abs(weight), axis=1, kind="stable")
+    return np.take_along_axis(index, order, axis=1), np.take_along_axis(weight, order, axis=1)
 
 
 def rest_offsets(index, weight, cage_rest):
