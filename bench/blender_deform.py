@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
         [--modes edit,playback] [--thin 0.002:0,0.005:12,0.005:0:0] [--sums chain,fma,fma-vector]
-        [--shared 0,11,12] [--trees direct,pairs,points,unsorted] [--reference-cells 16000] [--handler-off]
+        [--shared 0,11,12] [--trees direct,pairs,points,sorted] [--reference-cells 16000] [--handler-off]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
@@ -102,34 +102,28 @@ def lbc_variant(bound, cage, name, thinning=None, sum_form=None, shared_slots=No
     bound; see :func:`lbc_core.thinning.thin_weights`), its weighted sum built as ``sum_form`` (see
     :func:`rebuild_sum`; None: the add-on's), the slots every vertex evaluates ``shared_slots`` (see
     :func:`lbc_addon.deformer.build_node_group`; None: the add-on's choice), its tree changed as ``tree`` says (see
-    :func:`rebuild_tree`; None: as built)."""
+    :func:`rebuild_tree`, or "sorted": each vertex's slots ordered by weight, largest first; None: as built)."""
     obj = copy_object(bound, name)
     index, weight = storage.read(obj.data)
     cage_rest = cage_rest_local(cage, obj)
-    if thinning is not None or tree == "unsorted":
+    if thinning is not None:
         rows = np.repeat(np.arange(len(index)), index.shape[1])
         weights = sp.csr_matrix((weight.astype(float).ravel(), (rows, index.ravel())),
                                 shape=(len(index), len(cage_rest)))
         weights.eliminate_zeros()
-        if thinning is not None:
-            weights = thin_weights(weights, cage_rest, weights @ cage_rest, *thinning)
-        index, weight = storage.slot_arrays(weights, np.arange(len(cage_rest)))
-    if tree == "unsorted":  # each vertex's slots in the order of their cage vertices, as before the sort
-        index, weight = unsorted(index, weight)
+        index, weight = storage.slot_arrays(thin_weights(weights, cage_rest, weights @ cage_rest, *thinning),
+                                            np.arange(len(cage_rest)))
+    if tree == "sorted":  # each vertex's largest weights first (the padding still last)
+        order = np.argsort(-weight, axis=1, kind="stable")
+        index, weight = np.take_along_axis(index, order, axis=1), np.take_along_axis(weight, order, axis=1)
     storage.remove(obj.data)
     storage.write(obj.data, index, weight, storage.rest_offsets(index, weight, cage_rest))
     deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices), len(obj.data.vertices), shared_slots)
     if sum_form is not None:
         rebuild_sum(obj, sum_form)
-    if tree not in (None, "unsorted"):
+    if tree not in (None, "sorted"):
         rebuild_tree(obj, tree)
     return obj
-
-
-def unsorted(index, weight):
-    """The slots of each vertex ordered by cage vertex, the padding last."""
-    order = np.argsort(np.where(weight == 0, np.iinfo(np.int32).max, index), axis=1, kind="stable")
-    return np.take_along_axis(index, order, axis=1), np.take_along_axis(weight, order, axis=1)
 
 
 def rebuild_tree(obj, form):
@@ -443,7 +437,7 @@ def main(argv=None):
                         help="comma-separated slot counts every vertex evaluates, the rest only where used, for "
                         "copies of the default binding (0: every slot for every vertex), e.g. 0,11,12")
     parser.add_argument("--trees", default="",
-                        help="comma-separated changes of the default's tree: direct,pairs,points,unsorted")
+                        help="comma-separated changes of the default's tree: direct,pairs,points,sorted")
     parser.add_argument("--modes", default="edit,playback",
                         help="what a frame is: edit (the update after a cage edit, the add-on's handler included), "
                         "playback (frame_set, the cage animated)")

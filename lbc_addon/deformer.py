@@ -42,9 +42,9 @@ def build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots=N
     """A new node group deforming by ``slots`` (index, weight) attribute pairs.
 
     ``shared_slots``: None, every slot evaluated for every vertex; B < ``slots``, the first B for every vertex and
-    the others only for the vertices with a nonzero weight in slot B (the slots hold each vertex's weights largest
-    first, see :func:`storage.slot_arrays`), a second Set Position on that selection. The counts at bind time are
-    baked into its error messages; the modifier's inputs carry them for the checks.
+    the others only for the vertices with a nonzero weight in slot B (each vertex's padding comes last, see
+    :func:`storage.slot_arrays`), a second Set Position on that selection. The counts at bind time are baked into its
+    error messages; the modifier's inputs carry them for the checks.
     """
     group = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
     group.is_modifier = True
@@ -116,7 +116,7 @@ def shared_slot_count(weight):
     Parameters
     ----------
     weight : (m, K) array
-        The stored slots' weights, each vertex's largest first (:func:`storage.slot_arrays`).
+        The stored slots' weights, each vertex's padding last (:func:`storage.slot_arrays`).
 
     Returns
     -------

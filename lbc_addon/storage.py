@@ -25,10 +25,10 @@ def weight_name(slot):
 
 
 def slot_arrays(weights, column_vertex):
-    """Sparse weights to K padded slots, each vertex's largest weights (in magnitude) first.
+    """Sparse weights to K padded slots, each vertex's weights first and its padding (weight 0) last.
 
-    The order lets the deformer skip a vertex's last slots when their first is empty (see
-    :func:`deformer.build_node_group`): padding is 0 and always comes last.
+    The deformer relies on the padding coming last: it evaluates the last slots only on the vertices whose first of
+    them holds a weight (see :func:`deformer.build_node_group`).
 
     Parameters
     ----------
@@ -50,8 +50,7 @@ def slot_arrays(weights, column_vertex):
     weight = np.zeros((weights.shape[0], slots), dtype=np.float32)
     index[rows, position] = np.asarray(column_vertex)[weights.indices]
     weight[rows, position] = weights.data
-    order = np.argsort(-np.abs(weight), axis=1, kind="stable")
-    return np.take_along_axis(index, order, axis=1), np.take_along_axis(weight, order, axis=1)
+    return index, weight
 
 
 def rest_offsets(index, weight, cage_rest):

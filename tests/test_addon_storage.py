@@ -1,7 +1,6 @@
 """The K-slot weight cache in mesh attributes."""
 
 import numpy as np
-import pytest
 import scipy.sparse as sp
 
 from lbc_addon import storage
@@ -15,14 +14,6 @@ def test_slot_arrays_pad_rows_and_map_columns_to_cage_vertices():
     assert index.dtype == np.int32 and weight.dtype == np.float32
     assert index[0].tolist() == [7, 9, 0] and weight[0].tolist() == [0.5, 0.5, 0.0]
     assert index[2, 0] == 3 and weight[2].tolist() == [1.0, 0.0, 0.0]
-
-
-def test_slot_arrays_put_each_vertex_s_largest_weights_first_and_the_padding_last():
-    weights = sp.csr_matrix(np.array([[0.2, 0.5, 0.0, 0.3], [0.0, 0.0, 1.0, 0.0], [0.1, 0.0, 0.6, 0.3]]))
-    index, weight = storage.slot_arrays(weights, np.arange(4))
-    assert index[0].tolist() == [1, 3, 0] and weight[0].tolist() == pytest.approx([0.5, 0.3, 0.2])
-    assert index[1, 0] == 2 and weight[1].tolist() == [1.0, 0.0, 0.0]
-    assert index[2].tolist() == [2, 3, 0] and weight[2].tolist() == pytest.approx([0.6, 0.3, 0.1])
 
 
 def test_rest_offsets_are_the_weighted_cage_positions():
