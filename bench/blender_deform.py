@@ -14,7 +14,8 @@ shape keys (what playback and rendering cost; Blender calls no depsgraph update 
 the medians over the rounds, the lower and upper quartiles, and the load average before and after.
 
 Scenes: Suzanne subdivided to 48,612 vertices in a 56-vertex box cage, and the demo's gargoyle (two Catmull-Clark
-levels: 64,130 vertices) in its 67-vertex cage L10. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
+levels: 64,130 vertices) in its 67-vertex cage L10; "suzanne507", Suzanne as Blender makes her (507 vertices) in the
+same cage, shows the deformer's cost that does not grow with the vertices. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
 the add-on's defaults, LBC with every weight (bound with a threshold of 1e-12: nothing thinned), LBC with every
 weight thinned by other thresholds and caps (``--thin floor:cap[:rise]``, rise the floor's rise with the weights'
 spread, the default's when left out, 0 a constant floor; see :func:`lbc_core.thinning.thin_weights`),
@@ -63,7 +64,8 @@ def gargoyle_subdivided():
     return mesh, cage
 
 
-SCENES = {"suzanne": suzanne_in_box_scene, "gargoyle": gargoyle_subdivided}
+SCENES = {"suzanne": suzanne_in_box_scene, "gargoyle": gargoyle_subdivided,
+          "suzanne507": lambda: suzanne_in_box_scene(cuts=0)}
 
 
 def pose(rest, phase):
