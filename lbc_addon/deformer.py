@@ -2,7 +2,8 @@
 
 The node group reads the evaluated cage through Object Info in relative mode (so the cage's positions arrive in the
 mesh's local space, following its animation, armature, drivers), samples the cage position of each of the K slots,
-and moves every vertex by (Σ w_k c_k − rest) × Strength × its vertex group weight (see :mod:`storage`). Geometry
+and moves every vertex by (Σ w_k c_k − rest) × Strength × its vertex group weight (see :mod:`storage`); the last
+slots, which few vertices use, are evaluated on those vertices only (:func:`shared_slot_count`). Geometry
 Nodes is compiled C++ evaluated in the depsgraph: it runs in renders, in the viewport while the cage is edited, and in
 files opened without this add-on.
 
