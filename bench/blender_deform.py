@@ -1,21 +1,27 @@
 """Per-frame cost of the LBC deformer against Blender's Mesh Deform on the same mesh, cage and poses.
 
     PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
-        [--thin 0.002:0,0.005:12,0.005:0:0] [--sums chain,fma,fma-vector] [--reference-cells 16000] [--handler-off]
+        [--modes edit,playback] [--thin 0.002:0,0.005:12,0.005:0:0] [--sums chain,fma,fma-vector]
+        [--shared 0,11,12] [--trees direct,pairs,points,sorted] [--reference-cells 16000] [--handler-off]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
 one deformer. Frames are interleaved: in each round every variant gets the same new pose of the cage, in a rotating
-order, and the time of the depsgraph update that follows the cage edit (``evaluated_depsgraph_get``, the add-on's
-depsgraph handler included) is recorded, as wall time and as the process's CPU time. Printed: the medians over the
-rounds, the lower and upper quartiles, and the load average before and after.
+order, and the time of one frame is recorded, as wall time and as the process's CPU time. Two kinds of frame
+(``--modes``): "edit", the depsgraph update that follows an edit of the cage's vertices (``evaluated_depsgraph_get``,
+the add-on's depsgraph handler included), and "playback", ``scene.frame_set`` to the next frame of a cage animated by
+shape keys (what playback and rendering cost; Blender calls no depsgraph update handler on a frame change). Printed:
+the medians over the rounds, the lower and upper quartiles, and the load average before and after.
 
 Scenes: Suzanne subdivided to 48,612 vertices in a 56-vertex box cage, and the demo's gargoyle (two Catmull-Clark
-levels: 64,130 vertices) in its 67-vertex cage L10. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
+levels: 64,130 vertices) in its 67-vertex cage L10; "suzanne507", Suzanne as Blender makes her (507 vertices) in the
+same cage, shows the deformer's cost that does not grow with the vertices. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
 the add-on's defaults, LBC with every weight (bound with a threshold of 1e-12: nothing thinned), LBC with every
 weight thinned by other thresholds and caps (``--thin floor:cap[:rise]``, rise the floor's rise with the weights'
-spread, the default's when left out, 0 a constant floor; see :func:`lbc_core.thinning.thin_weights`), and
-LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`). ``--reference-cells`` also
+spread, the default's when left out, 0 a constant floor; see :func:`lbc_core.thinning.thin_weights`),
+LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`), the default's weights with
+another number of slots evaluated for every vertex (``--shared``; see :func:`lbc_addon.deformer.build_node_group`),
+and the default's tree changed by another lever (``--trees``; see :func:`rebuild_tree`). ``--reference-cells`` also
 prints how far the binding with every weight is from a finer one: the yardstick for the error thinning makes.
 ``--handler-off`` also measures the default binding with the add-on's depsgraph handler (its check of every binding
 after a cage edit) unregistered.
@@ -58,7 +64,8 @@ def gargoyle_subdivided():
     return mesh, cage
 
 
-SCENES = {"suzanne": suzanne_in_box_scene, "gargoyle": gargoyle_subdivided}
+SCENES = {"suzanne": suzanne_in_box_scene, "gargoyle": gargoyle_subdivided,
+          "suzanne507": lambda: suzanne_in_box_scene(cuts=0)}
 
 
 def pose(rest, phase):
@@ -92,10 +99,12 @@ def copy_object(mesh, name):
     return copy
 
 
-def lbc_variant(bound, cage, name, thinning=None, sum_form=None):
+def lbc_variant(bound, cage, name, thinning=None, sum_form=None, shared_slots=None, tree=None):
     """A copy of the bound mesh deformed by LBC, its weights thinned by ``thinning`` = (floor, cap, rise) (None: as
     bound; see :func:`lbc_core.thinning.thin_weights`), its weighted sum built as ``sum_form`` (see
-    :func:`rebuild_sum`; None: the add-on's)."""
+    :func:`rebuild_sum`; None: the add-on's), the slots every vertex evaluates ``shared_slots`` (see
+    :func:`lbc_addon.deformer.build_node_group`; None: the add-on's choice), its tree changed as ``tree`` says (see
+    :func:`rebuild_tree`, or "sorted": each vertex's slots ordered by weight, largest first; None: as built)."""
     obj = copy_object(bound, name)
     index, weight = storage.read(obj.data)
     cage_rest = cage_rest_local(cage, obj)
@@ -106,12 +115,67 @@ def lbc_variant(bound, cage, name, thinning=None, sum_form=None):
         weights.eliminate_zeros()
         index, weight = storage.slot_arrays(thin_weights(weights, cage_rest, weights @ cage_rest, *thinning),
                                             np.arange(len(cage_rest)))
+    if tree == "sorted":  # each vertex's largest weights first (the padding still last)
+        order = np.argsort(-weight, axis=1, kind="stable")
+        index, weight = np.take_along_axis(index, order, axis=1), np.take_along_axis(weight, order, axis=1)
     storage.remove(obj.data)
     storage.write(obj.data, index, weight, storage.rest_offsets(index, weight, cage_rest))
-    deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices), len(obj.data.vertices))
+    deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices), len(obj.data.vertices), shared_slots)
     if sum_form is not None:
         rebuild_sum(obj, sum_form)
+    if tree not in (None, "sorted"):
+        rebuild_tree(obj, tree)
     return obj
+
+
+def rebuild_tree(obj, form):
+    """Change the deformer's tree, to measure a lever.
+
+    "direct": Set Position's Position fed Σ w_k c_k itself, no offset (no rest attribute read, no subtraction; on
+    the plain path only, Strength 1 and no vertex group, and not exact where the rest differs from the vertex:
+    a bound on the lever's gain). "pairs": each slot's (index, weight) in one 2D vector attribute, one Named
+    Attribute read and a Separate XYZ instead of two reads. "points": the cage sampled as a point cloud (Mesh to
+    Points, once) instead of the Object Info mesh.
+    """
+    group = obj.modifiers[0].node_group
+    nodes, links = group.nodes, group.links
+    samples = [n for n in nodes if n.bl_idname == "GeometryNodeSampleIndex"]
+    if form == "direct":
+        subtract = next(n for n in nodes if n.bl_idname == "ShaderNodeVectorMath" and n.operation == "SUBTRACT")
+        total = deformer._inputs(subtract, "Vector")[0].links[0].from_socket
+        set_position = next(n for n in nodes if n.bl_idname == "GeometryNodeSetPosition"
+                            and deformer._input(n, "Geometry").links[0].from_node.bl_idname == "NodeGroupInput")
+        links.remove(deformer._input(set_position, "Offset").links[0])
+        links.new(total, deformer._input(set_position, "Position"))
+    elif form == "pairs":
+        index, weight = storage.read(obj.data)
+        for slot in range(index.shape[1]):
+            attribute = obj.data.attributes.new(f".bench_pair_{slot}", "FLOAT2", "POINT")
+            attribute.data.foreach_set("vector", np.column_stack([index[:, slot], weight[:, slot]]).astype(
+                np.float32).ravel())
+        reads = {deformer._input(n, "Name").default_value: n for n in nodes
+                 if n.bl_idname == "GeometryNodeInputNamedAttribute" and n.data_type in ("INT", "FLOAT")}
+        for slot in range(index.shape[1]):
+            index_read, weight_read = reads[storage.index_name(slot)], reads[storage.weight_name(slot)]
+            pair = deformer._named_attribute(nodes, "FLOAT_VECTOR", f".bench_pair_{slot}", index_read.location)
+            separate = nodes.new("ShaderNodeSeparateXYZ")
+            links.new(pair.outputs["Attribute"], deformer._input(separate, "Vector"))
+            for read, output in ((index_read, "X"), (weight_read, "Y")):
+                for link in list(read.outputs["Attribute"].links):
+                    to_socket = link.to_socket
+                    if to_socket.node.bl_idname == "FunctionNodeCompare":  # the tail's selection keeps its read
+                        continue
+                    links.remove(link)
+                    links.new(separate.outputs[output], to_socket)
+    elif form == "points":
+        cage_geometry = deformer._input(samples[0], "Geometry").links[0].from_socket
+        points = nodes.new("GeometryNodeMeshToPoints")
+        points.mode = "VERTICES"
+        links.new(cage_geometry, deformer._input(points, "Mesh"))
+        for sample in samples:
+            links.new(points.outputs["Points"], deformer._input(sample, "Geometry"))
+    else:
+        raise ValueError(f"unknown tree form {form!r}")
 
 
 def rebuild_sum(obj, form):
@@ -210,38 +274,70 @@ def evaluated(obj):
             collection.objects.unlink(obj)
 
 
-def measure(variants, cage, rest, rounds, without_handler=()):
-    """Milliseconds of the depsgraph update after a cage edit, per variant: {name: (wall, cpu) arrays (rounds,)}.
+def measure(variants, cage, rest, rounds, without_handler=(), playback=False):
+    """Milliseconds per frame, per variant: {name: (wall, cpu) arrays (rounds,)}.
 
-    Variants named in ``without_handler`` are measured with the add-on's handlers unregistered.
+    Edit (``playback`` False): the depsgraph update after a cage edit, the add-on's depsgraph handler included;
+    variants named in ``without_handler`` are measured with the add-on's handlers unregistered. Playback: the cage
+    animated (:func:`animate`), the time of ``scene.frame_set`` to the next frame, as an artist's playback or render
+    (Blender calls no depsgraph update handler on a frame change).
 
     Wall time is what the artist waits; the process's CPU time (every thread's) is the work done, which a machine
     shared with other jobs inflates less.
     """
-    collection = bpy.context.scene.collection
+    scene = bpy.context.scene
     times = {name: [] for name in variants}
     names = list(variants)
+    if playback:
+        animate(cage, rest, 2 * rounds + 2)
     for number in range(rounds):
         shift = number % len(names)
         for name in names[shift:] + names[:shift]:
             obj = variants[name]
-            collection.objects.link(obj)
+            scene.collection.objects.link(obj)
             if name in without_handler:
                 deformer.unregister()
-            set_cage(cage, pose(rest, 0.37 * number))
-            bpy.context.evaluated_depsgraph_get()  # untimed: relations rebuilt after linking
-            set_cage(cage, pose(rest, 0.37 * number + 0.2))
+            # Untimed: relations rebuilt after linking; then the same timed change for every variant of the round.
+            if playback:
+                scene.frame_set(2 * number + 1)
+            else:
+                set_cage(cage, pose(rest, 0.37 * number))
+                bpy.context.evaluated_depsgraph_get()
+                set_cage(cage, pose(rest, 0.37 * number + 0.2))
             start, cpu = time.perf_counter(), time.process_time()
-            bpy.context.evaluated_depsgraph_get()
+            if playback:
+                scene.frame_set(2 * number + 2)
+            else:
+                bpy.context.evaluated_depsgraph_get()
             times[name].append((1000 * (time.perf_counter() - start), 1000 * (time.process_time() - cpu)))
             if name in without_handler:
                 deformer.register()
-            collection.objects.unlink(obj)
+            scene.collection.objects.unlink(obj)
+    if playback:
+        cage.shape_key_clear()
+        cage.data.update()
     set_cage(cage, rest)
     return {name: np.array(values) for name, values in times.items()}
 
 
-def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, handler_off=False):
+def animate(cage, rest, frames):
+    """Animate the cage by two shape keys, the twist and the bulge of :func:`pose`, their values keyframed on every
+    frame from 1 to ``frames`` (0.37 radians of :func:`pose`'s phase per frame)."""
+    cage.shape_key_add(name="Basis", from_mix=False)
+    keys = []
+    for name, phase in (("Twist", np.pi / 2), ("Bulge", 0.0)):
+        key = cage.shape_key_add(name=name, from_mix=False)
+        key.slider_min = -1.0
+        key.data.foreach_set("co", np.asarray(pose(rest, phase), dtype=np.float32).ravel())
+        keys.append(key)
+    for frame in range(1, frames + 1):
+        keys[0].value, keys[1].value = np.sin(0.37 * frame), np.cos(0.37 * frame)
+        for key in keys:
+            key.keyframe_insert("value", frame=frame)
+
+
+def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, handler_off=False, shared=(),
+              trees=(), modes=("edit", "playback")):
     mesh, cage = SCENES[name]()
     rest = positions(cage.data)
     print(f"\n{name}: {len(mesh.data.vertices)} vertices, cage {len(rest)} vertices")
@@ -289,20 +385,34 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
         variants[f"LBC every weight {form}"] = lbc_variant(mesh, cage, form, None, form)
         compare(f"LBC every weight {form}", mesh, "the add-on's tree")
         variants[f"LBC default {form}"] = lbc_variant(default, cage, form, None, form)
+    for slots in shared:  # the default's weights, another split of the slots (0: every slot for every vertex)
+        key = f"LBC default shared {slots or summary['slots']}"
+        variants[key] = lbc_variant(default, cage, key, shared_slots=slots or summary["slots"])
+        compare(key, default, "the default's")
+    for form in trees:
+        key = f"LBC default {form}"
+        variants[key] = lbc_variant(default, cage, key, tree=form)
+        compare(key, default, "the default's")
     without_handler = ()
     if handler_off:  # the default binding again, the add-on's check of it after each cage edit left out
         without_handler = (f"LBC default K={summary['slots']} no handler",)
         variants[without_handler[0]] = default
-    load = os.getloadavg()[0]
-    times = measure(variants, cage, rest, rounds, without_handler)
-    print(f"  {rounds} interleaved frames each, load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
-    print(f"  {'variant':36}{'wall ms: median':>16}{'quartiles':>14}{'CPU ms: median':>16}{'quartiles':>14}")
-    for variant, values in times.items():
-        columns = ""
-        for kind in (0, 1):
-            low, mid, high = np.percentile(values[:, kind], [25, 50, 75])
-            columns += f"{mid:16.2f}{f'{low:.2f}-{high:.2f}':>14}"
-        print(f"  {variant:36}{columns}")
+    for mode in modes:
+        playback = mode == "playback"
+        load = os.getloadavg()[0]
+        times = measure(variants, cage, rest, rounds, () if playback else without_handler, playback)
+        what = "frame_set, the cage animated by shape keys" if playback else "the update after a cage edit"
+        print(f"  {mode}: {what}; {rounds} interleaved frames each, load average {load:.2f} before, "
+              f"{os.getloadavg()[0]:.2f} after")
+        print(f"  {'variant':36}{'wall ms: median':>16}{'quartiles':>14}{'CPU ms: median':>16}{'quartiles':>14}")
+        for variant, values in times.items():
+            if playback and variant in without_handler:
+                continue  # the same as the default in playback: no handler runs
+            columns = ""
+            for kind in (0, 1):
+                low, mid, high = np.percentile(values[:, kind], [25, 50, 75])
+                columns += f"{mid:16.2f}{f'{low:.2f}-{high:.2f}':>14}"
+            print(f"  {variant:36}{columns}")
 
 
 def thinning(text):
@@ -325,12 +435,21 @@ def main(argv=None):
     parser.add_argument("--precision", type=int, default=5, help="Mesh Deform precision")
     parser.add_argument("--handler-off", action="store_true",
                         help="also measure the default binding with the add-on's depsgraph handler unregistered")
+    parser.add_argument("--shared", default="",
+                        help="comma-separated slot counts every vertex evaluates, the rest only where used, for "
+                        "copies of the default binding (0: every slot for every vertex), e.g. 0,11,12")
+    parser.add_argument("--trees", default="",
+                        help="comma-separated changes of the default's tree: direct,pairs,points,sorted")
+    parser.add_argument("--modes", default="edit,playback",
+                        help="what a frame is: edit (the update after a cage edit, the add-on's handler included), "
+                        "playback (frame_set, the cage animated)")
     args = parser.parse_args(argv)
     register_addon()
     thinnings = [thinning(value) for value in args.thin.split(",") if value]
     for name in args.scenes.split(","):
         run_scene(name, thinnings, [form for form in args.sums.split(",") if form], args.frames, args.precision,
-                  args.reference_cells, args.handler_off)
+                  args.reference_cells, args.handler_off, [int(value) for value in args.shared.split(",") if value],
+                  [form for form in args.trees.split(",") if form], args.modes.split(","))
 
 
 if __name__ == "__main__":

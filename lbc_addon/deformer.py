@@ -2,7 +2,8 @@
 
 The node group reads the evaluated cage through Object Info in relative mode (so the cage's positions arrive in the
 mesh's local space, following its animation, armature, drivers), samples the cage position of each of the K slots,
-and moves every vertex by (Σ w_k c_k − rest) × Strength × its vertex group weight (see :mod:`storage`). Geometry
+and moves every vertex by (Σ w_k c_k − rest) × Strength × its vertex group weight (see :mod:`storage`); the last
+slots, which few vertices use, are evaluated on those vertices only (:func:`shared_slot_count`). Geometry
 Nodes is compiled C++ evaluated in the depsgraph: it runs in renders, in the viewport while the cage is edited, and in
 files opened without this add-on.
 
@@ -33,11 +34,18 @@ STOPPED_HERE = ("topology", "welded apart")
 # The modifier inputs that are the artist's (kept when the mesh is bound again); the others are the add-on's.
 USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")
 
+# The slots beyond those every vertex evaluates are left to at most this share of the vertices (see
+# :func:`shared_slot_count`; bench/RESULTS.md: 5 % gave the fastest split on both benchmark scenes).
+TAIL_SHARE = 0.05
 
-def build_node_group(slots, cage_vertex_count, mesh_vertex_count):
+
+def build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots=None):
     """A new node group deforming by ``slots`` (index, weight) attribute pairs.
 
-    The counts at bind time are baked into its error messages; the modifier's inputs carry them for the checks.
+    ``shared_slots``: None, every slot evaluated for every vertex; B < ``slots``, the first B for every vertex and
+    the others only for the vertices with a nonzero weight in slot B (each vertex's padding comes last, see
+    :func:`storage.slot_arrays`), a second Set Position on that selection. The counts at bind time are baked into its
+    error messages; the modifier's inputs carry them for the checks.
     """
     group = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
     group.is_modifier = True
@@ -74,43 +82,55 @@ def build_node_group(slots, cage_vertex_count, mesh_vertex_count):
 
     position = nodes.new("GeometryNodeInputPosition")
     position.location = (_COLUMN, -100)
-    terms = []
-    for slot in range(slots):
-        y = -200 - 260 * slot
-        index = _named_attribute(nodes, "INT", storage.index_name(slot), (_COLUMN * 2, y))
-        weight = _named_attribute(nodes, "FLOAT", storage.weight_name(slot), (_COLUMN * 2, y - 120))
-        sample = nodes.new("GeometryNodeSampleIndex")
-        sample.data_type = "FLOAT_VECTOR"
-        sample.domain = "POINT"
-        sample.location = (_COLUMN * 3, y)
-        links.new(cage_geometry, _input(sample, "Geometry"))
-        links.new(position.outputs["Position"], _input(sample, "Value"))
-        links.new(index.outputs["Attribute"], _input(sample, "Index"))
-        scaled = _vector_math(nodes, "SCALE", (_COLUMN * 4, y))
-        links.new(sample.outputs["Value"], _input(scaled, "Vector"))
-        links.new(weight.outputs["Attribute"], _input(scaled, "Scale"))
-        terms.append(scaled.outputs["Vector"])
-    total = pairwise_sum(group, terms, _COLUMN * 5)
+    shared = slots if shared_slots is None else min(shared_slots, slots)
+    total = pairwise_sum(group, _weighted_samples(group, cage_geometry, position, range(shared)), _COLUMN * 5)
 
     rest = _named_attribute(nodes, "FLOAT_VECTOR", storage.REST_NAME, (_COLUMN * 7.5, 300))
     displacement = _vector_math(nodes, "SUBTRACT", (_COLUMN * 8.5, 150))
     links.new(total, _inputs(displacement, "Vector")[0])
     links.new(rest.outputs["Attribute"], _inputs(displacement, "Vector")[1])
+    factor, plain = _factor(group, group_in)
     set_position = nodes.new("GeometryNodeSetPosition")
     set_position.location = (_COLUMN * 9.5, 150)
     links.new(group_in.outputs["Geometry"], _input(set_position, "Geometry"))
-    links.new(_offset(group, group_in, displacement.outputs["Vector"]), _input(set_position, "Offset"))
+    links.new(_scaled(group, displacement.outputs["Vector"], factor, plain), _input(set_position, "Offset"))
+    deformed = set_position.outputs["Geometry"]
+    if shared < slots:
+        deformed = _add_tail(group, deformed, cage_geometry, position, range(shared, slots), factor, plain)
 
     stop = _stop_condition(group, group_in, cage_geometry, cage_vertex_count, mesh_vertex_count)
     switch = nodes.new("GeometryNodeSwitch")
     switch.input_type = "GEOMETRY"
     switch.location = (_COLUMN * 10.5, 400)
     links.new(stop, _input(switch, "Switch"))
-    links.new(set_position.outputs["Geometry"], _input(switch, "False"))
+    links.new(deformed, _input(switch, "False"))
     links.new(group_in.outputs["Geometry"], _input(switch, "True"))
     group_out.location = (_COLUMN * 11.5, 0)
     links.new(switch.outputs["Output"], _input(group_out, "Geometry"))
     return group
+
+
+def shared_slot_count(weight):
+    """How many slots the deformer evaluates for every vertex: the fewest B after which at most :data:`TAIL_SHARE`
+    of the vertices have weights left, the others evaluated on those vertices only.
+
+    Parameters
+    ----------
+    weight : (m, K) array
+        The stored slots' weights, each vertex's padding last (:func:`storage.slot_arrays`).
+
+    Returns
+    -------
+    int
+        B in 1 … K; K (no tail) when no B qualifies, or where a vertex has a weight after an empty slot B, which the
+        tail's selection (slot B's weight nonzero) would miss.
+    """
+    used = weight != 0
+    share = used.sum(axis=0) / max(len(weight), 1)
+    for shared in range(1, weight.shape[1]):
+        if share[shared] <= TAIL_SHARE and np.array_equal(used[:, shared:].any(axis=1), used[:, shared]):
+            return shared
+    return weight.shape[1]
 
 
 def pairwise_sum(group, terms, x):
@@ -131,13 +151,53 @@ def pairwise_sum(group, terms, x):
     return terms[0]
 
 
-def _offset(group, group_in, displacement):
-    """The Set Position offset: the displacement × Strength × the vertex group's weight (inverted on request).
+def _weighted_samples(group, cage_geometry, position, slots):
+    """Per slot of ``slots`` the vector output w_k c_k: the cage position at the slot's index times its weight."""
+    nodes, links = group.nodes, group.links
+    terms = []
+    for slot in slots:
+        y = -200 - 260 * slot
+        index = _named_attribute(nodes, "INT", storage.index_name(slot), (_COLUMN * 2, y))
+        weight = _named_attribute(nodes, "FLOAT", storage.weight_name(slot), (_COLUMN * 2, y - 120))
+        sample = nodes.new("GeometryNodeSampleIndex")
+        sample.data_type = "FLOAT_VECTOR"
+        sample.domain = "POINT"
+        sample.location = (_COLUMN * 3, y)
+        links.new(cage_geometry, _input(sample, "Geometry"))
+        links.new(position.outputs["Position"], _input(sample, "Value"))
+        links.new(index.outputs["Attribute"], _input(sample, "Index"))
+        scaled = _vector_math(nodes, "SCALE", (_COLUMN * 4, y))
+        links.new(sample.outputs["Value"], _input(scaled, "Vector"))
+        links.new(weight.outputs["Attribute"], _input(scaled, "Scale"))
+        terms.append(scaled.outputs["Vector"])
+    return terms
 
-    Like Mesh Deform's, a vertex group name that names no attribute of the mesh (or none) masks nothing. Per vertex
-    only what is needed is computed: a Switch whose condition is a single value evaluates only the input it passes
-    on, so with no vertex group and Strength 1 the displacement goes through as it is (the mask and the product
-    cost 12 % of the deformer's time on the Suzanne scene of bench/blender_deform.py).
+
+def _add_tail(group, geometry, cage_geometry, position, slots, factor, plain):
+    """``geometry`` moved further by Σ w_k c_k over ``slots`` (× the factor), on the vertices that use the first of
+    them: a Set Position evaluates its fields on its selection only, so the tail costs what its few vertices need."""
+    nodes, links = group.nodes, group.links
+    first = slots[0]
+    tail = pairwise_sum(group, _weighted_samples(group, cage_geometry, position, slots), _COLUMN * 5)
+    weight = _named_attribute(nodes, "FLOAT", storage.weight_name(first), (_COLUMN * 7.5, -300 - 260 * first))
+    used = _compare(nodes, "FLOAT", "NOT_EQUAL", (_COLUMN * 8.5, -300 - 260 * first))
+    links.new(weight.outputs["Attribute"], _input(used, "A"))
+    _input(used, "B").default_value = 0.0
+    _input(used, "Epsilon").default_value = 0.0
+    set_tail = nodes.new("GeometryNodeSetPosition")
+    set_tail.location = (_COLUMN * 10, -300 - 260 * first)
+    links.new(geometry, _input(set_tail, "Geometry"))
+    links.new(used.outputs["Result"], _input(set_tail, "Selection"))
+    links.new(_scaled(group, tail, factor, plain), _input(set_tail, "Offset"))
+    return set_tail.outputs["Geometry"]
+
+
+def _factor(group, group_in):
+    """The Strength × the vertex group's weight (inverted on request), and whether it is 1 everywhere: outputs
+    (factor, plain) for :func:`_scaled`.
+
+    Like Mesh Deform's, a vertex group name that names no attribute of the mesh (or none) masks nothing. ``plain``
+    (Strength 1 and no vertex group) is a single value, never a field.
     """
     nodes, links = group.nodes, group.links
     length = nodes.new("FunctionNodeStringLength")
@@ -170,9 +230,6 @@ def _offset(group, group_in, displacement):
     links.new(grouped, _input(factor, "Switch"))
     links.new(group_in.outputs["Strength"], _input(factor, "False"))
     links.new(masked.outputs["Value"], _input(factor, "True"))
-    scaled = _vector_math(nodes, "SCALE", (_COLUMN * 7.5, 500))
-    links.new(displacement, _input(scaled, "Vector"))
-    links.new(factor.outputs["Output"], _input(scaled, "Scale"))
 
     full = _compare(nodes, "FLOAT", "EQUAL", (_COLUMN * 4, 1250))
     links.new(group_in.outputs["Strength"], _input(full, "A"))
@@ -183,11 +240,26 @@ def _offset(group, group_in, displacement):
     plain.location = (_COLUMN * 5, 1200)
     links.new(full.outputs["Result"], _inputs(plain, "Boolean")[0])
     links.new(grouped, _inputs(plain, "Boolean")[1])
-    offset = _switch(nodes, "VECTOR", (_COLUMN * 8, 300))
-    links.new(plain.outputs["Boolean"], _input(offset, "Switch"))
-    links.new(scaled.outputs["Vector"], _input(offset, "False"))
-    links.new(displacement, _input(offset, "True"))
-    return offset.outputs["Output"]
+    return factor.outputs["Output"], plain.outputs["Boolean"]
+
+
+def _scaled(group, vector, factor, plain):
+    """The vector output ``vector`` × ``factor`` (see :func:`_factor`), or ``vector`` itself where ``plain``.
+
+    Per vertex only what is needed is computed: a Switch whose condition is a single value evaluates only the input
+    it passes on, so with no vertex group and Strength 1 the vector goes through as it is (the mask and the product
+    cost 12 % of the deformer's time on the Suzanne scene of bench/blender_deform.py).
+    """
+    nodes, links = group.nodes, group.links
+    location = vector.node.location
+    scaled = _vector_math(nodes, "SCALE", (location.x + _COLUMN, location.y + 200))
+    links.new(vector, _input(scaled, "Vector"))
+    links.new(factor, _input(scaled, "Scale"))
+    chosen = _switch(nodes, "VECTOR", (location.x + _COLUMN * 1.5, location.y))
+    links.new(plain, _input(chosen, "Switch"))
+    links.new(scaled.outputs["Vector"], _input(chosen, "False"))
+    links.new(vector, _input(chosen, "True"))
+    return chosen.outputs["Output"]
 
 
 def _math(nodes, operation, location):
@@ -318,19 +390,24 @@ def _warning(nodes, links, condition, message, location):
     return node.outputs["Show"]
 
 
-def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count):
+def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count, shared_slots=None):
     """Give ``mesh_obj`` the deformer for a new binding.
 
     A bound object keeps its LBC modifier (its place in the stack, name, Strength, vertex group) with a new node
     group; otherwise a new modifier goes first in the stack (the weights belong to the mesh's own vertices, before
     any other modifier moves them).
 
+    ``shared_slots``: how many of the ``slots`` stored on the mesh every vertex evaluates (see
+    :func:`build_node_group`); None, :func:`shared_slot_count` of the stored weights.
+
     Returns
     -------
     (modifier, replaced node group or None)
         The replaced group is still in the file: :func:`release_group` removes it once the binding is complete.
     """
-    group = build_node_group(slots, cage_vertex_count, mesh_vertex_count)
+    if shared_slots is None:
+        shared_slots = shared_slot_count(storage.read(mesh_obj.data)[1])
+    group = build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots)
     modifier = find_modifier(mesh_obj)
     if modifier is None:
         modifier = mesh_obj.modifiers.new(MODIFIER_NAME, "NODES")
@@ -391,8 +468,14 @@ def input_property(modifier, identifier):
 
 
 def input_identifier(modifier, name):
-    """The socket identifier of the modifier's input called ``name``, or None when its node group has none."""
-    return next((item.identifier for item in _input_items(modifier.node_group) if item.name == name), None)
+    """The socket identifier of the modifier's input called ``name``, or None when its node group has none.
+
+    Found by Blender's own lookup by name (the first item so called; only the geometry's name is an input's and an
+    output's): 0.001 ms against 0.03 for listing the items from Python, and the depsgraph handler asks after every
+    cage edit.
+    """
+    item = modifier.node_group.interface.items_tree.get(name)
+    return item.identifier if item is not None and _is_input(item) else None
 
 
 def is_enabled(modifier):
@@ -406,9 +489,13 @@ def is_enabled(modifier):
 
 
 def _input_items(group):
-    """The group's input sockets but the geometry, one by one (a lookup by name stops at the first match)."""
-    return (item for item in group.interface.items_tree
-            if item.item_type == "SOCKET" and item.in_out == "INPUT" and item.socket_type != "NodeSocketGeometry")
+    """The group's input sockets but the geometry."""
+    return [item for item in group.interface.items_tree if _is_input(item)]
+
+
+def _is_input(item):
+    """Whether a node group interface item is an input socket other than the geometry."""
+    return item.item_type == "SOCKET" and item.in_out == "INPUT" and item.socket_type != "NodeSocketGeometry"
 
 
 def release_group(group, successor=None):

@@ -388,3 +388,77 @@ def test_welded_cage_vertices_posed_apart_stop_the_deformer_until_they_meet_agai
     cage.data.update()
     evaluated_positions(mesh)
     assert mesh.lbc.state == "FOLLOWING"
+
+
+def _rebuilt_with_shared_slots(mesh, cage, shared_slots):
+    """The bound mesh's deformer rebuilt so that every vertex evaluates ``shared_slots`` slots, the rest only where
+    used; returns its node group."""
+    modifier, replaced = deformer.attach(mesh, cage, mesh.lbc.slots, len(cage.data.vertices),
+                                         len(mesh.data.vertices), shared_slots)
+    mesh.lbc.node_group = modifier.node_group
+    deformer.release_group(replaced, modifier.node_group)
+    return modifier.node_group
+
+
+def _weighted_cage(mesh, cage):
+    """Σ_k w_k c_k per mesh vertex from the stored slots and the cage's vertices in the mesh's local space, float64."""
+    index, weight = storage.read(mesh.data)
+    to_mesh = np.array(mesh.matrix_world.inverted() @ cage.matrix_world)
+    cage_local = positions(cage.data) @ to_mesh[:3, :3].T + to_mesh[:3, 3]
+    return np.einsum("mk,mkd->md", weight.astype(np.float64), cage_local[index])
+
+
+def test_slots_beyond_the_shared_ones_deform_exactly_where_used_with_strength_and_mask(bound_gargoyle):
+    """The two-tier tree (every vertex's first slots, then the rest on the vertices that use them) gives the numpy
+    product of the stored weights, on vertices with weights on both sides of the split and with none beyond it."""
+    mesh, cage = bound_gargoyle
+    _, weight = storage.read(mesh.data)
+    counts = np.count_nonzero(weight, axis=1)
+    shared = int(np.median(counts))
+    assert 0 < np.count_nonzero(counts > shared) < len(counts)  # both kinds of vertex are exercised
+    group = _rebuilt_with_shared_slots(mesh, cage, shared)
+    assert sum(node.bl_idname == "GeometryNodeSetPosition" for node in group.nodes) == 2
+    rest = positions(mesh.data)
+    rest_offsets = np.empty(3 * len(rest), dtype=np.float32)
+    mesh.data.attributes[storage.REST_NAME].data.foreach_get("vector", rest_offsets)
+    rest_offsets = rest_offsets.reshape(-1, 3)
+    posed = positions(cage.data)
+    posed += 0.15 * np.sin(3 * posed[:, [1, 2, 0]])  # not affine: every weight matters
+    cage.data.vertices.foreach_set("co", posed.astype(np.float32).ravel())
+    cage.data.update()
+    displacement = _weighted_cage(mesh, cage) - rest_offsets
+    assert np.abs(displacement).max() > 0.01 * diagonal(mesh)
+    mask = mesh.vertex_groups.new(name="Mask")
+    mask_weights = np.round(np.linspace(0, 1, len(rest)), 3)
+    for vertex in np.flatnonzero(mask_weights):
+        mask.add([int(vertex)], float(mask_weights[vertex]), "REPLACE")
+    modifier = mesh.modifiers[deformer.MODIFIER_NAME]
+    cases = (({}, 1.0), ({"Strength": 0.5}, 0.5), ({"Vertex Group": "Mask"}, mask_weights),
+             ({"Strength": -0.75, "Vertex Group": "Mask", "Invert Vertex Group": True}, -0.75 * (1 - mask_weights)))
+    for values, factor in cases:
+        deformer.set_inputs(modifier, {"Strength": 1.0, "Vertex Group": "", "Invert Vertex Group": False, **values})
+        mesh.update_tag()
+        expected = rest + np.reshape(factor, (-1, 1)) * displacement
+        assert np.abs(evaluated_positions(mesh) - expected).max() < 1e-6 * diagonal(mesh), values
+
+
+def test_a_bind_splits_the_slots_where_few_vertices_use_the_rest(bound_gargoyle):
+    mesh, _ = bound_gargoyle
+    _, weight = storage.read(mesh.data)
+    shared = deformer.shared_slot_count(weight)
+    used = np.count_nonzero(weight, axis=0) / len(weight)
+    assert shared < mesh.lbc.slots and used[shared] <= deformer.TAIL_SHARE  # this binding has a tail
+    assert np.all(used[1:shared] > deformer.TAIL_SHARE)  # and it starts at the first slot few vertices use
+    assert sum(node.bl_idname == "GeometryNodeSetPosition" for node in mesh.lbc.node_group.nodes) == 2
+
+
+def test_shared_slot_count_keeps_every_slot_when_an_empty_slot_precedes_a_weight():
+    weight = np.zeros((100, 4), dtype=np.float32)
+    weight[:, :2] = 0.4
+    weight[:3, 2] = 0.2
+    assert deformer.shared_slot_count(weight) == 2  # 3 % of the vertices use slots 2 and 3
+    weight[50, 3] = 0.2  # a weight after an empty slot 2, which a tail from slot 2 would miss: from slot 3
+    assert deformer.shared_slot_count(weight) == 3
+    weight[10:20, 3] = 0.2  # and slot 3 used by 11 %: no split
+    assert deformer.shared_slot_count(weight) == 4
+    assert deformer.shared_slot_count(np.full((10, 3), 1 / 3)) == 3  # every vertex uses every slot
