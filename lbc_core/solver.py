@@ -17,6 +17,9 @@ Where this differs from the authors' reference, and why:
   extrapolation with the safeguard of Zhang, Peng, Deng et al. (ACM TOG 2019) accelerates the map of three steps.
 - The penalty is picked from the number of control points; the start is the harmonic coordinates (the reference
   computes them and throws them away).
+- A 3D cage 1/200 as thick as wide or thinner (STRETCHED_SOLVE_FROM) is solved in the stretched frame it was meshed in,
+  where its cells are round: the total variation's norm is then weighted per axis (its prox a per-entry root), and
+  thousands of iterations become a few hundred.
 - The stopping rule is relative (Boyd et al. 2011, §3.3.1), so it behaves the same across mesh sizes, and tested
   after every Anderson period: a Douglas-Rachford step's residual is α times its primal residual.
 - The output is the clamped split variable W, with its exact zeros, projected back onto the equality constraints on
@@ -39,6 +42,7 @@ from .parallel import thread_map, worker_count
 from .errors import CageError
 from .progress import Progress
 from .constraints import project_onto_constraints
+from .frame import MeshingFrame
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
@@ -245,6 +249,14 @@ def solve_on_mesh(
     unit_vertices = (vertices - centre) / scale
     unit_controls = (control_points - centre) / scale
 
+    # A very thin 3D cage is meshed stretched (lbc_core.frame.MeshingFrame), so its cells are flat, and a splitting
+    # that treats their steep and flat directions alike takes thousands of iterations. Past STRETCHED_SOLVE_FROM the
+    # iterations run in the stretched frame, where the cells are round, the total variation's norm weighted per axis
+    # so that the problem stays the cage's own. (Plain total variation only: the Huber prox has no such form.)
+    stretch = _Stretch.of(unit_controls) if d == 3 and epsilon == 0 else None
+    solve_vertices, solve_controls = (unit_vertices, unit_controls) if stretch is None else (
+        stretch.apply(unit_vertices), stretch.apply(unit_controls))
+
     interior = np.setdiff1d(np.arange(n_vertices), boundary_vertices)
     weights = np.empty((n_vertices, n))
     weights[boundary_vertices] = boundary_weights
@@ -252,8 +264,8 @@ def solve_on_mesh(
     if len(interior):
         dtype = np.float32 if single_precision else np.float64
         progress(0.0, "factorising the solver's matrix")
-        problem = _Problem(unit_vertices, cells, boundary_vertices, boundary_weights, unit_controls, interior,
-                           BETA[d], dtype, progress)
+        problem = _Problem(solve_vertices, cells, boundary_vertices, boundary_weights, solve_controls, interior,
+                           BETA[d], dtype, progress, stretch)
         timer.lap("factorisation")
         if problem.M.shape[0] == 0:
             # n = d + 1: a simplex cage. The constraints leave no freedom; Z = H are its barycentric coordinates.
@@ -418,8 +430,11 @@ class _Problem:
     """
 
     def __init__(self, vertices, cells, boundary_vertices, boundary_weights, controls, interior, beta, dtype,
-                 progress):
+                 progress, stretch=None):
         d = vertices.shape[1]
+        # In a stretched frame (:class:`_Stretch`) the total variation's norm is weighted per axis.
+        self.axis_scale = None if stretch is None else stretch.axis_scale.astype(dtype)
+        self.tv_scale = 1.0 if stretch is None else stretch.tv_scale
         gradients, measures = fem.cell_gradients(vertices, cells)
         self.d = d
         self.n_cells = len(measures)
@@ -482,8 +497,8 @@ class _Problem:
             cells = np.arange(start, min(start + per_slice, self.n_cells))
             rows = (np.arange(self.d)[:, None] * self.n_cells + cells).ravel()  # component-major
             gradient = (self.G64[rows] @ interior_weights + self.E64[rows]).reshape(self.d, len(cells), n)
-            total += _scaled_tv(gradient, tv_weights[cells], self.sqrt_cell[cells])
-        return total
+            total += _scaled_tv(gradient, tv_weights[cells], self.sqrt_cell[cells], self.axis_scale)
+        return total * self.tv_scale
 
 
 def _renumber(subset, n):
@@ -557,9 +572,12 @@ class _DouglasRachford:
         n = tv_weights.shape[1]
         self.size_x = p.n_cells * p.d * n
         self.shape_x, self.shape_w = (p.d, p.n_cells, n), (p.n_interior, n)
-        self.tv_weights = tv_weights
+        self.tv_weights = tv_weights * p.tv_scale
         # In scaled variables the shrink threshold of cell c is √|c| ω / ρ; the clip bound of vertex v is √(β m_v).
-        self.thresholds = (p.sqrt_cell * tv_weights / rho).astype(p.G.dtype)
+        self.thresholds = (p.sqrt_cell * self.tv_weights / rho).astype(p.G.dtype)
+        # X̃ = v_X · shrink: one factor per cell and coordinate (1, F, n), or per component in a stretched frame.
+        self.shape_shrink = (1 if p.axis_scale is None else p.d,) + self.shape_x[1:]
+        self.secular_roots = None if p.axis_scale is None else np.zeros(self.shape_x[1:], dtype=p.G.dtype)
         self.boundary_part = p.E.reshape(self.shape_x)
         self.boundary_load = p.GT @ p.E  # (N_in, n): Gᵀ E, so that the reflection need not subtract E each step
         check()
@@ -598,12 +616,24 @@ class _DouglasRachford:
 
         def rescale(chunk):
             cells = chunk.cells
-            kept = _shrink_factor(v_x[:, cells], start.thresholds[cells].astype(state.dtype), self.epsilon)
+            kept = self.shrink_factors(v_x[:, cells], start.thresholds[cells].astype(state.dtype))
             v_x[:, cells] *= kept * cell_ratio[cells] + (1.0 - kept) * threshold_ratio[cells]
 
         self.in_rounds(rescale)
         v_w *= (p.sqrt_mass / start.sqrt_mass).astype(state.dtype)
         return state
+
+    def shrink_factors(self, values, thresholds, cells=None):
+        """The prox of the cells' total variation as factors of ``values`` (d, F', n): (1, F', n), or (d, F', n) with
+        the norm weighted per axis. With ``cells`` (the steps' own calls) the weighted prox starts its Newton steps
+        from the roots they found on those cells the step before."""
+        if self.p.axis_scale is None:
+            return _shrink_factor(values, thresholds, self.epsilon)[None]
+        guess = None if cells is None else self.secular_roots[cells]
+        factors, roots = _weighted_shrink_factors(values, thresholds, self.p.axis_scale, guess)
+        if cells is not None:
+            self.secular_roots[cells] = roots
+        return factors
 
     def solve(self, rhs):
         """The Y-step's factorised solve, SOLVE_COLUMNS right-hand sides at a time with cancel checks between (as
@@ -633,13 +663,13 @@ class _DouglasRachford:
         v_x, v_w = self.split(state)
         new_state = np.empty_like(state)
         new_x, new_w = self.split(new_state)
-        shrink = np.empty(self.shape_x[1:], dtype=state.dtype)  # (F, n): X̃ = v_X · shrink
+        shrink = np.empty(self.shape_shrink, dtype=state.dtype)  # X̃ = v_X · shrink
         gradient = np.empty_like(v_x)
 
         def shrink_and_reflect(chunk):
             cells = chunk.cells
-            shrink[cells] = _shrink_factor(v_x[:, cells], self.thresholds[cells], self.epsilon)
-            reflected = v_x[:, cells] * (2.0 * shrink[cells] - 1.0)  # 2 X̃ - v_X (E is subtracted after Gᵀ)
+            shrink[:, cells] = self.shrink_factors(v_x[:, cells], self.thresholds[cells], cells)
+            reflected = v_x[:, cells] * (2.0 * shrink[:, cells] - 1.0)  # 2 X̃ - v_X (E is subtracted after Gᵀ)
             return chunk.GT @ reflected.reshape(-1, reflected.shape[2])
 
         def update(chunk):
@@ -647,7 +677,7 @@ class _DouglasRachford:
             g = gradient[:, cells]
             np.add((chunk.G @ Z).reshape(g.shape), E[:, cells], out=g)
             # v_X + α (g - X̃), with X̃ = v_X · shrink
-            np.multiply(v_x[:, cells], 1.0 - alpha * shrink[cells], out=new_x[:, cells])
+            np.multiply(v_x[:, cells], 1.0 - alpha * shrink[:, cells], out=new_x[:, cells])
             new_x[:, cells] += alpha * g
 
         W = np.maximum(v_w, 0.0)  # clip to [0, √(β m_v)]; np.clip with a broadcast bound is several times slower
@@ -668,7 +698,7 @@ class _DouglasRachford:
 
     def objective(self, gradient):
         """Σ ω |c| |∇w| on the unit-diagonal cage, from a scaled gradient (d, F, n)."""
-        return _scaled_tv(gradient, self.tv_weights, self.p.sqrt_cell)
+        return _scaled_tv(gradient, self.tv_weights, self.p.sqrt_cell, self.p.axis_scale)
 
 
 @dataclass
@@ -705,6 +735,12 @@ ENTRIES_PER_CHUNK = 4_000_000
 # Right-hand sides per call of the Y-step's solve, and entries per slice of a state's norm: cancel is checked between.
 SOLVE_COLUMNS = 32
 NORM_SLICE = 4_000_000
+# Newton steps of the weighted prox (a stretched frame) at most per entry; from the previous step's root most need few.
+NEWTON_STEPS = 30
+# The stretch (in the meshing frame, 0.25 / the cage's thinnest aspect) from which the solve runs stretched: the
+# weighted prox costs 5-10 times a plain step, so only where the cage's frame takes thousands of iterations or stops
+# far from the optimum (cages 1/200 as thick as wide and thinner; bench/RESULTS.md).
+STRETCHED_SOLVE_FROM = 50.0
 
 
 def _cell_chunks(problem, size_x):
@@ -941,8 +977,80 @@ def _shrink_factor(values, thresholds, epsilon):
     return factor
 
 
-def _scaled_tv(gradient, tv_weights, sqrt_cell):
-    """Σ ω |c| |∇w| from gradients scaled by √|c| (d, F, n), TV weights (F, n) and √|c| (F, 1)."""
+def _weighted_shrink_factors(values, thresholds, axis_scale, guess=None, steps=NEWTON_STEPS):
+    """The prox of τ|a ∘ g| (a norm weighted per axis) of each cell's gradient vector, as factors per component.
+
+    prox(v)_k = v_k s / (s + a_k²), where s > 0 solves |q(s)|² = Σ_k a_k² v_k² / (s + a_k²)² = τ², the trust-region
+    secular equation; no root (|v / a| ≤ τ) means the prox is 0, and τ = 0 leaves v as it is. 1 / |q(s)| is concave
+    in s, so Newton steps from the left rise monotonically to the root, and a step from the right lands left of it;
+    only the entries with a root are solved, each until its own root is found.
+
+    Parameters
+    ----------
+    values : (d, F, n) float array
+        Gradient vectors, component-major.
+    thresholds : (F, n) float array
+    axis_scale : (d,) float array
+        a, the weight of each component in the norm.
+    guess : (F, n) float array, optional
+        Roots s near these (the previous step's): the steps start there, or at the lower bound if it is larger.
+    steps : int
+        Newton steps at most per entry (each stops once its factors move by less than 1e-5).
+
+    Returns
+    -------
+    factors : (d, F, n) float array f, with prox(values) = values · f
+    roots : (F, n) float array s (0 where the prox is 0)
+    """
+    d = values.shape[0]
+    squared_threshold = np.square(thresholds).ravel()
+    dual_norm = np.square(values[0] / axis_scale[0])
+    for component, scale in zip(values[1:], axis_scale[1:]):
+        dual_norm += np.square(component / scale)
+    active = np.flatnonzero((dual_norm.ravel() > squared_threshold) & (squared_threshold > 0))
+    # In float64: near the root 1 / |q| - 1 / τ cancels to float32's resolution, and the steps would wander there.
+    # The components with the same a make one term of |q|².
+    squared_scale = np.square(np.asarray(axis_scale, dtype=np.float64))
+    poles, term_of = np.unique(squared_scale, return_inverse=True)
+    poles = poles[:, None]
+    numerators = np.zeros((len(poles), len(active)))
+    flat_values = values.reshape(d, -1)
+    for component in range(d):
+        numerators[term_of[component]] += squared_scale[component] * np.square(
+            flat_values[component, active].astype(np.float64))
+    squared_threshold = squared_threshold[active].astype(np.float64)
+    # |q(s)|² ≥ each term, so s ≥ a |v| / τ − a² for each: the largest of these bounds lies left of the root.
+    lower = np.max(np.sqrt(numerators / squared_threshold) - poles, axis=0)
+    np.maximum(lower, 0.0, out=lower)
+    roots = lower.copy() if guess is None else np.maximum(lower, guess.ravel()[active])
+    # The entries still moving, with their own copies of what the steps read (shrunk as entries settle).
+    pending, s, inverse_threshold = np.arange(len(roots)), roots.copy(), 1.0 / np.sqrt(squared_threshold)
+    for _ in range(steps):
+        denominators = s + poles
+        q_squared = numerators / np.square(denominators)
+        norm = np.sqrt(q_squared.sum(axis=0))
+        slope = np.sum(q_squared / denominators, axis=0) / norm ** 3
+        moved = np.maximum(s - (1.0 / norm - inverse_threshold) / slope, lower)
+        roots[pending] = moved
+        # The factors s / (s + a_k²) move by at most |Δs| / (s + 1) (min a = 1).
+        moving = np.abs(moved - s) > 1e-5 * (moved + 1.0)
+        if not moving.any():
+            break
+        pending, s, numerators = pending[moving], moved[moving], numerators[:, moving]
+        inverse_threshold, lower = inverse_threshold[moving], lower[moving]
+    factors = np.zeros_like(values)
+    factors.reshape(d, -1)[:, thresholds.ravel() == 0] = 1.0
+    factors.reshape(d, -1)[:, active] = roots / (roots + squared_scale[:, None])
+    all_roots = np.zeros_like(thresholds)
+    all_roots.ravel()[active] = roots
+    return factors, all_roots
+
+
+def _scaled_tv(gradient, tv_weights, sqrt_cell, axis_scale=None):
+    """Σ ω |c| |∇w| from gradients scaled by √|c| (d, F, n), TV weights (F, n) and √|c| (F, 1); ``axis_scale`` (d,)
+    weights the norm's components (a stretched frame)."""
+    if axis_scale is not None:
+        gradient = gradient * np.asarray(axis_scale)[:, None, None]
     return float(np.sum(tv_weights * sqrt_cell * _group_norms(gradient)))
 
 
@@ -952,6 +1060,39 @@ def _group_norms(values):
     for component in values[1:]:
         squared += np.square(component)
     return np.sqrt(squared, out=squared)
+
+
+class _Stretch:
+    """The linear map into the frame a thin 3D cage was meshed in (:class:`lbc_core.frame.MeshingFrame`), where its
+    cells are round, and how the total variation reads there.
+
+    u = x A with A = R diag(σ) (R the cage's principal axes), so ∇ₓw = A ∇ᵤw and |∇ₓw| = |σ ∘ ∇ᵤw|, and
+    |c|ₓ = |c|ᵤ / Π σ. With a = σ / min σ: ω |c|ₓ |∇ₓw| = (ω min σ / Π σ) |c|ᵤ |a ∘ ∇ᵤw|.
+
+    Attributes
+    ----------
+    matrix : (3, 3) float array, A
+    axis_scale : (3,) float array, a (1 along the cage's long axes)
+    tv_scale : float, min σ / Π σ
+    """
+
+    def __init__(self, matrix):
+        self.matrix = matrix
+        sigma = np.linalg.norm(matrix, axis=0)
+        self.axis_scale = sigma / sigma.min()
+        self.tv_scale = float(sigma.min() / np.prod(sigma))
+
+    @classmethod
+    def of(cls, controls):
+        """The stretch of the cage with these control points (unit diagonal), or None where it is stretched less than
+        STRETCHED_SOLVE_FROM times."""
+        frame = MeshingFrame(controls)
+        sigma = np.linalg.norm(frame.matrix, axis=0)
+        return None if sigma.max() < STRETCHED_SOLVE_FROM * sigma.min() else cls(frame.matrix)
+
+    def apply(self, points):
+        """(P, 3) points → the stretched frame (linear: the solve does not care where the origin is)."""
+        return points @ self.matrix
 
 
 class _Timer:

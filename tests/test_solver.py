@@ -100,3 +100,74 @@ def test_progress_says_the_time_left_once_the_residual_has_fallen():
     # The first check has nothing to extrapolate from (it used to say minutes for a solve of a second).
     assert "left" not in admm[0]
     assert all("left" in message for message in admm[1:]) and len(admm) > 2
+
+
+def _thin_cage_problem(name, thickness):
+    """The solve_on_mesh arguments of a corpus cage flattened along z to ``thickness`` × its width, meshed and weighted
+    as the pipeline does (unit frame)."""
+    import cage_corpus
+    from lbc_core.boundary import boundary_weights
+    from lbc_core.cage import make_cage
+    from lbc_core.frame import UnitFrame
+    from lbc_core.geodesics import geodesic_distances, tv_weights
+    from lbc_core.meshing import mesh_domain
+
+    vertices, faces = cage_corpus.load(name)
+    vertices = np.array(vertices, dtype=float)
+    low = vertices[:, 2].min()
+    vertices[:, 2] = low + (vertices[:, 2] - low) * thickness * np.ptp(vertices[:, :2], axis=0).max() / np.ptp(
+        vertices[:, 2])
+    cage = make_cage(vertices, faces)
+    unit = UnitFrame.of(cage).cage_to_unit(cage)
+    domain = mesh_domain(unit, None, "auto")
+    omega = tv_weights(domain.cells, geodesic_distances(domain.vertices, domain.cells, domain.control_vertices),
+                       "quadratic")
+    return (domain.vertices, domain.cells, domain.boundary_vertices, boundary_weights(domain, unit), unit.vertices,
+            omega)
+
+
+@pytest.mark.parametrize("axis_scale", [(1.0, 1.0, 40.0), (1.0, 3.0, 250.0), (1.0, 1.0, 1.0)])
+def test_the_weighted_prox_minimises_its_problem(axis_scale):
+    from lbc_core.solver import _shrink_factor, _weighted_shrink_factors
+
+    rng = np.random.default_rng(4)
+    values = rng.normal(size=(3, 200, 7)) * rng.choice([1e-3, 1.0, 30.0], size=(1, 200, 7))
+    thresholds = rng.uniform(0.0, 2.0, size=(200, 7))
+    thresholds[0, 0] = 0.0
+    a = np.array(axis_scale)
+    factors, roots = _weighted_shrink_factors(values, thresholds, a)
+    g = values * factors
+    norm = np.linalg.norm(g * a[:, None, None], axis=0)
+    zero = norm == 0
+    # prox of τ|a ∘ g| at v: g = 0 iff |v / a| ≤ τ; else τ a² g / |a ∘ g| + g − v = 0.
+    assert np.all(np.linalg.norm(values / a[:, None, None], axis=0)[zero] <= thresholds[zero] * (1 + 1e-9))
+    optimality = thresholds * a[:, None, None] ** 2 * g / np.where(zero, 1.0, norm) + g - values
+    assert np.abs(optimality[:, ~zero]).max() <= 1e-6 * np.abs(values).max()
+    assert factors[:, 0, 0].tolist() == [1.0, 1.0, 1.0] and roots[0, 0] == 0.0  # τ = 0: v itself
+    if axis_scale == (1.0, 1.0, 1.0):
+        np.testing.assert_allclose(factors, np.broadcast_to(_shrink_factor(values, thresholds, 0.0), factors.shape),
+                                   atol=1e-9)
+
+
+def test_a_thin_cage_is_solved_in_its_stretched_frame_as_its_own_problem(monkeypatch):
+    """A cage 1/10 as thick as wide is meshed stretched; solving there, the norm weighted per axis, reaches the same
+    optimum as solving in the cage's frame (where a cage this thick converges too)."""
+    from lbc_core import solver
+
+    problem = _thin_cage_problem("cube", 0.1)
+    monkeypatch.setattr(solver, "STRETCHED_SOLVE_FROM", 2.0)  # this cage is stretched 2.5 times
+    stretched = solve_on_mesh(*problem, tolerance=2e-5)
+    monkeypatch.setattr(solver._Stretch, "of", classmethod(lambda cls, controls: None))
+    plain = solve_on_mesh(*problem, tolerance=2e-5)
+    assert stretched.converged and plain.converged
+    assert stretched.objective == pytest.approx(plain.objective, rel=1e-3)
+    assert np.abs(stretched.weights - plain.weights).max() < 0.02
+    assert_quality(problem[0], stretched.weights, problem[4], problem[2], problem[3])
+
+
+def test_a_very_thin_cage_converges():
+    """Issue 12, item 4: a cube 1/1000 as thick as wide took 10,000 iterations, unconverged, in the cage's frame."""
+    problem = _thin_cage_problem("cube", 1e-3)
+    result = solve_on_mesh(*problem, max_iterations=1000)
+    assert result.converged
+    assert_quality(problem[0], result.weights, problem[4], problem[2], problem[3])
