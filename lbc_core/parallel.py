@@ -19,3 +19,18 @@ def thread_map(function, items):
     if _POOL is None:
         _POOL = ThreadPoolExecutor(max_workers=worker_count(), thread_name_prefix="lbc")
     return list(_POOL.map(function, items))
+
+
+def map_in_rounds(function, items, before_round=None):
+    """``[function(item) for item in items]``, :func:`worker_count` items at a time in the shared pool.
+
+    ``before_round(item)``, called on the calling thread with each round's first item, reports progress and polls
+    cancel between rounds, so that a cancel is seen after one round, not after them all.
+    """
+    results = []
+    step = worker_count()
+    for first in range(0, len(items), step):
+        if before_round is not None:
+            before_round(items[first])
+        results += thread_map(function, items[first:first + step])
+    return results

@@ -10,11 +10,13 @@ import scipy.sparse as sp
 
 from .constraints import csr_from_padded, grow_support, padded_rows, restore_and_check, scatter_rows
 from .constraints import constraint_residuals, restore_constraints  # noqa: F401  (their home before constraints.py)
+from .parallel import map_in_rounds
 from .progress import Progress
 
 
-# Rows reduced at a time: the padded (rows, K, d+1) work arrays of a million points would take gigabytes.
-ROWS_PER_CHUNK = 65_536
+# Rows reduced by one thread at a time: the padded (rows, K, d+1) work arrays of a million points would take
+# gigabytes, so at most this many rows per thread are in flight (the smooth evaluation's own chunk).
+ROWS_PER_CHUNK = 16_384
 
 
 def reduce_weights(weights, controls, positions, threshold, tolerance, progress=None, cancel=None):
@@ -84,12 +86,10 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
 
 
 def _by_chunks(m, n, reduce_chunk, progress):
-    """``reduce_chunk(rows)`` over consecutive row slices of at most ROWS_PER_CHUNK, stacked into an (m, n) CSR;
-    ``progress`` is told before each chunk."""
-    chunks = []
-    for start in range(0, m, ROWS_PER_CHUNK):
-        progress(start / m, "reducing the weights")
-        chunks.append(reduce_chunk(slice(start, start + ROWS_PER_CHUNK)))
+    """``reduce_chunk(rows)`` over consecutive row slices of at most ROWS_PER_CHUNK, one per thread at a time,
+    stacked into an (m, n) CSR; ``progress`` is told before each round of chunks."""
+    chunks = map_in_rounds(lambda start: reduce_chunk(slice(start, start + ROWS_PER_CHUNK)),
+                           range(0, m, ROWS_PER_CHUNK), lambda start: progress(start / m, "reducing the weights"))
     progress(1.0, "reducing the weights: done")
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix((0, n))
 
