@@ -17,7 +17,8 @@
               too, as a yardstick), and the largest distance to every weight over blender_deform.py's three poses,
               beside every weight's distance to a 16,000-cell bind.
 --speed       item 2: default bind of the demo gargoyle (subdivided to 64k vertices, cage L10) and of Suzanne
-              subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process.
+              subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process:
+              lbc_core.bind, then the add-on's whole bind (snapshot, lbc_core, thinning, slots, writing) by stage.
 --l08         item 3: gargoyle cage L08 (168 control points) at 8000 and 32000 cells.
 --iterations  item 4: iterations of every gargoyle cage at the default resolution.
 --tolerance   the 3D stopping tolerance as a lever of item 2: for the capsule and gargoyle cages L10 and L12, binds
@@ -218,6 +219,25 @@ def faces_of(obj):
 def bench_speed():
     import bpy
 
+    sys.path.insert(0, str(ROOT / "tests"))
+    from blender_scenes import register_addon
+
+    from lbc_addon import geometry, jobs, writing
+
+    register_addon()
+
+    def addon_bind(mesh_obj, cage_obj):
+        """The add-on's default bind (what api.bind does), timed by stage: snapshot, lbc_core's stages, thinning,
+        slots, writing."""
+        clock = time.perf_counter()
+        request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get())
+        snapshot = time.perf_counter() - clock
+        result = jobs.solve(request)
+        clock = time.perf_counter()
+        writing.apply(request, result)
+        stages = dict(snapshot=snapshot, **result.stages, writing=time.perf_counter() - clock)
+        return sum(stages.values()), stages, result
+
     def compare(name, mesh_obj, cage_obj):
         points, cage, cage_faces = vertices_of(mesh_obj), vertices_of(cage_obj), faces_of(cage_obj)
         bpy.context.view_layer.update()
@@ -226,8 +246,15 @@ def bench_speed():
         binding = lbc_core.bind(cage, cage_faces, points)
         seconds = time.perf_counter() - start
         counts = np.diff(binding.weights.indptr)
-        print(f"| {name} | {len(points)} | {len(cage)} | {seconds:.2f} s | {md:.2f} s | {seconds / md:.1f}× | "
-              f"{binding.iterations} | {counts.mean():.1f} / {counts.max()} | " + ", ".join(f"{k} {v:.2f}" for k, v in binding.timings.items())
+        print(f"| {name}, lbc_core.bind | {len(points)} | {len(cage)} | {seconds:.2f} s | {md:.2f} s | "
+              f"{seconds / md:.1f}× | {binding.iterations} | {counts.mean():.1f} / {counts.max()} | "
+              + ", ".join(f"{k} {v:.2f}" for k, v in binding.timings.items()) + f" | {load()} |", flush=True)
+        seconds, stages, result = addon_bind(mesh_obj, cage_obj)
+        counts = np.count_nonzero(result.weight, axis=1)
+        outside_solve = seconds - stages["solve"] - stages.get("factorisation", 0.0)
+        print(f"| {name}, add-on bind | {len(points)} | {len(cage)} | {seconds:.2f} s ({outside_solve:.2f} outside "
+              f"the solve) | {md:.2f} s | {seconds / md:.1f}× | {result.binding.iterations} | "
+              f"{counts.mean():.1f} / {result.index.shape[1]} | " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items())
               + f" | {load()} |", flush=True)
 
     print("| scene | mesh vertices | cage vertices | LBC default bind | Mesh Deform p5 bind | ratio | iterations "

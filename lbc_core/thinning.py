@@ -18,7 +18,8 @@ vary slowly, so a weight that fades out there bends a surface little. Points who
 import numpy as np
 import scipy.sparse as sp
 
-from .constraints import csr_from_padded, padded_rows
+from .constraints import csr_from_padded, padded_rows, scatter_rows
+from .parallel import map_in_rounds
 from .progress import Progress
 
 # Default floor: the largest that keeps issue 12's capsule no more creased than Mesh Deform (bench/RESULTS.md).
@@ -31,7 +32,7 @@ SPREAD_ONSET = 0.13
 # slots to 15 within the discretisation yardstick; higher rises are undone by the relaxations (RESULTS).
 SPREAD_RISE = 2.0
 
-# Rows thinned between two cancel polls (about 0.1 s each).
+# Rows thinned by one thread at a time (about 0.05 s each); cancel is polled between rounds of one chunk per thread.
 ROWS_PER_CHUNK = 8192
 
 # Times a point's threshold is relaxed (floor / 4, cap + 1) where its kept weights cannot reproduce it, before it
@@ -61,7 +62,7 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
         0 keeps it constant.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
-        Polled between chunks of :data:`ROWS_PER_CHUNK` rows; True stops with :class:`lbc_core.Cancelled`.
+        Polled between rounds of :data:`ROWS_PER_CHUNK` rows per thread; True stops with :class:`lbc_core.Cancelled`.
 
     Returns
     -------
@@ -75,12 +76,65 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     controls = np.asarray(controls, dtype=float)
     positions = np.asarray(positions, dtype=float)
     progress = Progress.of(progress, cancel)
-    chunks = []
-    for start in range(0, weights.shape[0], ROWS_PER_CHUNK):
-        progress(start / weights.shape[0], "thinning the weights")
-        chunks.append(_thin_rows(weights[start:start + ROWS_PER_CHUNK], controls,
-                                 positions[start:start + ROWS_PER_CHUNK], floor, max_influences, spread_rise))
+    m = weights.shape[0]
+
+    def thin(start):
+        rows = slice(start, start + ROWS_PER_CHUNK)
+        return _thin_rows(weights[rows], controls, positions[rows], floor, max_influences, spread_rise)
+
+    chunks = map_in_rounds(thin, range(0, m, ROWS_PER_CHUNK), lambda start: progress(start / m, "thinning the weights"))
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
+
+
+def thin_changed_rows(thinned, before, weights, controls_before, controls, floor=DEFAULT_FLOOR, max_influences=0,
+                      spread_rise=SPREAD_RISE, progress=None, cancel=None):
+    """:func:`thin_weights` of ``weights`` when ``thinned`` is that of ``before``: only the rows that can differ are
+    thinned again (a warm re-bind keeps the rows its edit cannot reach).
+
+    A row is thinned again when its weights differ from ``before``'s or it has weight on a control point that moved;
+    every row is when the controls' extent changed (it scales every row's floor and tolerance). Each row's thinning
+    depends on that row alone, so the result is :func:`thin_weights`'s (to rounding: a chunk pads its rows to its longest).
+
+    Parameters
+    ----------
+    thinned : (m, n) scipy.sparse matrix
+        ``thin_weights(before, controls_before, before @ controls_before, floor, max_influences, spread_rise)``.
+    before, weights : (m, n) scipy.sparse matrix
+        The previous and the new weights (non-negative, summing to 1).
+    controls_before, controls : (n, d) float array
+        The control points ``before`` and ``weights`` reproduce with.
+    floor, max_influences, spread_rise, progress, cancel
+        As for :func:`thin_weights`, and the same as ``thinned`` was made with.
+
+    Returns
+    -------
+    thinned : (m, n) scipy.sparse.csr_matrix
+    again : int
+        How many rows were thinned again.
+    """
+    weights, before = sp.csr_matrix(weights, dtype=float), sp.csr_matrix(before, dtype=float)
+    controls, controls_before = np.asarray(controls, dtype=float), np.asarray(controls_before, dtype=float)
+    if (before.shape != weights.shape or controls_before.shape != controls.shape
+            or controls_extent(controls_before) != controls_extent(controls)):
+        return thin_weights(weights, controls, weights @ controls, floor, max_influences, spread_rise, progress,
+                            cancel), weights.shape[0]
+    difference = weights - before
+    difference.eliminate_zeros()
+    moved = np.flatnonzero(np.any(controls != controls_before, axis=1))
+    changed = (np.diff(difference.indptr) > 0) | (weights[:, moved].getnnz(axis=1) > 0)
+    again = np.flatnonzero(changed)
+    if not len(again):
+        return sp.csr_matrix(thinned), 0
+    rows = weights[again]
+    thinned_again = thin_weights(rows, controls, rows @ controls, floor, max_influences, spread_rise, progress, cancel)
+    kept = sp.diags((~changed).astype(float)) @ sp.csr_matrix(thinned)
+    kept.eliminate_zeros()
+    return scatter_rows(kept, again, thinned_again), len(again)
+
+
+def controls_extent(controls):
+    """The length scale of the thinning: the controls' bounding box diagonal (1 for no controls)."""
+    return float(np.linalg.norm(np.ptp(controls, axis=0))) if len(controls) else 1.0
 
 
 def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise):
@@ -89,7 +143,7 @@ def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise)
     order = np.argsort(-values, axis=1, kind="stable")
     values = np.take_along_axis(values, order, axis=1)
     columns = np.take_along_axis(columns, order, axis=1)
-    extent = float(np.linalg.norm(np.ptp(controls, axis=0))) if len(controls) else 1.0
+    extent = controls_extent(controls)
     thinned = values.copy()  # rows that never reproduce keep their input
     pending = np.arange(len(values))
     slot_controls = controls[columns]  # (m, L, d)
