@@ -153,8 +153,11 @@ def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise)
         if not len(pending):
             break
         prior = np.maximum(values[pending] - thresholds(values[pending], floors[pending], caps[pending])[:, None], 0.0)
-        tilted, done = tilt(prior, slot_controls[pending], positions[pending], extent)
-        thinned[pending[done]] = tilted[done]
+        # Rows are sorted, so the weights left are a prefix: the tilt (which keeps zeros at zero) skips the rest.
+        width = max(int(np.count_nonzero(prior, axis=1).max(initial=0)), 1)
+        tilted, done = tilt(prior[:, :width], slot_controls[pending, :width], positions[pending], extent)
+        thinned[pending[done]] = 0.0
+        thinned[pending[done], :width] = tilted[done]
         pending = pending[~done]
         floors[pending] /= 4
         caps[pending] += caps[pending] > 0
@@ -234,36 +237,43 @@ def tilt(prior, controls, positions, extent, iterations=40):
     target = np.zeros(d + 1)
     target[d] = 1.0
     multipliers = np.zeros((m, d + 1))
+    # The rows still iterating, gathered once and compacted as rows settle (not gathered again at every evaluation).
     active = np.flatnonzero(total[:, 0] > 0)
+    rows, kept, lam = affine[active], prior[active], multipliers[active]
 
-    def tilted(rows, lam):
-        exponent = np.clip((affine[rows] @ lam[:, :, None])[:, :, 0], -200.0, 200.0)
-        return prior[rows] * np.exp(exponent)
+    def tilted(kept, rows, lam):
+        return kept * np.exp(np.clip((rows @ lam[:, :, None])[:, :, 0], -200.0, 200.0))
 
     for _ in range(iterations):
         if not len(active):
             break
-        weights = tilted(active, multipliers[active])
-        rows = affine[active]
+        weights = tilted(kept, rows, lam)
         gradient = (weights[:, None, :] @ rows)[:, 0] - target
         # A point outside the hull of its prior's support has no solution: λ runs off (weights grown e^50-fold).
-        settled = (np.abs(gradient).max(axis=1) <= 1e-12) | ~(np.abs(multipliers[active]).max(axis=1) < 50)
-        active, weights, gradient, rows = active[~settled], weights[~settled], gradient[~settled], rows[~settled]
-        if not len(active):
-            break
+        settled = (np.abs(gradient).max(axis=1) <= 1e-12) | ~(np.abs(lam).max(axis=1) < 50)
+        if settled.any():
+            multipliers[active[settled]] = lam[settled]
+            going = ~settled
+            active, rows, kept, lam = active[going], rows[going], kept[going], lam[going]
+            weights, gradient = weights[going], gradient[going]
+            if not len(active):
+                break
         hessian = np.swapaxes(weights[:, :, None] * rows, 1, 2) @ rows
         hessian += 1e-14 * np.eye(d + 1)
         step = np.linalg.solve(hessian, gradient[:, :, None])[:, :, 0]
-        dual = weights.sum(axis=1) - multipliers[active, d]
+        dual = weights.sum(axis=1) - lam[:, d]
         scale = np.ones(len(active))
-        for _ in range(30):  # halve the step where the dual would grow
-            trial = multipliers[active] - scale[:, None] * step
-            grows = tilted(active, trial).sum(axis=1) - trial[:, d] > dual + 1e-14  # rounding is no growth
-            if not grows.any():
+        growing = np.arange(len(active))
+        for _ in range(30):  # halve the step where the dual would grow (a row that did not grow is done)
+            trial = lam[growing] - scale[growing, None] * step[growing]
+            grows = tilted(kept[growing], rows[growing], trial).sum(axis=1) - trial[:, d] > dual[growing] + 1e-14
+            growing = growing[grows]  # rounding is no growth
+            if not len(growing):
                 break
-            scale[grows] /= 2
-        multipliers[active] -= scale[:, None] * step
-    weights = tilted(np.arange(m), multipliers)
+            scale[growing] /= 2
+        lam = lam - scale[:, None] * step
+    multipliers[active] = lam
+    weights = tilted(prior, affine, multipliers)
     unity = np.abs(weights.sum(axis=1) - 1.0)
     reproduction = np.linalg.norm(np.einsum("mk,mkd->md", weights, controls) - positions, axis=1)
     done = (total[:, 0] > 0) & (unity <= 1e-9) & (reproduction <= 1e-9 * extent)
