@@ -79,7 +79,10 @@ class SmoothInterpolation:
         blend = fade_in(linear @ self.cage_distance / self.fade)
         fitted, fits = moving_least_squares(self.vertices, self.tree, points, self.radius)
         blend = np.where(fits, blend, 0.0)
-        return (sp.diags(1.0 - blend) @ linear + sp.diags(blend) @ fitted).tocsr()
+        linear = linear.copy()
+        linear.data *= np.repeat(1.0 - blend, np.diff(linear.indptr))
+        fitted.data *= np.repeat(blend, np.diff(fitted.indptr))
+        return (linear + fitted).tocsr()
 
 
 def moving_least_squares(vertices, tree, points, radius):
@@ -126,10 +129,14 @@ def moving_least_squares(vertices, tree, points, radius):
     # Value at the point of the fit = e₀ᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e₀ (M is symmetric).
     solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
                              np.broadcast_to(np.eye(d + 1)[:, :1], (k, d + 1, 1)))[:, :, 0]
-    row = np.repeat(np.arange(k), np.diff(weight.indptr))
-    slope = solved[:, 1:]
-    factor = solved[row, 0] + np.einsum("pj,pj->p", local[weight.indices] - centre[row], slope[row])
-    rows = sp.csr_matrix((weight.data * factor * fits[row], weight.indices, weight.indptr), shape=weight.shape)
+    # Per (point, vertex) pair, coordinate by coordinate: np.repeat over each row's pairs is several times faster
+    # than gathering (pairs, d) blocks by row index.
+    counts = np.diff(weight.indptr)
+    factor = np.repeat(solved[:, 0] * fits, counts)
+    for axis in range(d):
+        factor += ((local[:, axis][weight.indices] - np.repeat(centre[:, axis], counts))
+                   * np.repeat(solved[:, 1 + axis] * fits, counts))
+    rows = sp.csr_matrix((weight.data * factor, weight.indices, weight.indptr), shape=weight.shape)
     rows.eliminate_zeros()
     return rows, fits
 
