@@ -103,6 +103,8 @@ def _reduce_rows(full, controls, positions, threshold, tolerance, check):
     # Most rows reproduce on their kept support: correct them all at once on short padded rows.
     values, columns = padded_rows(kept)
     corrected, done = restore_and_check(values, columns, controls, positions, tolerance, check)
+    if done.all():
+        return csr_from_padded(corrected, columns, n)
     reduced = scatter_rows(sp.csr_matrix(full.shape), np.flatnonzero(done),
                            csr_from_padded(corrected[done], columns[done], n))
     pending = np.flatnonzero(~done)

@@ -110,7 +110,8 @@ def moving_least_squares(vertices, tree, points, radius):
     _, on_vertex = tree.query(points, distance_upper_bound=0.0)
     hit = np.flatnonzero(on_vertex < len(vertices))
     weight = sp.csr_matrix((kernel(pairs.data / radius), pairs.indices, pairs.indptr), shape=(k, len(vertices)))
-    weight = (weight + sp.csr_matrix((np.ones(len(hit)), (hit, on_vertex[hit])), shape=weight.shape)).tocsr()
+    if len(hit):
+        weight = (weight + sp.csr_matrix((np.ones(len(hit)), (hit, on_vertex[hit])), shape=weight.shape)).tocsr()
     # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ.
     local = vertices / radius
     centre = points / radius
