@@ -21,16 +21,21 @@ def thread_map(function, items):
     return list(_POOL.map(function, items))
 
 
-def map_in_rounds(function, items, before_round=None):
-    """``[function(item) for item in items]``, :func:`worker_count` items at a time in the shared pool.
+def map_row_chunks(function, m, most_rows, before_round=None):
+    """``function(rows)`` over consecutive slices of ``range(m)``, one per thread at a time, in order.
 
-    ``before_round(item)``, called on the calling thread with each round's first item, reports progress and polls
-    cancel between rounds, so that a cancel is seen after one round, not after them all.
+    The slices are of equal size (at most ``most_rows``) and come in full rounds of :func:`worker_count`, so no
+    thread idles through a short last round (Suzanne's 48,612 rows in 16,384-row chunks: three, the last round one
+    thread's; here four of 12,153). ``before_round(start)``, called on the calling thread with each round's first row,
+    reports progress and polls cancel, so that a cancel is seen after one round, not after them all.
     """
+    threads = worker_count()
+    rounds = -(-m // (threads * most_rows))
+    size = max(-(-m // (threads * rounds)), 1) if m else 1
+    starts = range(0, m, size)
     results = []
-    step = worker_count()
-    for first in range(0, len(items), step):
+    for first in range(0, len(starts), threads):
         if before_round is not None:
-            before_round(items[first])
-        results += thread_map(function, items[first:first + step])
+            before_round(starts[first])
+        results += thread_map(lambda start: function(slice(start, min(start + size, m))), starts[first:first + threads])
     return results

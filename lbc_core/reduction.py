@@ -10,7 +10,7 @@ import scipy.sparse as sp
 
 from .constraints import csr_from_padded, grow_support, padded_rows, restore_and_check, scatter_rows
 from .constraints import constraint_residuals, restore_constraints  # noqa: F401  (their home before constraints.py)
-from .parallel import map_in_rounds
+from .parallel import map_row_chunks
 from .progress import Progress
 
 
@@ -86,10 +86,9 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
 
 
 def _by_chunks(m, n, reduce_chunk, progress):
-    """``reduce_chunk(rows)`` over consecutive row slices of at most ROWS_PER_CHUNK, one per thread at a time,
-    stacked into an (m, n) CSR; ``progress`` is told before each round of chunks."""
-    chunks = map_in_rounds(lambda start: reduce_chunk(slice(start, start + ROWS_PER_CHUNK)),
-                           range(0, m, ROWS_PER_CHUNK), lambda start: progress(start / m, "reducing the weights"))
+    """``reduce_chunk(rows)`` over consecutive equal row slices of at most ROWS_PER_CHUNK, one per thread at a time
+    (:func:`~lbc_core.parallel.map_row_chunks`), stacked into an (m, n) CSR; ``progress`` is told before each round."""
+    chunks = map_row_chunks(reduce_chunk, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "reducing the weights"))
     progress(1.0, "reducing the weights: done")
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix((0, n))
 

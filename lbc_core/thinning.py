@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .constraints import csr_from_padded, padded_rows, scatter_rows
-from .parallel import map_in_rounds
+from .parallel import map_row_chunks
 from .progress import Progress
 
 # Default floor: the largest that keeps issue 12's capsule no more creased than Mesh Deform (bench/RESULTS.md).
@@ -78,11 +78,10 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     progress = Progress.of(progress, cancel)
     m = weights.shape[0]
 
-    def thin(start):
-        rows = slice(start, start + ROWS_PER_CHUNK)
+    def thin(rows):
         return _thin_rows(weights[rows], controls, positions[rows], floor, max_influences, spread_rise)
 
-    chunks = map_in_rounds(thin, range(0, m, ROWS_PER_CHUNK), lambda start: progress(start / m, "thinning the weights"))
+    chunks = map_row_chunks(thin, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "thinning the weights"))
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
 
 

@@ -57,11 +57,11 @@ def test_reduce_reports_each_round_of_chunks_of_rows_and_stops_on_cancel(monkeyp
     monkeypatch.setattr(reduction, "ROWS_PER_CHUNK", 100)
     threads = worker_count()
     rng = np.random.default_rng(4)
-    points = rng.uniform(0.0, 1.0, (250 * threads, 2))  # three rounds of one chunk per thread, the last one short
+    points = rng.uniform(0.0, 1.0, (300 * threads, 2))  # three rounds of one chunk per thread
     weights = sp.csr_matrix(bilinear_weights(points))
     fractions = []
     reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, progress=lambda fraction, message: fractions.append(fraction))
-    assert fractions == pytest.approx([0.0, 0.4, 0.8, 1.0])
+    assert fractions == pytest.approx([0.0, 1 / 3, 2 / 3, 1.0])
     chunks = []
     reduce_rows = reduction._reduce_rows
     monkeypatch.setattr(reduction, "_reduce_rows", lambda *arguments: chunks.append(1) or reduce_rows(*arguments))
