@@ -18,7 +18,8 @@
               beside every weight's distance to a 16,000-cell bind.
 --speed       item 2: default bind of the demo gargoyle (subdivided to 64k vertices, cage L10) and of Suzanne
               subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process:
-              lbc_core.bind, then the add-on's whole bind (snapshot, lbc_core, thinning, slots, writing) by stage.
+              lbc_core.bind, then the add-on's whole bind (snapshot, lbc_core, thinning, slots, writing) by stage,
+              with the evaluation, reduction and thinning of ``--baseline`` (default main; one thread), then current.
 --evaluation  item 2, the bind's time outside the solve: the demo gargoyle's evaluation at its 64k points (smooth
               rows, reduction) and the add-on's thinning, timed against the code of a baseline revision
               (``--baseline``, default main) loaded from git into the same process: interleaved, CPU seconds, one
@@ -223,7 +224,9 @@ def faces_of(obj):
     return [list(polygon.vertices) for polygon in obj.data.polygons]
 
 
-def bench_speed():
+def bench_speed(baseline):
+    import contextlib
+
     import bpy
 
     sys.path.insert(0, str(ROOT / "tests"))
@@ -232,10 +235,28 @@ def bench_speed():
     from lbc_addon import geometry, jobs, writing
 
     register_addon()
+    old = baseline_modules(baseline)
+
+    @contextlib.contextmanager
+    def baseline_code():
+        """The bind's evaluation, reduction and thinning from ``baseline``'s modules, on one thread (as before)."""
+        import lbc_core.parallel as parallel
+        import lbc_core.pipeline as pipeline
+
+        saved = pipeline.SmoothInterpolation, pipeline.interpolate_and_reduce, jobs.thin_weights, parallel.worker_count
+        pipeline.SmoothInterpolation = old["smoothing"].SmoothInterpolation
+        pipeline.interpolate_and_reduce = old["reduction"].interpolate_and_reduce
+        jobs.thin_weights, parallel.worker_count = old["thinning"].thin_weights, lambda: 1
+        try:
+            yield
+        finally:
+            (pipeline.SmoothInterpolation, pipeline.interpolate_and_reduce, jobs.thin_weights,
+             parallel.worker_count) = saved
 
     def addon_bind(mesh_obj, cage_obj):
         """The add-on's default bind (what api.bind does), timed by stage: snapshot, lbc_core's stages, thinning,
-        slots, writing."""
+        slots, writing; from scratch (the session's previous binding of the mesh forgotten)."""
+        jobs.forget(mesh_obj.session_uid)
         clock = time.perf_counter()
         request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get())
         snapshot = time.perf_counter() - clock
@@ -256,13 +277,15 @@ def bench_speed():
         print(f"| {name}, lbc_core.bind | {len(points)} | {len(cage)} | {seconds:.2f} s | {md:.2f} s | "
               f"{seconds / md:.1f}× | {binding.iterations} | {counts.mean():.1f} / {counts.max()} | "
               + ", ".join(f"{k} {v:.2f}" for k, v in binding.timings.items()) + f" | {load()} |", flush=True)
-        seconds, stages, result = addon_bind(mesh_obj, cage_obj)
-        counts = np.count_nonzero(result.weight, axis=1)
-        outside_solve = seconds - stages["solve"] - stages.get("factorisation", 0.0)
-        print(f"| {name}, add-on bind | {len(points)} | {len(cage)} | {seconds:.2f} s ({outside_solve:.2f} outside "
-              f"the solve) | {md:.2f} s | {seconds / md:.1f}× | {result.binding.iterations} | "
-              f"{counts.mean():.1f} / {result.index.shape[1]} | " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items())
-              + f" | {load()} |", flush=True)
+        for code in (baseline, "current"):
+            with baseline_code() if code == baseline else contextlib.nullcontext():
+                seconds, stages, result = addon_bind(mesh_obj, cage_obj)
+            counts = np.count_nonzero(result.weight, axis=1)
+            outside_solve = seconds - stages["solve"] - stages.get("factorisation", 0.0)
+            print(f"| {name}, add-on bind, {code} | {len(points)} | {len(cage)} | {seconds:.2f} s ({outside_solve:.2f} "
+                  f"outside the solve) | {md:.2f} s | {seconds / md:.1f}× | {result.binding.iterations} | "
+                  f"{counts.mean():.1f} / {result.index.shape[1]} | "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()) + f" | {load()} |", flush=True)
 
     print("| scene | mesh vertices | cage vertices | LBC default bind | Mesh Deform p5 bind | ratio | iterations "
           "| influences mean / max | LBC stages (s) | load |")
@@ -501,7 +524,9 @@ def main(argv=None):
                         "1e-12:0 every weight)")
     parser.add_argument("--thinnings", default="0.005:0:0,0.005:0:2,0.005:0:4,0.005:12:0,0.005:14:0",
                         help="--thinning: comma-separated floor:cap:rise settings (lbc_core.thinning.thin_weights)")
-    parser.add_argument("--baseline", default="main", help="--evaluation: the git revision to time against")
+    parser.add_argument("--baseline", default="main",
+                        help="--evaluation, --speed: the git revision whose evaluation, reduction and thinning to time "
+                        "against")
     parser.add_argument("--picture", type=Path)
     args = parser.parse_args(argv)
     if args.picture:
@@ -517,7 +542,7 @@ def main(argv=None):
         bench_thinning([(float(floor), int(cap), float(rise))
                         for floor, cap, rise in (value.split(":") for value in args.thinnings.split(","))])
     if args.speed:
-        bench_speed()
+        bench_speed(args.baseline)
     if args.evaluation:
         bench_evaluation(args.baseline)
     if args.l08:
