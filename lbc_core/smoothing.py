@@ -125,8 +125,7 @@ def moving_least_squares(vertices, tree, points, radius):
                                              - centre[:, b] * sums[:, 1 + a] + centre[:, a] * centre[:, b] * mass)
     moments = np.empty((k, d + 1, d + 1))
     moments[:, 0, 0], moments[:, 0, 1:], moments[:, 1:, 0], moments[:, 1:, 1:] = mass, first, first, second
-    eigenvalues = np.linalg.eigvalsh(moments)
-    fits = eigenvalues[:, 0] > eigenvalues[:, -1] / MAX_CONDITION
+    fits = well_conditioned(moments)
     # Value at the point of the fit = e₀ᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e₀ (M is symmetric).
     solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
                              np.broadcast_to(np.eye(d + 1)[:, :1], (k, d + 1, 1)))[:, :, 0]
@@ -140,6 +139,32 @@ def moving_least_squares(vertices, tree, points, radius):
     rows = sp.csr_matrix((weight.data * factor, weight.indices, weight.indptr), shape=weight.shape)
     rows.eliminate_zeros()
     return rows, fits
+
+
+def well_conditioned(matrices):
+    """Which symmetric positive semi-definite matrices have λ_min > λ_max / MAX_CONDITION.
+
+    Most pass a cheap sufficient test, λ_min ≥ det / λ_max^(D-1) ≥ det / trace^(D-1) (twice over, for rounding), and
+    λ_max ≤ trace; only the others get their eigenvalues computed, so the answer is the eigenvalues' own.
+
+    Parameters
+    ----------
+    matrices : (k, D, D) float array
+
+    Returns
+    -------
+    (k,) bool array
+    """
+    size = matrices.shape[-1]
+    trace = np.trace(matrices, axis1=1, axis2=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        passes = np.linalg.det(matrices) / trace ** (size - 1) > 2.0 * trace / MAX_CONDITION
+    answer = passes.copy()
+    doubtful = np.flatnonzero(~passes)
+    if len(doubtful):
+        eigenvalues = np.linalg.eigvalsh(matrices[doubtful])
+        answer[doubtful] = eigenvalues[:, 0] > eigenvalues[:, -1] / MAX_CONDITION
+    return answer
 
 
 def kernel(r):
