@@ -12,7 +12,8 @@ same comparison between two cold binds at 8000 and 9000 cells: what remeshing al
 --addon  only the demo gargoyle (64k points), through the add-on's bind (lbc_addon.jobs.solve: lbc_core, thinning,
          slots; no bpy): a cold bind of the edited cage against the warm re-bind, which thins again only the rows the
          re-bind changed, and the same warm re-bind thinning every row (the path before); CPU seconds of every
-         thread, the best of two interleaved runs; the warm re-bind's stages in wall seconds.
+         thread (wall seconds in brackets), the best of two interleaved runs; the warm re-bind's stages in wall
+         seconds.
 """
 
 import argparse
@@ -177,12 +178,12 @@ def addon_scene(cage, faces, points, edits):
             return thinned, again
 
         def timed_solve(thinning):
-            """CPU seconds (every thread) of jobs.solve(target), the result."""
+            """(CPU seconds of every thread, wall seconds) of jobs.solve(target), the result."""
             jobs.thin_changed_rows = thinning
             clock = time.process_time()
             result = jobs.solve(target)
             jobs.thin_changed_rows = thin_changed_rows
-            return time.process_time() - clock, result
+            return (time.process_time() - clock, result.seconds), result
 
         # Interleaved, the best of ROUNDS: the machine is shared.
         seconds = {"cold": [], "warm": [], "before": []}
@@ -198,10 +199,13 @@ def addon_scene(cage, faces, points, edits):
             spent, _ = timed_solve(thin_changed_rows)
             seconds["cold"].append(spent)
             jobs.remember(first, first_result)  # the next solve starts warm from the unedited cage's binding again
-        cold, fast, slow = (min(seconds[name]) for name in ("cold", "warm", "before"))
+        (cold, cold_wall), (fast, fast_wall), (slow, slow_wall) = (min(seconds[name]) for name in ("cold", "warm",
+                                                                                                    "before"))
         same = (f"indices equal, weights within {np.abs(warm.weight - before.weight).max():.1e}"
                 if np.array_equal(warm.index, before.index) else "indices differ")
-        print(f"| {count} × {share:.0%} | {cold:.2f} | {fast:.2f} | {cold / fast:.1f}× | {slow:.2f} | {cold / slow:.1f}× "
+        print(f"| {count} × {share:.0%} | {cold:.2f} ({cold_wall:.2f}) | {fast:.2f} ({fast_wall:.2f}) | "
+              f"{cold / fast:.1f}× ({cold_wall / fast_wall:.1f}×) | {slow:.2f} ({slow_wall:.2f}) | {cold / slow:.1f}× "
+              f"({cold_wall / slow_wall:.1f}×) "
               f"| {counts[0]} of {len(points)} | " + ", ".join(f"{k} {v:.2f}" for k, v in warm.stages.items())
               + f" | {same} |", flush=True)
     print(f"({warm.rebind}; load average {os.getloadavg()[0]:.1f})")
