@@ -316,8 +316,9 @@ def baseline_modules(revision, names=("constraints", "smoothing", "reduction", "
     for name in names:
         source = subprocess.run(["git", "-C", str(ROOT), "show", f"{revision}:lbc_core/{name}.py"], check=True,
                                 capture_output=True, text=True).stdout
-        source = re.sub(r"^from \.(\w+) import", lambda match: f"from {'baseline_' if match[1] in modules else 'lbc_core.'}"
-                        f"{match[1]} import", source, flags=re.M)
+        source = re.sub(r"^from \.(\w+) import",
+                        lambda match: f"from {'baseline_' if match[1] in modules else 'lbc_core.'}{match[1]} import",
+                        source, flags=re.M)
         module = types.ModuleType(f"baseline_{name}")
         sys.modules[module.__name__] = module
         exec(compile(source, f"{revision}:lbc_core/{name}.py", "exec"), module.__dict__)

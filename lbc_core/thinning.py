@@ -92,7 +92,8 @@ def thin_changed_rows(thinned, before, weights, controls_before, controls, floor
 
     A row is thinned again when its weights differ from ``before``'s or it has weight on a control point that moved;
     every row is when the controls' extent changed (it scales every row's floor and tolerance). Each row's thinning
-    depends on that row alone, so the result is :func:`thin_weights`'s (to rounding: a chunk pads its rows to its longest).
+    depends on that row alone, so the result is :func:`thin_weights`'s (to rounding: a chunk pads its rows to its
+    longest).
 
     Parameters
     ----------
