@@ -1,6 +1,6 @@
 """Warm re-bind (issue 12, item 5) against a cold bind of the same edited cage, side by side in one process.
 
-    .venv/bin/python bench/rebinding.py [--skip-64k]
+    .venv/bin/python bench/rebinding.py [--skip-64k] [--addon]
 
 For each scene: bind the gargoyle to its cage, move 1, 3 or 5 cage vertices (seeded random directions) by 1-10 % of
 the cage's diagonal, then bind the edited cage cold (lbc_core.bind) and warm (lbc_core.rebind from the first
@@ -8,6 +8,12 @@ binding). Printed per edit: both times and iterations, the objectives (and, on t
 cold solve's: the same problem, so any difference is the solver's tolerance), the largest weight difference at the
 points, and the largest difference of the points deformed by one pose, over the cage's diagonal. "mesh noise" is the
 same comparison between two cold binds at 8000 and 9000 cells: what remeshing alone changes.
+
+--addon  only the demo gargoyle (64k points), through the add-on's bind (lbc_addon.jobs.solve: lbc_core, thinning,
+         slots; no bpy): a cold bind of the edited cage against the warm re-bind, which thins again only the rows the
+         re-bind changed, and the same warm re-bind thinning every row (the path before); CPU seconds of every
+         thread (wall seconds in brackets), the best of two interleaved runs; the warm re-bind's stages in wall
+         seconds.
 """
 
 import argparse
@@ -31,6 +37,7 @@ from lbc_core.solver import solve_on_mesh  # noqa: E402
 
 GARGOYLE = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
 EDITS = [(1, 0.01), (1, 0.02), (3, 0.01), (5, 0.01), (1, 0.05), (3, 0.10)]
+ROUNDS = 2  # --addon: each bind repeated, interleaved, the best CPU time kept
 
 
 def edited(cage, faces, count, share, seed=1):
@@ -138,10 +145,81 @@ def gargoyle_64k():
     return vertices_of(obj)
 
 
+def addon_scene(cage, faces, points, edits):
+    """The add-on's warm re-bind against its cold bind, and against the warm re-bind thinning every row."""
+    from lbc_addon import jobs
+
+    options = {"cells": 0, "weighting": "quadratic", "epsilon": 0.0, "tolerance": 0.0, "thinning": 0.0,
+               "influences": 0, "mode": "3D"}
+
+    def request(cage_points):
+        return jobs.BindRequest(mesh_uid=1, cage_uid=2, mesh_name="Gargoyle", points=points, cage_points=cage_points,
+                                cage_faces=faces, flat=None, options=options, cage_topology="", mesh_topology="")
+
+    def every_row(thinned, before, weights, controls_before, controls, *thinning, cancel=None):
+        return jobs.thin_weights(weights, controls, weights @ controls, *thinning, cancel=cancel), weights.shape[0]
+
+    thin_changed_rows = jobs.thin_changed_rows
+    first = request(cage)
+    first_result = jobs.solve(first)
+    jobs.remember(first, first_result)
+    print(f"\nadd-on bind (lbc_addon.jobs.solve), demo gargoyle: {len(points)} points, cage L10; load average "
+          f"{os.getloadavg()[0]:.1f}")
+    print("| edit | cold s | warm s | speed-up | warm s, every row thinned (before) | speed-up | rows thinned again | "
+          "warm stages (s) | the same slots |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for count, share in edits:
+        target = request(edited(cage, faces, count, share))
+        counts = []
+
+        def counted(*arguments, **keywords):
+            thinned, again = thin_changed_rows(*arguments, **keywords)
+            counts.append(again)
+            return thinned, again
+
+        def timed_solve(thinning):
+            """(CPU seconds of every thread, wall seconds) of jobs.solve(target), the result."""
+            jobs.thin_changed_rows = thinning
+            clock = time.process_time()
+            result = jobs.solve(target)
+            jobs.thin_changed_rows = thin_changed_rows
+            return (time.process_time() - clock, result.seconds), result
+
+        # Interleaved, the best of ROUNDS: the machine is shared.
+        seconds = {"cold": [], "warm": [], "before": []}
+        for _ in range(ROUNDS):
+            for name, thinning in (("before", every_row), ("warm", counted)):
+                spent, result = timed_solve(thinning)
+                seconds[name].append(spent)
+                if name == "warm":
+                    warm = result
+                else:
+                    before = result
+            jobs.forget(1)
+            spent, _ = timed_solve(thin_changed_rows)
+            seconds["cold"].append(spent)
+            jobs.remember(first, first_result)  # the next solve starts warm from the unedited cage's binding again
+        (cold, cold_wall), (fast, fast_wall), (slow, slow_wall) = (min(seconds[name]) for name in ("cold", "warm",
+                                                                                                    "before"))
+        same = (f"indices equal, weights within {np.abs(warm.weight - before.weight).max():.1e}"
+                if np.array_equal(warm.index, before.index) else "indices differ")
+        print(f"| {count} × {share:.0%} | {cold:.2f} ({cold_wall:.2f}) | {fast:.2f} ({fast_wall:.2f}) | "
+              f"{cold / fast:.1f}× ({cold_wall / fast_wall:.1f}×) | {slow:.2f} ({slow_wall:.2f}) | {cold / slow:.1f}× "
+              f"({cold_wall / slow_wall:.1f}×) "
+              f"| {counts[0]} of {len(points)} | " + ", ".join(f"{k} {v:.2f}" for k, v in warm.stages.items())
+              + f" | {same} |", flush=True)
+    print(f"({warm.rebind}; load average {os.getloadavg()[0]:.1f})")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--skip-64k", action="store_true")
+    parser.add_argument("--addon", action="store_true")
     arguments = parser.parse_args(argv)
+    if arguments.addon:
+        cage, faces = read_cage(GARGOYLE / "cage_L10.obj")
+        addon_scene(cage, [list(face) for face in faces], gargoyle_64k(), [(1, 0.02), (3, 0.01)])
+        return
     points, _ = read_mesh(GARGOYLE / "mesh.off")
     for level in ("L10", "L09"):
         cage, faces = read_cage(GARGOYLE / f"cage_{level}.obj")
@@ -153,3 +231,5 @@ def main(argv=None):
 
 if __name__ == "__main__":
     main()
+    sys.stdout.flush()
+    os._exit(0)  # the bpy 4.5.4 module can deadlock in a static destructor at exit; everything is written

@@ -17,7 +17,13 @@
               too, as a yardstick), and the largest distance to every weight over blender_deform.py's three poses,
               beside every weight's distance to a 16,000-cell bind.
 --speed       item 2: default bind of the demo gargoyle (subdivided to 64k vertices, cage L10) and of Suzanne
-              subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process.
+              subdivided to ~48k vertices in a 56-vertex box cage, against Mesh Deform precision 5, same process:
+              lbc_core.bind, then the add-on's whole bind (snapshot, lbc_core, thinning, slots, writing) by stage,
+              with the evaluation, reduction and thinning of ``--baseline`` (default main; one thread), then current.
+--evaluation  item 2, the bind's time outside the solve: the demo gargoyle's evaluation at its 64k points (smooth
+              rows, reduction) and the add-on's thinning, timed against the code of a baseline revision
+              (``--baseline``, default main) loaded from git into the same process: interleaved, CPU seconds, one
+              thread, then the current code on every core (wall seconds); the largest weight difference.
 --l08         item 3: gargoyle cage L08 (168 control points) at 8000 and 32000 cells.
 --iterations  item 4: iterations of every gargoyle cage at the default resolution.
 --tolerance   the 3D stopping tolerance as a lever of item 2: for the capsule and gargoyle cages L10 and L12, binds
@@ -30,7 +36,10 @@
 
 import argparse
 import os
+import re
+import subprocess
 import sys
+import types
 import time
 from pathlib import Path
 
@@ -215,8 +224,47 @@ def faces_of(obj):
     return [list(polygon.vertices) for polygon in obj.data.polygons]
 
 
-def bench_speed():
+def bench_speed(baseline):
+    import contextlib
+
     import bpy
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from blender_scenes import register_addon
+
+    from lbc_addon import geometry, jobs, writing
+
+    register_addon()
+    old = baseline_modules(baseline)
+
+    @contextlib.contextmanager
+    def baseline_code():
+        """The bind's evaluation, reduction and thinning from ``baseline``'s modules, on one thread (as before)."""
+        import lbc_core.parallel as parallel
+        import lbc_core.pipeline as pipeline
+
+        saved = pipeline.SmoothInterpolation, pipeline.interpolate_and_reduce, jobs.thin_weights, parallel.worker_count
+        pipeline.SmoothInterpolation = old["smoothing"].SmoothInterpolation
+        pipeline.interpolate_and_reduce = old["reduction"].interpolate_and_reduce
+        jobs.thin_weights, parallel.worker_count = old["thinning"].thin_weights, lambda: 1
+        try:
+            yield
+        finally:
+            (pipeline.SmoothInterpolation, pipeline.interpolate_and_reduce, jobs.thin_weights,
+             parallel.worker_count) = saved
+
+    def addon_bind(mesh_obj, cage_obj):
+        """The add-on's default bind (what api.bind does), timed by stage: snapshot, lbc_core's stages, thinning,
+        slots, writing; from scratch (the session's previous binding of the mesh forgotten)."""
+        jobs.forget(mesh_obj.session_uid)
+        clock = time.perf_counter()
+        request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get())
+        snapshot = time.perf_counter() - clock
+        result = jobs.solve(request)
+        clock = time.perf_counter()
+        writing.apply(request, result)
+        stages = dict(snapshot=snapshot, **result.stages, writing=time.perf_counter() - clock)
+        return sum(stages.values()), stages, result
 
     def compare(name, mesh_obj, cage_obj):
         points, cage, cage_faces = vertices_of(mesh_obj), vertices_of(cage_obj), faces_of(cage_obj)
@@ -226,9 +274,18 @@ def bench_speed():
         binding = lbc_core.bind(cage, cage_faces, points)
         seconds = time.perf_counter() - start
         counts = np.diff(binding.weights.indptr)
-        print(f"| {name} | {len(points)} | {len(cage)} | {seconds:.2f} s | {md:.2f} s | {seconds / md:.1f}× | "
-              f"{binding.iterations} | {counts.mean():.1f} / {counts.max()} | " + ", ".join(f"{k} {v:.2f}" for k, v in binding.timings.items())
-              + f" | {load()} |", flush=True)
+        print(f"| {name}, lbc_core.bind | {len(points)} | {len(cage)} | {seconds:.2f} s | {md:.2f} s | "
+              f"{seconds / md:.1f}× | {binding.iterations} | {counts.mean():.1f} / {counts.max()} | "
+              + ", ".join(f"{k} {v:.2f}" for k, v in binding.timings.items()) + f" | {load()} |", flush=True)
+        for code in (baseline, "current"):
+            with baseline_code() if code == baseline else contextlib.nullcontext():
+                seconds, stages, result = addon_bind(mesh_obj, cage_obj)
+            counts = np.count_nonzero(result.weight, axis=1)
+            outside_solve = seconds - stages["solve"] - stages.get("factorisation", 0.0)
+            print(f"| {name}, add-on bind, {code} | {len(points)} | {len(cage)} | {seconds:.2f} s ({outside_solve:.2f} "
+                  f"outside the solve) | {md:.2f} s | {seconds / md:.1f}× | {result.binding.iterations} | "
+                  f"{counts.mean():.1f} / {result.index.shape[1]} | "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()) + f" | {load()} |", flush=True)
 
     print("| scene | mesh vertices | cage vertices | LBC default bind | Mesh Deform p5 bind | ratio | iterations "
           "| influences mean / max | LBC stages (s) | load |")
@@ -250,6 +307,79 @@ def bench_speed():
     box.data.vertices.foreach_set("co", box_vertices.astype(np.float32).ravel())
     box.data.update()
     compare("Suzanne, 9 cuts, cube with 2 cuts", suzanne, box)
+
+
+def baseline_modules(revision, names=("constraints", "smoothing", "reduction", "thinning")):
+    """lbc_core's modules ``names`` as they are at a git ``revision``, loaded beside the current ones: their relative
+    imports of each other resolve among them, the others to the current lbc_core. Returns {name: module}."""
+    modules = {}
+    for name in names:
+        source = subprocess.run(["git", "-C", str(ROOT), "show", f"{revision}:lbc_core/{name}.py"], check=True,
+                                capture_output=True, text=True).stdout
+        source = re.sub(r"^from \.(\w+) import",
+                        lambda match: f"from {'baseline_' if match[1] in modules else 'lbc_core.'}{match[1]} import",
+                        source, flags=re.M)
+        module = types.ModuleType(f"baseline_{name}")
+        sys.modules[module.__name__] = module
+        exec(compile(source, f"{revision}:lbc_core/{name}.py", "exec"), module.__dict__)
+        modules[name] = module
+    return modules
+
+
+def bench_evaluation(baseline, rounds=3):
+    """The evaluation at the demo gargoyle's points and the add-on's thinning: current code against ``baseline``'s."""
+    import lbc_core.parallel as parallel
+    from bench.rebinding import gargoyle_64k
+    from lbc_core import smoothing, thinning
+    from lbc_core.frame import UnitFrame
+    from lbc_core.pipeline import REPRODUCTION_TOLERANCE
+
+    points = gargoyle_64k()
+    cage, faces = read_cage(GARGOYLE / "cage_L10.obj")
+    binding = lbc_core.bind(cage, faces, points)
+    frame = UnitFrame.of(binding.cage)
+    unit_cage = frame.cage_to_unit(binding.cage)
+    vertices, cells = frame.to_unit(binding.domain.vertices), binding.domain.cells
+    located, _, _ = interpolation_matrix(vertices, cells, frame.to_unit(points))
+    threshold = binding.options["threshold"]
+    tolerance = REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal
+    old = baseline_modules(baseline)
+    current = {"smoothing": smoothing, "reduction": sys.modules["lbc_core.reduction"], "thinning": thinning}
+
+    def run(modules):
+        """(evaluation and reduction CPU s, wall s), (thinning CPU s, wall s), the reduced and the thinned weights."""
+        figures = []
+        clock, cpu = time.perf_counter(), time.process_time()
+        smooth = modules["smoothing"].SmoothInterpolation(vertices, cells, located)
+        reduced = modules["reduction"].interpolate_and_reduce(smooth, binding.domain_weights, unit_cage.vertices,
+                                                              vertices, threshold, tolerance)
+        figures.append((time.process_time() - cpu, time.perf_counter() - clock))
+        clock, cpu = time.perf_counter(), time.process_time()
+        thinned = modules["thinning"].thin_weights(reduced, unit_cage.vertices, reduced @ unit_cage.vertices)
+        figures.append((time.process_time() - cpu, time.perf_counter() - clock))
+        return figures, reduced, thinned
+
+    threads = parallel.worker_count
+    seconds = {"baseline": [], "current, one thread": [], "current, every core": []}
+    for _ in range(rounds):
+        for name, modules in (("baseline", old), ("current, one thread", current), ("current, every core", current)):
+            parallel.worker_count = threads if name.endswith("every core") else (lambda: 1)
+            figures, reduced, thinned = run(modules)
+            seconds[name].append(figures)
+            results = (reduced, thinned) if name == "baseline" else results
+            if name != "baseline":
+                differences = (abs(reduced - results[0]).max(), abs(thinned - results[1]).max())
+    parallel.worker_count = threads
+    print(f"\ndemo gargoyle, {len(points)} points, cage L10: the evaluation at the points against {baseline} "
+          f"({threads()} threads on every core; best of {rounds}, interleaved; {load()})")
+    print("| code | evaluation + reduction CPU s (wall) | thinning CPU s (wall) |")
+    print("| --- | --- | --- |")
+    for name, runs in seconds.items():
+        evaluation = min(runs, key=lambda figures: figures[0][0])[0]
+        thinning_seconds = min(runs, key=lambda figures: figures[1][0])[1]
+        print(f"| {name} | {evaluation[0]:.2f} ({evaluation[1]:.2f}) | {thinning_seconds[0]:.2f} "
+              f"({thinning_seconds[1]:.2f}) |")
+    print(f"largest difference to {baseline}: reduced weights {differences[0]:.1e}, thinned {differences[1]:.1e}")
 
 
 def subdivided(bpy, obj, cuts):
@@ -388,18 +518,22 @@ def render_picture(path):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for flag in ("capsule", "addon", "thinning", "speed", "l08", "iterations", "tolerance"):
+    for flag in ("capsule", "addon", "thinning", "speed", "evaluation", "l08", "iterations", "tolerance"):
         parser.add_argument(f"--{flag}", action="store_true")
     parser.add_argument("--settings", default="0:0,1e-12:0,0.002:0,0.01:0,0.005:12,0.005:16",
                         help="--addon: comma-separated Threshold:Max Influences settings (0:0 is the defaults, "
                         "1e-12:0 every weight)")
     parser.add_argument("--thinnings", default="0.005:0:0,0.005:0:2,0.005:0:4,0.005:12:0,0.005:14:0",
                         help="--thinning: comma-separated floor:cap:rise settings (lbc_core.thinning.thin_weights)")
+    parser.add_argument("--baseline", default="main",
+                        help="--evaluation, --speed: the git revision whose evaluation, reduction and thinning to time "
+                        "against")
     parser.add_argument("--picture", type=Path)
     args = parser.parse_args(argv)
     if args.picture:
         render_picture(args.picture)
-    elif not (args.addon or args.thinning or args.speed or args.l08 or args.iterations or args.tolerance):
+    elif not (args.addon or args.thinning or args.speed or args.evaluation or args.l08 or args.iterations
+              or args.tolerance):
         args.capsule = True
     if args.capsule:
         bench_capsule()
@@ -409,7 +543,9 @@ def main(argv=None):
         bench_thinning([(float(floor), int(cap), float(rise))
                         for floor, cap, rise in (value.split(":") for value in args.thinnings.split(","))])
     if args.speed:
-        bench_speed()
+        bench_speed(args.baseline)
+    if args.evaluation:
+        bench_evaluation(args.baseline)
     if args.l08:
         bench_l08()
     if args.iterations:

@@ -26,3 +26,4 @@ POSED_APART = _cage.POSED_APART
 flatten = _planar.flatten
 DEFAULT_FLOOR = _thinning.DEFAULT_FLOOR
 thin_weights = _thinning.thin_weights
+thin_changed_rows = _thinning.thin_changed_rows

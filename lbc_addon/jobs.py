@@ -11,8 +11,9 @@ Nothing in the scene changes before step 3, so a failed or cancelled bind leaves
 
 Binding a mesh again to the same cage with the same options (Rebind, Rebind All, or Bind on a bound mesh) starts from
 its previous binding when this session still has it (``lbc_core.rebind``: a small cage edit at rest re-binds several
-times faster). The previous bindings live in memory only, the last :data:`KEPT_BINDINGS` of them: their solver state
-is 8-30 MB a binding, too large for the .blend, so a reopened file, or a mesh bound long ago, binds from scratch.
+times faster; only the weights it changed are thinned again). The previous bindings live in memory only, the last
+:data:`KEPT_BINDINGS` of them: their solver state is 8-30 MB a binding (their thinned weights about 8 MB for 64k
+vertices), too large for the .blend, so a reopened file, or a mesh bound long ago, binds from scratch.
 """
 
 import threading
@@ -23,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import storage
-from .core import DEFAULT_FLOOR, lbc_core, thin_weights
+from .core import DEFAULT_FLOOR, lbc_core, thin_changed_rows, thin_weights
 
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
@@ -41,6 +42,8 @@ class _Previous:
     options: dict
     loop: np.ndarray  # the flat cage's outline of a 2D bind, else None
     binding: object  # lbc_core.Binding
+    thinning: tuple  # the Thinning floor and Max Influences the binding's weights were thinned with
+    thinned: object  # those thinned weights (scipy.sparse, one column per control point)
 
 
 _previous = OrderedDict()  # mesh session_uid -> _Previous, the most recent last
@@ -80,7 +83,10 @@ class BindResult:
     seconds: float = 0.0
     welded: str = ""  # "copy:kept,..." cage vertices welded into one control point (the deformer reads the kept one)
     binding: object = None  # the lbc_core.Binding, kept for a later warm re-bind once applied
+    thinning: tuple = ()  # the floor and Max Influences the weights were thinned with
+    thinned: object = None  # the thinned weights (scipy.sparse, one column per control point), kept likewise
     rebind: str = ""  # for a bind that had a previous binding to start from: how it went (lbc_core.rebind)
+    stages: dict = field(default_factory=dict)  # seconds: lbc_core's stages, then "thinning" and "slots"
 
 
 def core_options(options):
@@ -141,21 +147,30 @@ def solve(request, progress=None, cancel=None):
         column_base = np.arange(len(request.cage_points))
     previous = warm_start(request)
     if previous is not None:
-        binding = lbc_core.rebind(previous, cage_vertices, faces, points, progress=progress, cancel=cancel)
+        binding = lbc_core.rebind(previous.binding, cage_vertices, faces, points, progress=progress, cancel=cancel)
     else:
         binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options),
                                 progress=progress, cancel=cancel)
     column_vertex = column_base[binding.control_input_index]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
     rest = binding.rest_cage_vertices
-    floor = request.options["thinning"] or DEFAULT_FLOOR
-    weights = thin_weights(binding.weights, rest, binding.weights @ rest, floor, request.options["influences"],
-                           cancel=cancel)
+    thinning = (request.options["thinning"] or DEFAULT_FLOOR, request.options["influences"])
+    clock = time.perf_counter()
+    if previous is not None and previous.thinning == thinning:
+        # A warm re-bind keeps the rows its edit cannot reach: only the others are thinned again.
+        weights, _ = thin_changed_rows(previous.thinned, previous.binding.weights, binding.weights,
+                                       previous.binding.rest_cage_vertices, rest, *thinning, cancel=cancel)
+    else:
+        weights = thin_weights(binding.weights, rest, binding.weights @ rest, *thinning, cancel=cancel)
+    stages = dict(binding.timings, thinning=time.perf_counter() - clock)
+    clock = time.perf_counter()
     index, weight = storage.slot_arrays(weights, column_vertex)
+    rest_offsets = storage.rest_offsets(index, weight, request.cage_points)
+    stages["slots"] = time.perf_counter() - clock
     return BindResult(
         index=index,
         weight=weight,
-        rest=storage.rest_offsets(index, weight, request.cage_points),
+        rest=rest_offsets,
         control_points=len(column_vertex),
         outside=int(np.count_nonzero(binding.outside)),
         core_fingerprint=binding.cage.fingerprint(),
@@ -163,7 +178,10 @@ def solve(request, progress=None, cancel=None):
         welded=welded_pairs(column_base, column_vertex[binding.cage.vertex_map]),
         seconds=time.perf_counter() - start,
         binding=binding,
+        thinning=thinning,
+        thinned=weights,
         rebind=binding.options.get("rebind", ""),
+        stages=stages,
     )
 
 
@@ -175,8 +193,8 @@ def _not_converged(iterations):
 
 
 def warm_start(request):
-    """The previous binding of the request's mesh to start from, or None: this session must have bound the same
-    mesh to the same cage with the same options, and a 2D bind must use the same outline."""
+    """The previous binding (:class:`_Previous`) of the request's mesh to start from, or None: this session must have
+    bound the same mesh to the same cage with the same options, and a 2D bind must use the same outline."""
     previous = _previous.get(request.mesh_uid)
     if previous is None or previous.cage_uid != request.cage_uid:
         return None
@@ -185,7 +203,7 @@ def warm_start(request):
     loop = None if request.flat is None else request.flat.loop
     if (previous.loop is None) != (loop is None) or (loop is not None and not np.array_equal(previous.loop, loop)):
         return None
-    return previous.binding
+    return previous
 
 
 def remember(request, result):
@@ -193,7 +211,8 @@ def remember(request, result):
     binding is written."""
     _previous.pop(request.mesh_uid, None)
     loop = None if request.flat is None else request.flat.loop
-    _previous[request.mesh_uid] = _Previous(request.cage_uid, dict(request.options), loop, result.binding)
+    _previous[request.mesh_uid] = _Previous(request.cage_uid, dict(request.options), loop, result.binding,
+                                            result.thinning, result.thinned)
     while len(_previous) > KEPT_BINDINGS:
         _previous.popitem(last=False)
 

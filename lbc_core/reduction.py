@@ -10,11 +10,13 @@ import scipy.sparse as sp
 
 from .constraints import csr_from_padded, grow_support, padded_rows, restore_and_check, scatter_rows
 from .constraints import constraint_residuals, restore_constraints  # noqa: F401  (their home before constraints.py)
+from .parallel import map_row_chunks
 from .progress import Progress
 
 
-# Rows reduced at a time: the padded (rows, K, d+1) work arrays of a million points would take gigabytes.
-ROWS_PER_CHUNK = 65_536
+# Rows reduced by one thread at a time: the padded (rows, K, d+1) work arrays of a million points would take
+# gigabytes, so at most this many rows per thread are in flight (the smooth evaluation's own chunk).
+ROWS_PER_CHUNK = 16_384
 
 
 def reduce_weights(weights, controls, positions, threshold, tolerance, progress=None, cancel=None):
@@ -84,12 +86,9 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
 
 
 def _by_chunks(m, n, reduce_chunk, progress):
-    """``reduce_chunk(rows)`` over consecutive row slices of at most ROWS_PER_CHUNK, stacked into an (m, n) CSR;
-    ``progress`` is told before each chunk."""
-    chunks = []
-    for start in range(0, m, ROWS_PER_CHUNK):
-        progress(start / m, "reducing the weights")
-        chunks.append(reduce_chunk(slice(start, start + ROWS_PER_CHUNK)))
+    """``reduce_chunk(rows)`` over consecutive equal row slices of at most ROWS_PER_CHUNK, one per thread at a time
+    (:func:`~lbc_core.parallel.map_row_chunks`), stacked into an (m, n) CSR; ``progress`` is told before each round."""
+    chunks = map_row_chunks(reduce_chunk, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "reducing the weights"))
     progress(1.0, "reducing the weights: done")
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix((0, n))
 
@@ -103,6 +102,8 @@ def _reduce_rows(full, controls, positions, threshold, tolerance, check):
     # Most rows reproduce on their kept support: correct them all at once on short padded rows.
     values, columns = padded_rows(kept)
     corrected, done = restore_and_check(values, columns, controls, positions, tolerance, check)
+    if done.all():
+        return csr_from_padded(corrected, columns, n)
     reduced = scatter_rows(sp.csr_matrix(full.shape), np.flatnonzero(done),
                            csr_from_padded(corrected[done], columns[done], n))
     pending = np.flatnonzero(~done)

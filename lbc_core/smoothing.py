@@ -79,7 +79,10 @@ class SmoothInterpolation:
         blend = fade_in(linear @ self.cage_distance / self.fade)
         fitted, fits = moving_least_squares(self.vertices, self.tree, points, self.radius)
         blend = np.where(fits, blend, 0.0)
-        return (sp.diags(1.0 - blend) @ linear + sp.diags(blend) @ fitted).tocsr()
+        linear = linear.copy()
+        linear.data *= np.repeat(1.0 - blend, np.diff(linear.indptr))
+        fitted.data *= np.repeat(blend, np.diff(fitted.indptr))
+        return (linear + fitted).tocsr()
 
 
 def moving_least_squares(vertices, tree, points, radius):
@@ -107,7 +110,8 @@ def moving_least_squares(vertices, tree, points, radius):
     _, on_vertex = tree.query(points, distance_upper_bound=0.0)
     hit = np.flatnonzero(on_vertex < len(vertices))
     weight = sp.csr_matrix((kernel(pairs.data / radius), pairs.indices, pairs.indptr), shape=(k, len(vertices)))
-    weight = (weight + sp.csr_matrix((np.ones(len(hit)), (hit, on_vertex[hit])), shape=weight.shape)).tocsr()
+    if len(hit):
+        weight = (weight + sp.csr_matrix((np.ones(len(hit)), (hit, on_vertex[hit])), shape=weight.shape)).tocsr()
     # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ.
     local = vertices / radius
     centre = points / radius
@@ -121,17 +125,46 @@ def moving_least_squares(vertices, tree, points, radius):
                                              - centre[:, b] * sums[:, 1 + a] + centre[:, a] * centre[:, b] * mass)
     moments = np.empty((k, d + 1, d + 1))
     moments[:, 0, 0], moments[:, 0, 1:], moments[:, 1:, 0], moments[:, 1:, 1:] = mass, first, first, second
-    eigenvalues = np.linalg.eigvalsh(moments)
-    fits = eigenvalues[:, 0] > eigenvalues[:, -1] / MAX_CONDITION
+    fits = well_conditioned(moments)
     # Value at the point of the fit = e₀ᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e₀ (M is symmetric).
     solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
                              np.broadcast_to(np.eye(d + 1)[:, :1], (k, d + 1, 1)))[:, :, 0]
-    row = np.repeat(np.arange(k), np.diff(weight.indptr))
-    slope = solved[:, 1:]
-    factor = solved[row, 0] + np.einsum("pj,pj->p", local[weight.indices] - centre[row], slope[row])
-    rows = sp.csr_matrix((weight.data * factor * fits[row], weight.indices, weight.indptr), shape=weight.shape)
+    # Per (point, vertex) pair, coordinate by coordinate: np.repeat over each row's pairs is several times faster
+    # than gathering (pairs, d) blocks by row index.
+    counts = np.diff(weight.indptr)
+    factor = np.repeat(solved[:, 0] * fits, counts)
+    for axis in range(d):
+        factor += ((local[:, axis][weight.indices] - np.repeat(centre[:, axis], counts))
+                   * np.repeat(solved[:, 1 + axis] * fits, counts))
+    rows = sp.csr_matrix((weight.data * factor, weight.indices, weight.indptr), shape=weight.shape)
     rows.eliminate_zeros()
     return rows, fits
+
+
+def well_conditioned(matrices):
+    """Which symmetric positive semi-definite matrices have λ_min > λ_max / MAX_CONDITION.
+
+    Most pass a cheap sufficient test, λ_min ≥ det / λ_max^(D-1) ≥ det / trace^(D-1) (twice over, for rounding), and
+    λ_max ≤ trace; only the others get their eigenvalues computed, so the answer is the eigenvalues' own.
+
+    Parameters
+    ----------
+    matrices : (k, D, D) float array
+
+    Returns
+    -------
+    (k,) bool array
+    """
+    size = matrices.shape[-1]
+    trace = np.trace(matrices, axis1=1, axis2=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        passes = np.linalg.det(matrices) / trace ** (size - 1) > 2.0 * trace / MAX_CONDITION
+    answer = passes.copy()
+    doubtful = np.flatnonzero(~passes)
+    if len(doubtful):
+        eigenvalues = np.linalg.eigvalsh(matrices[doubtful])
+        answer[doubtful] = eigenvalues[:, 0] > eigenvalues[:, -1] / MAX_CONDITION
+    return answer
 
 
 def kernel(r):

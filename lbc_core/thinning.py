@@ -18,7 +18,8 @@ vary slowly, so a weight that fades out there bends a surface little. Points who
 import numpy as np
 import scipy.sparse as sp
 
-from .constraints import csr_from_padded, padded_rows
+from .constraints import csr_from_padded, padded_rows, scatter_rows
+from .parallel import map_row_chunks
 from .progress import Progress
 
 # Default floor: the largest that keeps issue 12's capsule no more creased than Mesh Deform (bench/RESULTS.md).
@@ -31,7 +32,7 @@ SPREAD_ONSET = 0.13
 # slots to 15 within the discretisation yardstick; higher rises are undone by the relaxations (RESULTS).
 SPREAD_RISE = 2.0
 
-# Rows thinned between two cancel polls (about 0.1 s each).
+# Rows thinned by one thread at a time (about 0.05 s each); cancel is polled between rounds of one chunk per thread.
 ROWS_PER_CHUNK = 8192
 
 # Times a point's threshold is relaxed (floor / 4, cap + 1) where its kept weights cannot reproduce it, before it
@@ -61,7 +62,7 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
         0 keeps it constant.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
-        Polled between chunks of :data:`ROWS_PER_CHUNK` rows; True stops with :class:`lbc_core.Cancelled`.
+        Polled between rounds of :data:`ROWS_PER_CHUNK` rows per thread; True stops with :class:`lbc_core.Cancelled`.
 
     Returns
     -------
@@ -75,12 +76,65 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     controls = np.asarray(controls, dtype=float)
     positions = np.asarray(positions, dtype=float)
     progress = Progress.of(progress, cancel)
-    chunks = []
-    for start in range(0, weights.shape[0], ROWS_PER_CHUNK):
-        progress(start / weights.shape[0], "thinning the weights")
-        chunks.append(_thin_rows(weights[start:start + ROWS_PER_CHUNK], controls,
-                                 positions[start:start + ROWS_PER_CHUNK], floor, max_influences, spread_rise))
+    m = weights.shape[0]
+
+    def thin(rows):
+        return _thin_rows(weights[rows], controls, positions[rows], floor, max_influences, spread_rise)
+
+    chunks = map_row_chunks(thin, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "thinning the weights"))
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
+
+
+def thin_changed_rows(thinned, before, weights, controls_before, controls, floor=DEFAULT_FLOOR, max_influences=0,
+                      spread_rise=SPREAD_RISE, progress=None, cancel=None):
+    """:func:`thin_weights` of ``weights`` when ``thinned`` is that of ``before``: only the rows that can differ are
+    thinned again (a warm re-bind keeps the rows its edit cannot reach).
+
+    A row is thinned again when its weights differ from ``before``'s or it has weight on a control point that moved;
+    every row is when the controls' extent changed (it scales every row's floor and tolerance). Each row's thinning
+    depends on that row alone, so the result is :func:`thin_weights`'s (to rounding: a chunk pads its rows to its
+    longest).
+
+    Parameters
+    ----------
+    thinned : (m, n) scipy.sparse matrix
+        ``thin_weights(before, controls_before, before @ controls_before, floor, max_influences, spread_rise)``.
+    before, weights : (m, n) scipy.sparse matrix
+        The previous and the new weights (non-negative, summing to 1).
+    controls_before, controls : (n, d) float array
+        The control points ``before`` and ``weights`` reproduce with.
+    floor, max_influences, spread_rise, progress, cancel
+        As for :func:`thin_weights`, and the same as ``thinned`` was made with.
+
+    Returns
+    -------
+    thinned : (m, n) scipy.sparse.csr_matrix
+    again : int
+        How many rows were thinned again.
+    """
+    weights, before = sp.csr_matrix(weights, dtype=float), sp.csr_matrix(before, dtype=float)
+    controls, controls_before = np.asarray(controls, dtype=float), np.asarray(controls_before, dtype=float)
+    if (before.shape != weights.shape or controls_before.shape != controls.shape
+            or controls_extent(controls_before) != controls_extent(controls)):
+        return thin_weights(weights, controls, weights @ controls, floor, max_influences, spread_rise, progress,
+                            cancel), weights.shape[0]
+    difference = weights - before
+    difference.eliminate_zeros()
+    moved = np.flatnonzero(np.any(controls != controls_before, axis=1))
+    changed = (np.diff(difference.indptr) > 0) | (weights[:, moved].getnnz(axis=1) > 0)
+    again = np.flatnonzero(changed)
+    if not len(again):
+        return sp.csr_matrix(thinned), 0
+    rows = weights[again]
+    thinned_again = thin_weights(rows, controls, rows @ controls, floor, max_influences, spread_rise, progress, cancel)
+    kept = sp.diags((~changed).astype(float)) @ sp.csr_matrix(thinned)
+    kept.eliminate_zeros()
+    return scatter_rows(kept, again, thinned_again), len(again)
+
+
+def controls_extent(controls):
+    """The length scale of the thinning: the controls' bounding box diagonal (1 for no controls)."""
+    return float(np.linalg.norm(np.ptp(controls, axis=0))) if len(controls) else 1.0
 
 
 def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise):
@@ -89,7 +143,7 @@ def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise)
     order = np.argsort(-values, axis=1, kind="stable")
     values = np.take_along_axis(values, order, axis=1)
     columns = np.take_along_axis(columns, order, axis=1)
-    extent = float(np.linalg.norm(np.ptp(controls, axis=0))) if len(controls) else 1.0
+    extent = controls_extent(controls)
     thinned = values.copy()  # rows that never reproduce keep their input
     pending = np.arange(len(values))
     slot_controls = controls[columns]  # (m, L, d)
@@ -99,8 +153,11 @@ def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise)
         if not len(pending):
             break
         prior = np.maximum(values[pending] - thresholds(values[pending], floors[pending], caps[pending])[:, None], 0.0)
-        tilted, done = tilt(prior, slot_controls[pending], positions[pending], extent)
-        thinned[pending[done]] = tilted[done]
+        # Rows are sorted, so the weights left are a prefix: the tilt (which keeps zeros at zero) skips the rest.
+        width = max(int(np.count_nonzero(prior, axis=1).max(initial=0)), 1)
+        tilted, done = tilt(prior[:, :width], slot_controls[pending, :width], positions[pending], extent)
+        thinned[pending[done]] = 0.0
+        thinned[pending[done], :width] = tilted[done]
         pending = pending[~done]
         floors[pending] /= 4
         caps[pending] += caps[pending] > 0
@@ -180,36 +237,43 @@ def tilt(prior, controls, positions, extent, iterations=40):
     target = np.zeros(d + 1)
     target[d] = 1.0
     multipliers = np.zeros((m, d + 1))
+    # The rows still iterating, gathered once and compacted as rows settle (not gathered again at every evaluation).
     active = np.flatnonzero(total[:, 0] > 0)
+    rows, kept, lam = affine[active], prior[active], multipliers[active]
 
-    def tilted(rows, lam):
-        exponent = np.clip((affine[rows] @ lam[:, :, None])[:, :, 0], -200.0, 200.0)
-        return prior[rows] * np.exp(exponent)
+    def tilted(kept, rows, lam):
+        return kept * np.exp(np.clip((rows @ lam[:, :, None])[:, :, 0], -200.0, 200.0))
 
     for _ in range(iterations):
         if not len(active):
             break
-        weights = tilted(active, multipliers[active])
-        rows = affine[active]
+        weights = tilted(kept, rows, lam)
         gradient = (weights[:, None, :] @ rows)[:, 0] - target
         # A point outside the hull of its prior's support has no solution: λ runs off (weights grown e^50-fold).
-        settled = (np.abs(gradient).max(axis=1) <= 1e-12) | ~(np.abs(multipliers[active]).max(axis=1) < 50)
-        active, weights, gradient, rows = active[~settled], weights[~settled], gradient[~settled], rows[~settled]
-        if not len(active):
-            break
+        settled = (np.abs(gradient).max(axis=1) <= 1e-12) | ~(np.abs(lam).max(axis=1) < 50)
+        if settled.any():
+            multipliers[active[settled]] = lam[settled]
+            going = ~settled
+            active, rows, kept, lam = active[going], rows[going], kept[going], lam[going]
+            weights, gradient = weights[going], gradient[going]
+            if not len(active):
+                break
         hessian = np.swapaxes(weights[:, :, None] * rows, 1, 2) @ rows
         hessian += 1e-14 * np.eye(d + 1)
         step = np.linalg.solve(hessian, gradient[:, :, None])[:, :, 0]
-        dual = weights.sum(axis=1) - multipliers[active, d]
+        dual = weights.sum(axis=1) - lam[:, d]
         scale = np.ones(len(active))
-        for _ in range(30):  # halve the step where the dual would grow
-            trial = multipliers[active] - scale[:, None] * step
-            grows = tilted(active, trial).sum(axis=1) - trial[:, d] > dual + 1e-14  # rounding is no growth
-            if not grows.any():
+        growing = np.arange(len(active))
+        for _ in range(30):  # halve the step where the dual would grow (a row that did not grow is done)
+            trial = lam[growing] - scale[growing, None] * step[growing]
+            grows = tilted(kept[growing], rows[growing], trial).sum(axis=1) - trial[:, d] > dual[growing] + 1e-14
+            growing = growing[grows]  # rounding is no growth
+            if not len(growing):
                 break
-            scale[grows] /= 2
-        multipliers[active] -= scale[:, None] * step
-    weights = tilted(np.arange(m), multipliers)
+            scale[growing] /= 2
+        lam = lam - scale[:, None] * step
+    multipliers[active] = lam
+    weights = tilted(prior, affine, multipliers)
     unity = np.abs(weights.sum(axis=1) - 1.0)
     reproduction = np.linalg.norm(np.einsum("mk,mkd->md", weights, controls) - positions, axis=1)
     done = (total[:, 0] > 0) & (unity <= 1e-9) & (reproduction <= 1e-9 * extent)

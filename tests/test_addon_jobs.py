@@ -117,3 +117,35 @@ def test_a_solve_stopped_at_the_iteration_limit_is_a_warning(monkeypatch):
     np.testing.assert_allclose(result.weight.sum(axis=1), 1.0, atol=1e-5)
     monkeypatch.undo()
     assert not any("iterations" in warning for warning in jobs.solve(request()).warnings)
+
+
+def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(monkeypatch):
+    from lbc_core.io import read_cage, read_mesh
+
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    gargoyle = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
+    cage, faces = read_cage(gargoyle / "cage_L10.obj")
+    points, _ = read_mesh(gargoyle / "mesh.off")
+    first = request(cage, faces, points, cells=3000)
+    jobs.remember(first, jobs.solve(first))
+    edited = cage.copy()
+    inner = np.argmin(np.linalg.norm(cage - cage.mean(axis=0), axis=1))  # not on the bounding box: the extent stays
+    edited[inner] += 0.01 * np.linalg.norm(np.ptp(cage, axis=0))
+    counts = []
+    thin_changed_rows = jobs.thin_changed_rows
+
+    def spy(*arguments, **keywords):
+        thinned, count = thin_changed_rows(*arguments, **keywords)
+        counts.append(count)
+        return thinned, count
+
+    monkeypatch.setattr(jobs, "thin_changed_rows", spy)
+    warm = jobs.solve(request(edited, faces, points, cells=3000))
+    assert warm.rebind.startswith("bound again from the previous binding")
+    assert 0 < counts[0] < len(points)
+    binding = warm.binding
+    rest = binding.rest_cage_vertices
+    every_row = jobs.thin_weights(binding.weights, rest, binding.weights @ rest, *warm.thinning)
+    index, weight = jobs.storage.slot_arrays(every_row, binding.control_input_index)
+    np.testing.assert_array_equal(warm.index, index)
+    np.testing.assert_allclose(warm.weight, weight, atol=1e-7)

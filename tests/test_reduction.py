@@ -47,23 +47,27 @@ def test_reduce_keeps_more_support_where_the_reduced_one_cannot_reproduce():
     assert values.min() >= 0 and abs(values.sum() - 1) < 1e-12
 
 
-def test_reduce_reports_each_chunk_of_rows_and_stops_on_cancel(monkeypatch):
+def test_reduce_reports_each_round_of_chunks_of_rows_and_stops_on_cancel(monkeypatch):
     import pytest
 
     import lbc_core.reduction as reduction
     from lbc_core.errors import Cancelled
+    from lbc_core.parallel import worker_count
 
     monkeypatch.setattr(reduction, "ROWS_PER_CHUNK", 100)
+    threads = worker_count()
     rng = np.random.default_rng(4)
-    points = rng.uniform(0.0, 1.0, (250, 2))
+    points = rng.uniform(0.0, 1.0, (300 * threads, 2))  # three rounds of one chunk per thread
     weights = sp.csr_matrix(bilinear_weights(points))
     fractions = []
     reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, progress=lambda fraction, message: fractions.append(fraction))
-    assert fractions == [0.0, 0.4, 0.8, 1.0]
-    polls = []
+    assert fractions == pytest.approx([0.0, 1 / 3, 2 / 3, 1.0])
+    chunks = []
+    reduce_rows = reduction._reduce_rows
+    monkeypatch.setattr(reduction, "_reduce_rows", lambda *arguments: chunks.append(1) or reduce_rows(*arguments))
     with pytest.raises(Cancelled):
-        reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, cancel=lambda: polls.append(1) or len(polls) > 2)
-    assert len(polls) == 3  # stopped before the third chunk
+        reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, cancel=lambda: len(chunks) >= threads)
+    assert len(chunks) == threads  # the first round ran, the second never started
 
 
 def test_the_constraint_restoration_still_imports_from_reduction():

@@ -105,3 +105,19 @@ def test_rows_poll_cancel(scene):
 def test_median_edge_of_a_unit_tetrahedron():
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
     assert median_edge(vertices, np.array([[0, 1, 2, 3]])) == pytest.approx((1 + np.sqrt(2)) / 2)
+
+
+def test_the_conditioning_test_gives_what_the_eigenvalues_give():
+    from lbc_core.smoothing import MAX_CONDITION, well_conditioned
+
+    rng = np.random.default_rng(0)
+    spread = rng.normal(size=(3000, 4, 4))
+    matrices = spread @ np.swapaxes(spread, 1, 2)
+    scale = np.ones((3000, 4))
+    scale[1000:2000, 3] = 10.0 ** rng.uniform(-6, -2, 1000)  # condition numbers around the limit of 1e8
+    scale[2000:2100] = 0.0  # no vertex in reach: a zero matrix
+    matrices *= scale[:, :, None] * scale[:, None, :]
+    eigenvalues = np.linalg.eigvalsh(matrices)
+    expected = eigenvalues[:, 0] > eigenvalues[:, -1] / MAX_CONDITION
+    assert 0 < expected[1000:2000].sum() < 1000  # both answers occur near the limit
+    np.testing.assert_array_equal(well_conditioned(matrices), expected)

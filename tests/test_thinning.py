@@ -162,12 +162,53 @@ def test_empty_input():
     assert thin_weights(sp.csr_matrix((0, 8)), CUBE, np.zeros((0, 3))).shape == (0, 8)
 
 
-def test_cancel_stops_between_chunks_of_rows(monkeypatch):
+def test_cancel_stops_between_rounds_of_chunks_of_rows(monkeypatch):
     from lbc_core import Cancelled, thinning
+    from lbc_core.parallel import worker_count
 
     monkeypatch.setattr(thinning, "ROWS_PER_CHUNK", 10)
-    controls, weights, positions = random_weights(3, 30)
+    controls, weights, positions = random_weights(3, 30 * worker_count())  # three rounds of one chunk per thread
     polls = []
     with pytest.raises(Cancelled):
         thin_weights(sp.csr_matrix(weights), controls, positions, cancel=lambda: polls.append(1) or len(polls) > 2)
-    assert len(polls) == 3  # the third chunk never ran
+    assert len(polls) == 3  # the third round never ran
+
+
+def weights_off(weights, control, rows):
+    """``weights`` with no weight on ``control`` in ``rows``, renormalised."""
+    weights = weights.copy()
+    weights[rows, control] = 0.0
+    weights[rows] /= weights[rows].sum(axis=1, keepdims=True)
+    return weights
+
+
+@pytest.mark.parametrize("chunk", [7, 8192])
+def test_thinning_the_changed_rows_only_gives_what_thinning_every_row_gives(monkeypatch, chunk):
+    from lbc_core import thinning
+
+    monkeypatch.setattr(thinning, "ROWS_PER_CHUNK", chunk)
+    controls, weights, _ = random_weights(5, 50)
+    weights = weights_off(weights, 9, slice(0, 30))  # control 9 (inside the cube) weighs on rows 30-49 only
+    before = sp.csr_matrix(weights)
+    thinned = thin_weights(before, controls, before @ controls)
+    edited = weights.copy()
+    edited[[3, 17]] = weights_off(random_weights(6, 2)[1], 9, slice(None))  # two rows evaluated again
+    moved = controls.copy()
+    moved[9] += 0.01
+    new = sp.csr_matrix(edited)
+    again, count = thinning.thin_changed_rows(thinned, before, new, controls, moved)
+    assert count == 22  # rows 3, 17 and the 20 with weight on the moved control point
+    assert abs(again - thin_weights(new, moved, new @ moved)).max() <= 1e-15
+    assert (again[:3] != thinned[:3]).nnz == 0  # the other rows are the previous ones, untouched
+
+
+def test_thinning_the_changed_rows_thins_every_row_when_the_extent_changes():
+    from lbc_core.thinning import thin_changed_rows
+
+    controls, weights, positions = random_weights(5, 20)
+    before = sp.csr_matrix(weights)
+    grown = controls.copy()
+    grown[0] -= 0.1  # a cube corner: the extent grows, and with it every row's floor and tolerance
+    thinned, count = thin_changed_rows(thin_weights(before, controls, positions), before, before, controls, grown)
+    assert count == 20
+    assert abs(thinned - thin_weights(before, grown, before @ grown)).max() <= 1e-15

@@ -1,0 +1,34 @@
+"""The shared thread pool: row chunks in full rounds of one chunk per thread."""
+
+import threading
+
+import pytest
+
+from lbc_core import parallel
+
+
+@pytest.mark.parametrize("threads, m, most", [(2, 48_612, 16_384), (2, 64_130, 16_384), (3, 10, 4), (2, 1, 100),
+                                              (8, 0, 100)])
+def test_row_chunks_cover_the_rows_in_order_in_equal_slices_and_full_rounds(monkeypatch, threads, m, most):
+    monkeypatch.setattr(parallel, "worker_count", lambda: threads)
+    rounds = []
+    chunks = parallel.map_row_chunks(lambda rows: rows, m, most, rounds.append)
+    assert [index for rows in chunks for index in range(rows.start, rows.stop)] == list(range(m))
+    sizes = [rows.stop - rows.start for rows in chunks]
+    assert all(size <= most for size in sizes)
+    assert len(set(sizes[:-1])) <= 1 and sizes[-1:] <= sizes[:1]  # equal slices, the last one at most as long
+    assert rounds == [chunk.start for chunk in chunks[::threads]]
+    assert len(chunks) <= threads * len(rounds) and (m == 0 or len(chunks) > threads * (len(rounds) - 1))
+
+
+def test_row_chunks_run_on_several_threads():
+    seen = set()
+    barrier = threading.Barrier(min(parallel.worker_count(), 2), timeout=5)  # two chunks, one round
+
+    def work(rows):
+        seen.add(threading.get_ident())
+        barrier.wait()  # two chunks must be running at once for this to return
+        return rows
+
+    parallel.map_row_chunks(work, 2, 1)
+    assert len(seen) == min(parallel.worker_count(), 2)
