@@ -24,7 +24,7 @@ from .options import DEFAULT_CELLS, BindOptions
 from .progress import Progress
 from .reduction import interpolate_and_reduce
 from .smoothing import SmoothInterpolation
-from .solver import check_memory, solve_forecast, solve_on_mesh
+from .solver import check_memory, solve_forecast, solve_on_mesh, solves_stretched
 
 # Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
 REPRODUCTION_TOLERANCE = 1e-9
@@ -197,7 +197,8 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     check_memory(cage.n_control_points, n_cells, cage.dim)
     if progress is not None:
         progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve"
-                 if cage.is_simplex else solve_forecast(cage.n_control_points, n_cells, cage.dim))
+                 if cage.is_simplex else solve_forecast(cage.n_control_points, n_cells, cage.dim,
+                                                        options.epsilon == 0 and solves_stretched(cage.vertices)))
     return cage, points
 
 

@@ -328,14 +328,19 @@ def estimate_memory(n_control_points, n_cells, dim, n_vertices=None):
 # Only for the forecast told before a solve; the solve itself then reports its time left from its own iterations.
 SECONDS_PER_STATE_ENTRY = 6.1e-9
 ITERATIONS_PER_SQRT_N = 40
+# A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
+# (bench/RESULTS.md, bench/thin_cages.py).
+STRETCHED_TIME_FACTOR = 10
 
 
-def solve_forecast(n_control_points, n_cells, dim):
+def solve_forecast(n_control_points, n_cells, dim, stretched=False):
     """What a solve will take, told before it starts: its memory and roughly its time.
 
     Parameters
     ----------
     n_control_points, n_cells, dim : int
+    stretched : bool
+        Whether the solve runs in a stretched frame (:func:`solves_stretched`).
 
     Returns
     -------
@@ -343,12 +348,21 @@ def solve_forecast(n_control_points, n_cells, dim):
     """
     entries = n_control_points * (dim * n_cells + VERTICES_PER_CELL[dim] * n_cells)
     seconds = SECONDS_PER_STATE_ENTRY * entries * ITERATIONS_PER_SQRT_N * np.sqrt(n_control_points)
+    if stretched:
+        seconds *= STRETCHED_TIME_FACTOR
     text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
             f"{_size(estimate_memory(n_control_points, n_cells, dim))} of memory and roughly "
             f"{_duration(seconds)}")
     if seconds > 3600:
         text += " (beyond an hour on a 2-core machine: fewer cells or a coarser cage bind faster)"
     return text
+
+
+def solves_stretched(control_points):
+    """Whether a cage with these (n, d) control points is solved in its stretched frame (a 3D cage 1/200 as thick as
+    wide or thinner, see :data:`STRETCHED_SOLVE_FROM`)."""
+    control_points = np.asarray(control_points, dtype=float)
+    return control_points.shape[1] == 3 and _Stretch.of(control_points) is not None
 
 
 def _size(count):

@@ -171,3 +171,14 @@ def test_a_very_thin_cage_converges():
     result = solve_on_mesh(*problem, max_iterations=1000)
     assert result.converged
     assert_quality(problem[0], result.weights, problem[4], problem[2], problem[3])
+
+
+def test_the_forecast_knows_a_very_thin_cage_solves_slower():
+    from lbc_core.solver import solve_forecast, solves_stretched
+
+    box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+    assert not solves_stretched(box) and not solves_stretched(box * [1, 1, 0.01])  # 1/100: the cage's frame
+    assert solves_stretched(box * [1, 1, 0.001])
+    assert not solves_stretched(box[:4, :2])
+    plain, stretched = solve_forecast(106, 8000, 3), solve_forecast(106, 8000, 3, stretched=True)
+    assert plain.endswith("roughly 7 s") and stretched.endswith("roughly 69 s")
