@@ -53,9 +53,9 @@ PENALTY_SCALE = {2: 1.3, 3: 1.3}
 DEFAULT_TOLERANCE = {2: 2.5e-4, 3: 2e-4}
 # The dual residual is allowed this many times the primal tolerance: it lags, and the objective settles first.
 DUAL_TOLERANCE_FACTOR = 10.0
-# Anderson extrapolates the map of three steps: about as many steps in all as extrapolating every step (±10 %), at a
-# third of the history work per step (see bench/RESULTS.md).
-ANDERSON_PERIOD = 3
+# Anderson extrapolates the map of several steps: about as many steps in all as extrapolating every step (±10 %), at a
+# fraction of the history work per step; in 3D five steps take 5-20 % less time than three (see bench/RESULTS.md).
+ANDERSON_PERIOD = {2: 3, 3: 5}
 
 
 @dataclass
@@ -168,7 +168,7 @@ def solve_on_mesh(
     relaxation=1.6,
     check_every=10,
     anderson_memory=5,
-    anderson_period=ANDERSON_PERIOD,
+    anderson_period=None,
     single_precision=True,
     start=None,
     progress=None,
@@ -206,8 +206,9 @@ def solve_on_mesh(
         once the primal one passes.
     anderson_memory : int
         Extrapolations remembered by Anderson acceleration (0: plain ADMM).
-    anderson_period : int
-        Douglas-Rachford steps per Anderson extrapolation: Anderson accelerates the map made of this many steps.
+    anderson_period : int, optional
+        Douglas-Rachford steps per Anderson extrapolation: Anderson accelerates the map made of this many steps
+        (None: ANDERSON_PERIOD of the dimension).
     single_precision : bool
         Iterate in float32 (half the memory traffic); the result is corrected in float64, so the constraints hold
         to round-off either way.
@@ -241,6 +242,8 @@ def solve_on_mesh(
                         f"{n_vertices - len(boundary_vertices)}: start from a solve on this mesh")
     if tolerance is None:
         tolerance = DEFAULT_TOLERANCE[d]
+    if anderson_period is None:
+        anderson_period = ANDERSON_PERIOD[d]
     tv_weights = np.asarray(tv_weights, dtype=float)
 
     # Work on the cage scaled to unit diagonal, so that penalty and tolerances are scale-free.
