@@ -9,10 +9,12 @@ closest weights in the Kullback–Leibler sense, w''_j = w'_j exp(λ · (c_j −
 Newton steps), which keeps zeros at zero, stays positive and is smooth in w'. τ is a constant (the floor), smooth in
 the point; a cap on the count raises τ to the (K+1)-th largest weight, continuous but only piecewise smooth.
 
-Where a point's weights reach far, τ rises with their spread s = √(Σ w_j |c_j − x|²) (a fraction of the controls'
-extent, smooth in the point): deep inside a large cage many control points weigh about the same and the coordinates
-vary slowly, so a weight that fades out there bends a surface little. Points whose spread stays below
-:data:`SPREAD_ONSET` (issue 12's capsule: all of them) keep the constant floor.
+On request (``spread_rise``) τ rises where a point's weights reach far, with their spread s = √(Σ w_j |c_j − x|²)
+(a fraction of the controls' extent, smooth in the point): deep inside a large cage many control points weigh about
+the same and the coordinates vary slowly, so a weight that fades out there bends a surface little. Points whose
+spread stays below :data:`SPREAD_ONSET` (issue 12's capsule: all of them) keep the constant floor. The default keeps
+the floor constant: on few-vertex cages a risen floor leaves many points weights that cannot reproduce them, whose
+relaxed threshold then differs from their neighbours' (spikes on a flat mesh in a box cage, bench/RESULTS.md).
 """
 
 import numpy as np
@@ -28,9 +30,10 @@ DEFAULT_FLOOR = 0.005
 # Where the floor starts to rise: the spread, as a fraction of the controls' extent, above the capsule's largest
 # (0.129); Suzanne deep in its box cage reaches 0.26, the demo gargoyle 0.15 (bench/RESULTS.md, "Blender deformer").
 SPREAD_ONSET = 0.13
-# τ = floor · (1 + rise · max(0, s / onset − 1)²): continuously differentiable in s. 2 takes Suzanne's deformer from 17
-# slots to 15 within the discretisation yardstick; higher rises are undone by the relaxations (RESULTS).
-SPREAD_RISE = 2.0
+# τ = floor · (1 + rise · max(0, s / onset − 1)²): continuously differentiable in s. A rise of 2 took Suzanne's
+# deformer from 17 slots to 15, but spiked a flat grid in an 8-vertex box cage (88 of 5041 points, 0 at 0): the default
+# is 0, a constant floor (RESULTS).
+SPREAD_RISE = 0.0
 
 # Rows thinned by one thread at a time (about 0.05 s each); cancel is polled between rounds of one chunk per thread.
 ROWS_PER_CHUNK = 8192
@@ -184,6 +187,8 @@ def spread_floors(values, slot_controls, positions, extent, floor, rise=SPREAD_R
     -------
     (m,) float array
     """
+    if rise == 0:
+        return np.full(len(values), float(floor))
     squared = np.einsum("mk,mk->m", values, ((slot_controls - positions[:, None, :]) ** 2).sum(axis=2))
     beyond = np.maximum(np.sqrt(np.maximum(squared, 0.0)) / (extent * SPREAD_ONSET) - 1.0, 0.0)
     return float(floor) * (1.0 + rise * beyond ** 2)
