@@ -17,9 +17,9 @@ Where this differs from the authors' reference, and why:
   extrapolation with the safeguard of Zhang, Peng, Deng et al. (ACM TOG 2019) accelerates the map of three steps.
 - The penalty is picked from the number of control points; the start is the harmonic coordinates (the reference
   computes them and throws them away).
-- A 3D cage 1/200 as thick as wide or thinner (STRETCHED_SOLVE_FROM) is solved in the stretched frame it was meshed in,
-  where its cells are round: the total variation's norm is then weighted per axis (its prox a per-entry root), and
-  thousands of iterations become a few hundred.
+- A 3D cage 1/200 as thick as wide or thinner (STRETCHED_SOLVE_FROM) with few control points is solved in the
+  stretched frame it was meshed in, where its cells are round: the total variation's norm is then weighted per axis
+  (its prox a per-entry root), and thousands of iterations become a few hundred.
 - The stopping rule is relative (Boyd et al. 2011, §3.3.1), so it behaves the same across mesh sizes, and tested
   after every Anderson period: a Douglas-Rachford step's residual is α times its primal residual.
 - The output is the clamped split variable W, with its exact zeros, projected back onto the equality constraints on
@@ -363,7 +363,7 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False):
 
 def solves_stretched(control_points):
     """Whether a cage with these (n, d) control points is solved in its stretched frame (a 3D cage 1/200 as thick as
-    wide or thinner, see :data:`STRETCHED_SOLVE_FROM`)."""
+    wide or thinner with few control points, see :data:`STRETCHED_SOLVE_FROM`)."""
     control_points = np.asarray(control_points, dtype=float)
     return control_points.shape[1] == 3 and _Stretch.of(control_points) is not None
 
@@ -754,10 +754,12 @@ SOLVE_COLUMNS = 32
 NORM_SLICE = 4_000_000
 # Newton steps of the weighted prox (a stretched frame) at most per entry; from the previous step's root most need few.
 NEWTON_STEPS = 30
-# The stretch (in the meshing frame, 0.25 / the cage's thinnest aspect) from which the solve runs stretched: the
-# weighted prox costs 5-10 times a plain step, so only where the cage's frame takes thousands of iterations or stops
-# far from the optimum (cages 1/200 as thick as wide and thinner; bench/RESULTS.md).
+# The stretch (in the meshing frame, 0.25 / the cage's thinnest aspect) from which the solve runs stretched, and the
+# most control points it does so for: the weighted prox costs 5-10 times a plain step, so only where the cage's frame
+# takes thousands of iterations (cages 1/200 as thick as wide and thinner, with up to 18 control points measured; from
+# 24 on the cage's frame converges, less than 1 % above the optimum on most, in less time; bench/RESULTS.md).
 STRETCHED_SOLVE_FROM = 50.0
+STRETCHED_MOST_CONTROL_POINTS = 20
 
 
 def _cell_chunks(problem, size_x):
@@ -1102,7 +1104,9 @@ class _Stretch:
     @classmethod
     def of(cls, controls):
         """The stretch of the cage with these control points (unit diagonal), or None where it is stretched less than
-        STRETCHED_SOLVE_FROM times."""
+        STRETCHED_SOLVE_FROM times or has more than STRETCHED_MOST_CONTROL_POINTS."""
+        if len(controls) > STRETCHED_MOST_CONTROL_POINTS:
+            return None
         frame = MeshingFrame(controls)
         sigma = np.linalg.norm(frame.matrix, axis=0)
         return None if sigma.max() < STRETCHED_SOLVE_FROM * sigma.min() else cls(frame.matrix)

@@ -180,5 +180,7 @@ def test_the_forecast_knows_a_very_thin_cage_solves_slower():
     assert not solves_stretched(box) and not solves_stretched(box * [1, 1, 0.01])  # 1/100: the cage's frame
     assert solves_stretched(box * [1, 1, 0.001])
     assert not solves_stretched(box[:4, :2])
+    many = np.random.default_rng(1).uniform(size=(30, 3)) * [1, 1, 0.001]
+    assert not solves_stretched(many)  # 30 control points: the cage's frame converges sooner
     plain, stretched = solve_forecast(106, 8000, 3), solve_forecast(106, 8000, 3, stretched=True)
     assert plain.endswith("roughly 7 s") and stretched.endswith("roughly 69 s")
