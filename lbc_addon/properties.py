@@ -70,10 +70,10 @@ class BindOptions:
     )
     thinning: FloatProperty(
         name="Thinning",
-        description="Every weight is lowered by this (more where a vertex's weights reach far, deep inside a large "
-        "cage) and those that reach 0 are dropped; the others are then made "
+        description="Every weight is lowered by this and those that reach 0 are dropped; the others are then made "
         f"to sum to 1 and reproduce the vertex again, so weights fade in and out without creases. 0 uses "
-        f"{DEFAULT_FLOOR:g}. Larger: fewer influences per vertex, a faster deformer, a less smooth deformation",
+        f"{DEFAULT_FLOOR:g} (1e-9 keeps every weight). Larger: fewer influences per vertex, a faster deformer, a "
+        "less smooth deformation",
         default=0.0,
         min=0.0,
         soft_max=0.05,
