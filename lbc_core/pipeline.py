@@ -198,7 +198,7 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     if progress is not None:
         progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve"
                  if cage.is_simplex else solve_forecast(cage.n_control_points, n_cells, cage.dim,
-                                                        options.epsilon == 0 and solves_stretched(cage.vertices)))
+                                                        solves_stretched(cage.vertices, options.epsilon)))
     return cage, points
 
 

@@ -255,8 +255,8 @@ def solve_on_mesh(
     # A very thin 3D cage is meshed stretched (lbc_core.frame.MeshingFrame), so its cells are flat, and a splitting
     # that treats their steep and flat directions alike takes thousands of iterations. Past STRETCHED_SOLVE_FROM the
     # iterations run in the stretched frame, where the cells are round, the total variation's norm weighted per axis
-    # so that the problem stays the cage's own. (Plain total variation only: the Huber prox has no such form.)
-    stretch = _Stretch.of(unit_controls) if d == 3 and epsilon == 0 else None
+    # so that the problem stays the cage's own.
+    stretch = _Stretch.of(unit_controls, epsilon)
     solve_vertices, solve_controls = (unit_vertices, unit_controls) if stretch is None else (
         stretch.apply(unit_vertices), stretch.apply(unit_controls))
 
@@ -361,11 +361,11 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False):
     return text
 
 
-def solves_stretched(control_points):
-    """Whether a cage with these (n, d) control points is solved in its stretched frame (a 3D cage 1/200 as thick as
-    wide or thinner with few control points, see :data:`STRETCHED_SOLVE_FROM`)."""
-    control_points = np.asarray(control_points, dtype=float)
-    return control_points.shape[1] == 3 and _Stretch.of(control_points) is not None
+def solves_stretched(control_points, epsilon=0.0):
+    """Whether a cage with these (n, d) control points is solved in its stretched frame with the C¹ relaxation
+    width ``epsilon`` (a 3D cage 1/200 as thick as wide or thinner with few control points, plain total variation; see
+    :data:`STRETCHED_SOLVE_FROM`)."""
+    return _Stretch.of(np.asarray(control_points, dtype=float), epsilon) is not None
 
 
 def _size(count):
@@ -1102,10 +1102,11 @@ class _Stretch:
         self.tv_scale = float(sigma.min() / np.prod(sigma))
 
     @classmethod
-    def of(cls, controls):
-        """The stretch of the cage with these control points (unit diagonal), or None where it is stretched less than
-        STRETCHED_SOLVE_FROM times or has more than STRETCHED_MOST_CONTROL_POINTS."""
-        if len(controls) > STRETCHED_MOST_CONTROL_POINTS:
+    def of(cls, controls, epsilon):
+        """The stretch a solve uses for the cage with these (n, d) control points, or None: where it is not 3D, is
+        stretched less than STRETCHED_SOLVE_FROM times, has more than STRETCHED_MOST_CONTROL_POINTS, or the total
+        variation is Huber-relaxed (``epsilon`` > 0: its prox has no per-entry root form)."""
+        if controls.shape[1] != 3 or epsilon > 0 or len(controls) > STRETCHED_MOST_CONTROL_POINTS:
             return None
         frame = MeshingFrame(controls)
         sigma = np.linalg.norm(frame.matrix, axis=0)

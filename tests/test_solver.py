@@ -157,7 +157,7 @@ def test_a_thin_cage_is_solved_in_its_stretched_frame_as_its_own_problem(monkeyp
     problem = _thin_cage_problem("cube", 0.1)
     monkeypatch.setattr(solver, "STRETCHED_SOLVE_FROM", 2.0)  # this cage is stretched 2.5 times
     stretched = solve_on_mesh(*problem, tolerance=2e-5)
-    monkeypatch.setattr(solver._Stretch, "of", classmethod(lambda cls, controls: None))
+    monkeypatch.setattr(solver._Stretch, "of", classmethod(lambda cls, controls, epsilon: None))
     plain = solve_on_mesh(*problem, tolerance=2e-5)
     assert stretched.converged and plain.converged
     assert stretched.objective == pytest.approx(plain.objective, rel=1e-3)
