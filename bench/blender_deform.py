@@ -120,7 +120,8 @@ def lbc_variant(bound, cage, name, thinning=None, sum_form=None, shared_slots=No
         index, weight = np.take_along_axis(index, order, axis=1), np.take_along_axis(weight, order, axis=1)
     storage.remove(obj.data)
     storage.write(obj.data, index, weight, storage.rest_offsets(index, weight, cage_rest))
-    deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices), len(obj.data.vertices), shared_slots)
+    deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices), len(obj.data.vertices),
+                    deformer.shared_slot_count(weight) if shared_slots is None else shared_slots)
     if sum_form is not None:
         rebuild_sum(obj, sum_form)
     if tree not in (None, "sorted"):

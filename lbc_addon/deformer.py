@@ -398,15 +398,13 @@ def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count, shar
     any other modifier moves them).
 
     ``shared_slots``: how many of the ``slots`` stored on the mesh every vertex evaluates (see
-    :func:`build_node_group`); None, :func:`shared_slot_count` of the stored weights.
+    :func:`build_node_group`; :func:`shared_slot_count` of the weights written, for a bind); None, every slot.
 
     Returns
     -------
     (modifier, replaced node group or None)
         The replaced group is still in the file: :func:`release_group` removes it once the binding is complete.
     """
-    if shared_slots is None:
-        shared_slots = shared_slot_count(storage.read(mesh_obj.data)[1])
     group = build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots)
     modifier = find_modifier(mesh_obj)
     if modifier is None:

@@ -43,7 +43,7 @@ def _write(mesh_obj, cage_obj, request, result):
     storage.remove(mesh_obj.data)
     storage.write(mesh_obj.data, result.index, result.weight, result.rest)
     modifier, replaced_group = deformer.attach(mesh_obj, cage_obj, result.index.shape[1], len(request.cage_points),
-                                              len(request.points))
+                                              len(request.points), deformer.shared_slot_count(result.weight))
     _store_settings(settings, request, result, cage_obj, modifier.node_group)
     if settings.show_influence:  # repainted with the new weights
         influence.show(mesh_obj, settings.influence_vertex)
