@@ -42,8 +42,7 @@ class _Previous:
     options: dict
     loop: np.ndarray  # the flat cage's outline of a 2D bind, else None
     binding: object  # lbc_core.Binding
-    thinning: tuple  # the Thinning floor and Max Influences the binding's weights were thinned with
-    thinned: object  # those thinned weights (scipy.sparse, one column per control point)
+    thinned: object  # the binding's weights thinned as the options say (scipy.sparse, one column per control point)
 
 
 _previous = OrderedDict()  # mesh session_uid -> _Previous, the most recent last
@@ -83,7 +82,6 @@ class BindResult:
     seconds: float = 0.0
     welded: str = ""  # "copy:kept,..." cage vertices welded into one control point (the deformer reads the kept one)
     binding: object = None  # the lbc_core.Binding, kept for a later warm re-bind once applied
-    thinning: tuple = ()  # the floor and Max Influences the weights were thinned with
     thinned: object = None  # the thinned weights (scipy.sparse, one column per control point), kept likewise
     rebind: str = ""  # for a bind that had a previous binding to start from: how it went (lbc_core.rebind)
     stages: dict = field(default_factory=dict)  # seconds: lbc_core's stages, then "thinning" and "slots"
@@ -154,9 +152,9 @@ def solve(request, progress=None, cancel=None):
     column_vertex = column_base[binding.control_input_index]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
     rest = binding.rest_cage_vertices
-    thinning = (request.options["thinning"] or DEFAULT_FLOOR, request.options["influences"])
+    thinning = _thinning(request.options)
     clock = time.perf_counter()
-    if previous is not None and previous.thinning == thinning:
+    if previous is not None and _thinning(previous.options) == thinning:
         # A warm re-bind keeps the rows its edit cannot reach: only the others are thinned again.
         weights, _ = thin_changed_rows(previous.thinned, previous.binding.weights, binding.weights,
                                        previous.binding.rest_cage_vertices, rest, *thinning, cancel=cancel)
@@ -178,11 +176,15 @@ def solve(request, progress=None, cancel=None):
         welded=welded_pairs(column_base, column_vertex[binding.cage.vertex_map]),
         seconds=time.perf_counter() - start,
         binding=binding,
-        thinning=thinning,
         thinned=weights,
         rebind=binding.options.get("rebind", ""),
         stages=stages,
     )
+
+
+def _thinning(options):
+    """(floor, Max Influences) the weights are thinned with, from the add-on's options (Thinning 0: the default)."""
+    return options["thinning"] or DEFAULT_FLOOR, options["influences"]
 
 
 def _not_converged(iterations):
@@ -212,7 +214,7 @@ def remember(request, result):
     _previous.pop(request.mesh_uid, None)
     loop = None if request.flat is None else request.flat.loop
     _previous[request.mesh_uid] = _Previous(request.cage_uid, dict(request.options), loop, result.binding,
-                                            result.thinning, result.thinned)
+                                            result.thinned)
     while len(_previous) > KEPT_BINDINGS:
         _previous.popitem(last=False)
 
