@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
         [--modes edit,playback] [--thin 0.002:0,0.005:12,0.005:0:0] [--sums chain,fma,fma-vector]
-        [--shared 0,11,12] [--trees direct,pairs,points,sorted] [--reference-cells 16000] [--handler-off]
+        [--shared 0,11,12] [--trees direct,pairs,points,sorted,triplets] [--reference-cells 16000] [--handler-off]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
@@ -21,7 +21,8 @@ weight thinned by other thresholds and caps (``--thin floor:cap[:rise]``, rise t
 spread, the default's when left out, 0 a constant floor; see :func:`lbc_core.thinning.thin_weights`),
 LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`), the default's weights with
 another number of slots evaluated for every vertex (``--shared``; see :func:`lbc_addon.deformer.build_node_group`),
-and the default's tree changed by another lever (``--trees``; see :func:`rebuild_tree`). ``--reference-cells`` also
+and the default's tree changed by another lever (``--trees``; see :func:`rebuild_tree`, and :func:`triplet_variant`
+for "triplets"). ``--reference-cells`` also
 prints how far the binding with every weight is from a finer one: the yardstick for the error thinning makes.
 ``--handler-off`` also measures the default binding with the add-on's depsgraph handler (its check of every binding
 after a cage edit) unregistered.
@@ -126,6 +127,137 @@ def lbc_variant(bound, cage, name, thinning=None, sum_form=None, shared_slots=No
         rebuild_sum(obj, sum_form)
     if tree not in (None, "sorted"):
         rebuild_tree(obj, tree)
+    return obj
+
+
+def cage_triplets(index, weight, cage_vertex_count):
+    """The cage's vertices in groups of three that the mesh's vertices use together: greedily, the two used together
+    by the most vertices, then the vertex used with both by the most; a last group of one or two is padded with its
+    first member (weight 0 there).
+
+    Returns
+    -------
+    members : (T, 3) int array
+        Each group's cage vertices.
+    """
+    rows = np.repeat(np.arange(len(index)), index.shape[1])
+    used = (weight > 0).ravel()
+    usage = sp.csr_matrix((np.ones(used.sum()), (rows[used], index.ravel()[used])),
+                          shape=(len(index), cage_vertex_count))
+    together = (usage.T @ usage).toarray()
+    np.fill_diagonal(together, -1)
+    free, members = list(range(cage_vertex_count)), []
+    while free:
+        shared = together[np.ix_(free, free)]
+        first, second = np.unravel_index(np.argmax(shared), shared.shape)
+        group = [free[first], free[second]] if len(free) > 1 else [free[0]]
+        rest = [vertex for vertex in free if vertex not in group]
+        if rest and len(group) == 2:
+            group.append(rest[int(np.argmax(together[np.ix_(rest, group)].min(axis=1)))])
+        members.append(group + [group[0]] * (3 - len(group)))
+        free = [vertex for vertex in free if vertex not in group]
+    return np.array(members)
+
+
+def triplet_slots(index, weight, members):
+    """Each vertex's weights grouped by the cage triplets ``members`` (T, 3): slots of (triplet, weights of its three
+    vertices), the padding (triplet 0, weights 0) last. Returns (m, S) int32 and (m, S, 3) float32."""
+    triplet_of = np.empty(members.max() + 1, dtype=np.int64)
+    place_of = np.empty_like(triplet_of)
+    for triplet, group in enumerate(members):
+        for place, vertex in reversed(list(enumerate(group))):  # a padded repeat keeps the first place
+            triplet_of[vertex], place_of[vertex] = triplet, place
+    used = weight > 0
+    label = np.where(used, triplet_of[index], len(members))  # unused sorts last
+    order = np.argsort(label, axis=1, kind="stable")
+    ordered = np.take_along_axis(label, order, axis=1)
+    new = np.ones_like(ordered, dtype=bool)
+    new[:, 1:] = ordered[:, 1:] != ordered[:, :-1]
+    slot_sorted = np.cumsum(new, axis=1) - 1
+    slot = np.empty_like(slot_sorted)
+    np.put_along_axis(slot, order, slot_sorted, axis=1)
+    count = int((np.where(used, slot, -1).max(axis=1) + 1).max())
+    tri_index = np.zeros((len(index), count), dtype=np.int32)
+    tri_weight = np.zeros((len(index), count, 3), dtype=np.float32)
+    rows, columns = np.nonzero(used)
+    tri_index[rows, slot[rows, columns]] = triplet_of[index[rows, columns]]
+    np.add.at(tri_weight, (rows, slot[rows, columns], place_of[index[rows, columns]]), weight[rows, columns])
+    return tri_index, tri_weight
+
+
+def triplet_variant(bound, cage, name):
+    """The default binding's weights grouped by cage triplets (:func:`cage_triplets`): per slot one gathered 4×4
+    matrix whose first three columns are the triplet's cage positions, times the slot's weight vector (Transform
+    Direction), so a slot carries up to three weights; the matrices are built once per frame on a point cloud of T
+    points. Two tiers as the add-on's (the second on the vertices with a weight in slot B)."""
+    obj = copy_object(bound, name)
+    index, weight = storage.read(obj.data)
+    members = cage_triplets(index, weight, len(cage.data.vertices))
+    tri_index, tri_weight = triplet_slots(index, weight, members)
+    totals = tri_weight.sum(axis=2)
+    for slot in range(tri_index.shape[1]):
+        obj.data.attributes.new(f".bench_triplet_{slot}", "INT", "POINT").data.foreach_set("value", tri_index[:, slot])
+        obj.data.attributes.new(f".bench_triplet_weights_{slot}", "FLOAT_VECTOR", "POINT").data.foreach_set(
+            "vector", tri_weight[:, slot].ravel())
+        obj.data.attributes[storage.weight_name(slot)].data.foreach_set("value", totals[:, slot])  # the tail's test
+    shared = deformer.shared_slot_count(totals)
+    print(f"  triplets: {len(members)} of the cage's {len(cage.data.vertices)} vertices; slots {tri_index.shape[1]} "
+          f"(every vertex {shared}), {np.count_nonzero(totals, axis=1).mean():.2f} per vertex on average")
+    clouds = {}
+
+    def triplet_samples(group, cage_geometry, position, slots):
+        nodes, links = group.nodes, group.links
+        if group.name not in clouds:
+            points = nodes.new("GeometryNodePoints")
+            deformer._input(points, "Count").default_value = len(members)
+            point_index = nodes.new("GeometryNodeInputIndex")
+            combine = nodes.new("FunctionNodeCombineMatrix")
+            for column in range(3):
+                switch = nodes.new("GeometryNodeIndexSwitch")
+                switch.data_type = "INT"
+                while len(switch.index_switch_items) < len(members):
+                    switch.index_switch_items.new()
+                links.new(point_index.outputs["Index"], deformer._input(switch, "Index"))
+                for triplet in range(len(members)):
+                    switch.inputs[triplet + 1].default_value = int(members[triplet, column])
+                sample = nodes.new("GeometryNodeSampleIndex")
+                sample.data_type, sample.domain = "FLOAT_VECTOR", "POINT"
+                links.new(cage_geometry, deformer._input(sample, "Geometry"))
+                links.new(position.outputs["Position"], deformer._input(sample, "Value"))
+                links.new(switch.outputs["Output"], deformer._input(sample, "Index"))
+                separate = nodes.new("ShaderNodeSeparateXYZ")
+                links.new(sample.outputs["Value"], deformer._input(separate, "Vector"))
+                for row, axis in enumerate("XYZ"):
+                    links.new(separate.outputs[axis], deformer._input(combine, f"Column {column + 1} Row {row + 1}"))
+            store = nodes.new("GeometryNodeStoreNamedAttribute")
+            store.data_type, store.domain = "FLOAT4X4", "POINT"
+            links.new(points.outputs["Points"], deformer._input(store, "Geometry"))
+            deformer._input(store, "Name").default_value = ".bench_matrix"
+            links.new(combine.outputs["Matrix"], deformer._input(store, "Value"))
+            read = deformer._named_attribute(nodes, "FLOAT4X4", ".bench_matrix", (0, 0))
+            clouds[group.name] = store.outputs["Geometry"], read.outputs["Attribute"]
+        cloud, matrix = clouds[group.name]
+        terms = []
+        for slot in slots:
+            triplet = deformer._named_attribute(nodes, "INT", f".bench_triplet_{slot}", (0, 0))
+            weights = deformer._named_attribute(nodes, "FLOAT_VECTOR", f".bench_triplet_weights_{slot}", (0, 0))
+            sample = nodes.new("GeometryNodeSampleIndex")
+            sample.data_type, sample.domain = "FLOAT4X4", "POINT"
+            links.new(cloud, deformer._input(sample, "Geometry"))
+            links.new(matrix, deformer._input(sample, "Value"))
+            links.new(triplet.outputs["Attribute"], deformer._input(sample, "Index"))
+            product = nodes.new("FunctionNodeTransformDirection")
+            links.new(weights.outputs["Attribute"], deformer._input(product, "Direction"))
+            links.new(sample.outputs["Value"], deformer._input(product, "Transform"))
+            terms.append(product.outputs["Direction"])
+        return terms
+
+    original = deformer._weighted_samples
+    deformer._weighted_samples = triplet_samples
+    try:
+        deformer.attach(obj, cage, tri_index.shape[1], len(cage.data.vertices), len(obj.data.vertices), shared)
+    finally:
+        deformer._weighted_samples = original
     return obj
 
 
@@ -392,7 +524,8 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
         compare(key, default, "the default's")
     for form in trees:
         key = f"LBC default {form}"
-        variants[key] = lbc_variant(default, cage, key, tree=form)
+        variants[key] = (triplet_variant(default, cage, key) if form == "triplets"
+                         else lbc_variant(default, cage, key, tree=form))
         compare(key, default, "the default's")
     without_handler = ()
     if handler_off:  # the default binding again, the add-on's check of it after each cage edit left out
@@ -440,7 +573,7 @@ def main(argv=None):
                         help="comma-separated slot counts every vertex evaluates, the rest only where used, for "
                         "copies of the default binding (0: every slot for every vertex), e.g. 0,11,12")
     parser.add_argument("--trees", default="",
-                        help="comma-separated changes of the default's tree: direct,pairs,points,sorted")
+                        help="comma-separated changes of the default's tree: direct,pairs,points,sorted,triplets")
     parser.add_argument("--modes", default="edit,playback",
                         help="what a frame is: edit (the update after a cage edit, the add-on's handler included), "
                         "playback (frame_set, the cage animated)")
