@@ -584,12 +584,14 @@ def status(mesh_obj, depsgraph):
     return cause is None, message
 
 
-def diagnose(mesh_obj, depsgraph):
+def diagnose(mesh_obj, depsgraph, cages=None):
     """Why a bound object's deformer cannot work: (cause, message), cause None when it works.
 
     ``cause`` is one of "modifier", "weights", "mesh vertices", "cage deleted", "cage type", "cage vertices",
     "topology", "welded apart", "modifier error" (an error the node group raised for what only it sees). Only the
     causes in :data:`STOPPED_HERE` need the add-on to stop the deformer; the node group itself stops for the others.
+    ``cages``: a dict keeping each cage's :func:`evaluated_cage` for the next bindings checked with the same depsgraph,
+    so that the meshes bound to one cage (a body, its clothes, its eyes) evaluate and hash it once.
     """
     settings = mesh_obj.lbc
     modifier = find_modifier(mesh_obj)
@@ -611,7 +613,11 @@ def diagnose(mesh_obj, depsgraph):
         )
     if cage.type != "MESH":
         return "cage type", f"The cage '{cage.name}' is no longer a mesh: Rebind with a mesh cage"
-    topology, positions = evaluated_cage(cage, depsgraph)
+    if cages is None:
+        cages = {}
+    if cage.name_full not in cages:
+        cages[cage.name_full] = evaluated_cage(cage, depsgraph)
+    topology, positions = cages[cage.name_full]
     count = len(positions)
     if count != settings.cage_vertex_count:
         return "cage vertices", (
@@ -655,11 +661,12 @@ def check_bindings(depsgraph, changed=None):
             deleted.append(cage)
     for cage in deleted:
         forget_cage(cage)
+    cages = {}
     for obj in bound:
         cage = obj.lbc.cage
         if changed is not None and cage is not None and not {obj.name_full, cage.name_full} & changed:
             continue
-        cause, message = diagnose(obj, depsgraph)
+        cause, message = diagnose(obj, depsgraph, cages)
         set_enabled(obj, cause not in STOPPED_HERE)
         if obj.lbc.status != message:  # writing the same value would trigger another depsgraph update
             obj.lbc.state = "FOLLOWING" if cause is None else "STOPPED"

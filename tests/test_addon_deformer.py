@@ -144,6 +144,23 @@ def test_deleted_cage_is_reported_and_nothing_crashes(bound_gargoyle, capsys):
     assert not ok and "deleted" in message
 
 
+def test_meshes_bound_to_one_cage_are_checked_with_one_evaluation_of_it(bound_gargoyle, monkeypatch):
+    mesh, cage = bound_gargoyle
+    for _ in range(2):  # two more meshes bound to the same cage (own mesh data, as after Shift+D)
+        twin = mesh.copy()
+        twin.data = mesh.data.copy()
+        bpy.context.scene.collection.objects.link(twin)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    evaluated = []
+    evaluate = deformer.evaluated_cage
+    monkeypatch.setattr(deformer, "evaluated_cage",
+                        lambda cage_obj, graph: evaluated.append(cage_obj.name) or evaluate(cage_obj, graph))
+    deformer.check_bindings(depsgraph)
+    bound = [obj for obj in bpy.context.scene.objects if deformer.is_bound(obj)]
+    assert len(bound) == 3 and evaluated == [cage.name]
+    assert [obj.lbc.status for obj in bound] == [f"Following '{cage.name}'"] * 3
+
+
 def test_renamed_cage_keeps_deforming(bound_gargoyle):
     mesh, cage = bound_gargoyle
     cage.name = "Renamed Cage"
