@@ -344,8 +344,9 @@ def _stop_condition(group, group_in, cage_geometry, cage_vertex_count, mesh_vert
     causes = (
         (cage_changed, f"LBC: the cage is gone or no longer has the {cage_vertex_count} vertices it was bound with; "
                        "the mesh is left undeformed. Bind again, or restore the cage"),
-        (mesh_changed, f"LBC: the mesh no longer has the {mesh_vertex_count} vertices it was bound with; it is left "
-                       "undeformed. Rebind in the LBC panel"),
+        (mesh_changed, f"LBC: the mesh reaching this modifier no longer has the {mesh_vertex_count} vertices it was "
+                       "bound with; it is left undeformed. Move the LBC modifier above any modifier that adds or "
+                       "removes vertices, or Rebind in the LBC panel"),
         (disabled.outputs["Boolean"], "LBC: the cage's topology changed since binding (same vertex count); the mesh "
                                       "is left undeformed. Rebind in the LBC panel"),
     )
@@ -588,7 +589,9 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     """Why a bound object's deformer cannot work: (cause, message), cause None when it works.
 
     ``cause`` is one of "modifier", "weights", "mesh vertices", "cage deleted", "cage type", "cage vertices",
-    "topology", "welded apart", "modifier error" (an error the node group raised for what only it sees). Only the
+    "topology", "welded apart", "modifier above" (one that can change the vertex count), "modifier error" (an error
+    the node group raised for what only it sees). A cage with other vertices in renders still follows (cause None),
+    its message says so. Only the
     causes in :data:`STOPPED_HERE` need the add-on to stop the deformer; the node group itself stops for the others.
     ``cages``: a dict keeping each cage's :func:`evaluated_cage` for the next bindings checked with the same depsgraph,
     so that the meshes bound to one cage (a body, its clothes, its eyes) evaluate and hash it once.
@@ -635,13 +638,35 @@ def diagnose(mesh_obj, depsgraph, cages=None):
             f"Cage vertices {apart[0]} and {apart[1]} of '{cage.name}' were one point when bound and are now apart: "
             "the mesh stays at rest. Move them together again, or merge them (Merge by Distance) and Rebind"
         )
-    # What only the modifier sees: e.g. a modifier above it that changes the vertex count (Blender 4.3 and newer).
-    # While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone by now.
+    above = _vertex_count_modifier_above(mesh_obj, modifier)
+    if above is not None:
+        return "modifier above", (
+            f"The modifier '{above.name}' above '{modifier.name}' can change the mesh's vertex count: the mesh stays "
+            f"undeformed. Move '{modifier.name}' to the top of the stack"
+        )
+    # What only the modifier sees: e.g. a Geometry Nodes modifier above it that changes the vertex count (Blender 4.3
+    # and newer). While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone.
     warnings = getattr(modifier, "node_warnings", ()) if is_enabled(modifier) else ()
     for warning in warnings:
         if warning.message.startswith("LBC: "):
-            return "modifier error", warning.message[len("LBC: "):].capitalize()
+            message = warning.message[len("LBC: "):]
+            return "modifier error", message[:1].upper() + message[1:]
+    difference = geometry.render_difference(cage)
+    if difference is not None:
+        return None, (f"Following '{cage.name}' in the viewport, but renders leave the mesh undeformed: the cage's "
+                      f"{difference}. Make them the same and Rebind")
     return None, f"Following '{cage.name}'"
+
+
+def _vertex_count_modifier_above(mesh_obj, modifier):
+    """The first modifier shown in the viewport above ``modifier`` whose type can change the vertex count (Geometry
+    Nodes left to the node group's own check), or None."""
+    for other in mesh_obj.modifiers:
+        if other == modifier:
+            return None
+        if other.show_viewport and other.type in geometry.VERTEX_COUNT_MODIFIERS and other.type != "NODES":
+            return other
+    return None
 
 
 _last_messages = {}  # object session_uid -> the last status printed, so a problem is reported once, not per redraw

@@ -56,6 +56,42 @@ def topology_fingerprint(mesh):
     return digest.hexdigest()[:16]
 
 
+# Modifier types that can change a mesh's vertex count (Geometry Nodes too: a tree may).
+VERTEX_COUNT_MODIFIERS = frozenset({
+    "ARRAY", "BEVEL", "BOOLEAN", "BUILD", "DECIMATE", "EDGE_SPLIT", "EXPLODE", "MASK", "MESH_SEQUENCE_CACHE",
+    "MIRROR", "MULTIRES", "NODES", "OCEAN", "PARTICLE_INSTANCE", "REMESH", "SCREW", "SKIN", "SOLIDIFY", "SUBSURF",
+    "WELD", "WIREFRAME",
+})
+
+
+def render_difference(obj):
+    """Why ``obj``'s evaluated mesh may have other vertices in renders than in the viewport, or None.
+
+    A deformer bound to a cage's evaluated vertices stops where their count differs, and the viewport and renders
+    each evaluate their own: a Subdivision at Blender's defaults (1 level in the viewport, 2 in renders) leaves the
+    mesh undeformed in every render.
+    """
+    for modifier in obj.modifiers:
+        if modifier.type not in VERTEX_COUNT_MODIFIERS:
+            continue
+        if modifier.show_viewport != modifier.show_render:
+            return f"modifier '{modifier.name}' is shown in {'renders' if modifier.show_render else 'the viewport'} only"
+        render_levels = getattr(modifier, "render_levels", None)
+        if modifier.show_render and render_levels is not None and render_levels != modifier.levels:
+            return (f"modifier '{modifier.name}' has {render_levels} levels in renders and {modifier.levels} in the "
+                    "viewport")
+    return None
+
+
+def render_warning(mesh_obj, cage_obj):
+    """The warning for a binding whose cage has other vertices in renders (:func:`render_difference`), or None."""
+    difference = render_difference(cage_obj)
+    if difference is None:
+        return None
+    return (f"renders leave '{mesh_obj.name}' undeformed: the cage's {difference}; make the viewport and render "
+            "settings the same (or apply the modifier) and Rebind")
+
+
 def to_local(matrix, positions):
     """Apply a 4×4 ``mathutils.Matrix`` (or array) to (k, 3) positions."""
     matrix = np.array(matrix, dtype=np.float64)
@@ -81,6 +117,8 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
             f"the mesh data of '{mesh_obj.name}' is shared by {mesh_obj.data.users} objects and the weights are "
             "stored in it: make it single user first (Object > Relations > Make Single User)"
         )
+    if not len(mesh_obj.data.vertices):
+        raise CageError(f"'{mesh_obj.name}' has no vertices: there is nothing to bind")
     points = vertex_positions(mesh_obj.data)
     cage_eval = cage_obj.evaluated_get(depsgraph)
     cage_mesh = cage_eval.to_mesh()
@@ -108,6 +146,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
                  "thinning": thinning, "influences": influences, "mode": mode},
         cage_topology=cage_topology,
         mesh_topology=topology_fingerprint(mesh_obj.data),
+        warnings=[warning for warning in (render_warning(mesh_obj, cage_obj),) if warning],
     )
 
 

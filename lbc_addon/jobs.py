@@ -62,6 +62,7 @@ class BindRequest:
     options: dict  # the bind options by their Object.lbc property names (0: lbc_core's default)
     cage_topology: str
     mesh_topology: str
+    warnings: list = field(default_factory=list)  # what the snapshot noticed (a cage with other vertices in renders)
 
     @property
     def dimension(self):
@@ -134,6 +135,14 @@ def printed_progress():
     return progress
 
 
+def _outside_warning(mesh_name, outside):
+    """A warning when every point of the mesh lies outside the cage (``outside``: (m,) bool), likely the wrong cage."""
+    if len(outside) and outside.all():
+        return [f"every vertex of '{mesh_name}' lies outside the cage: is it the right cage? (they follow the closest "
+                "points inside it)"]
+    return []
+
+
 def solve(request, progress=None, cancel=None):
     """Compute the weights (no ``bpy`` here: safe in a worker thread). Raises CageError or lbc_core.Cancelled."""
     start = time.perf_counter()
@@ -172,7 +181,8 @@ def solve(request, progress=None, cancel=None):
         control_points=len(column_vertex),
         outside=int(np.count_nonzero(binding.outside)),
         core_fingerprint=binding.cage.fingerprint(),
-        warnings=list(binding.cage.warnings) + ([] if binding.converged else [_not_converged(binding.iterations)]),
+        warnings=request.warnings + _outside_warning(request.mesh_name, binding.outside) + list(binding.cage.warnings)
+        + ([] if binding.converged else [_not_converged(binding.iterations)]),
         welded=welded_pairs(column_base, column_vertex[binding.cage.vertex_map]),
         seconds=time.perf_counter() - start,
         binding=binding,

@@ -30,7 +30,7 @@ def _bound_selection(context):
 def _report_result(operator, mesh_obj):
     """Warnings about a finished bind: vertices outside the cage, repairs lbc_core made."""
     settings = mesh_obj.lbc
-    if settings.outside:
+    if 0 < settings.outside < len(mesh_obj.data.vertices):  # all of them: one of the warnings says so
         operator.report(
             {"WARNING"},
             f"{mesh_obj.name}: {settings.outside} vertices lie outside the cage; they follow the closest point inside",

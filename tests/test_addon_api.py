@@ -3,6 +3,7 @@
 import bpy
 import numpy as np
 import pytest
+from mathutils import Matrix
 
 import lbc_core
 from lbc_addon import api, jobs
@@ -26,6 +27,29 @@ def test_api_bind_returns_the_figures_and_unbind_restores_the_mesh():
     assert api.status(mesh) == (True, "Following 'Box'")
     api.unbind(mesh)
     assert mesh_state(mesh) == before and not is_bound(mesh)
+
+
+def test_api_bind_warns_when_renders_would_see_other_cage_vertices():
+    mesh, cage = sphere_in_box_scene()
+    cage.modifiers.new("Subdivision", "SUBSURF").levels = 0  # nothing in the viewport, 2 levels in renders
+    summary = api.bind(mesh, cage, cells=1000)
+    assert summary["warnings"][0] == (
+        "renders leave 'Sphere' undeformed: the cage's modifier 'Subdivision' has 2 levels in renders and 0 in the "
+        "viewport; make the viewport and render settings the same (or apply the modifier) and Rebind")
+    assert api.status(mesh)[0] and "renders leave the mesh undeformed" in api.status(mesh)[1]
+
+
+def test_api_bind_warns_when_every_vertex_lies_outside_the_cage_and_refuses_an_empty_mesh():
+    mesh, cage = sphere_in_box_scene()
+    mesh.data.transform(Matrix.Translation((5.0, 0.0, 0.0)))  # the sphere beside the box
+    summary = api.bind(mesh, cage, cells=1000)
+    assert summary["outside"] == len(mesh.data.vertices)
+    assert summary["warnings"][0].startswith("every vertex of 'Sphere' lies outside the cage: is it the right cage?")
+    empty = bpy.data.objects.new("Empty mesh", bpy.data.meshes.new("Empty mesh"))
+    bpy.context.scene.collection.objects.link(empty)
+    with pytest.raises(lbc_core.CageError, match="'Empty mesh' has no vertices: there is nothing to bind"):
+        api.bind(empty, cage, cells=1000)
+    assert not is_bound(empty) and not empty.modifiers
 
 
 def test_api_bind_raises_lbc_cores_error_and_changes_nothing():
