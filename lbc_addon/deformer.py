@@ -550,11 +550,12 @@ def set_enabled(mesh_obj, enabled):
 
 
 def evaluated_cage(cage_obj, depsgraph):
-    """Topology fingerprint and (n, 3) vertex positions of the cage as the deformer sees it (modifiers applied)."""
+    """Topology fingerprints (:func:`geometry.topology_fingerprints`) and (n, 3) vertex positions of the cage as the
+    deformer sees it (modifiers applied)."""
     cage_eval = cage_obj.evaluated_get(depsgraph)
     mesh = cage_eval.to_mesh()
     try:
-        return geometry.topology_fingerprint(mesh), geometry.vertex_positions(mesh)
+        return geometry.topology_fingerprints(mesh), geometry.vertex_positions(mesh)
     finally:
         cage_eval.to_mesh_clear()
 
@@ -620,14 +621,14 @@ def diagnose(mesh_obj, depsgraph, cages=None):
         cages = {}
     if cage.name_full not in cages:
         cages[cage.name_full] = evaluated_cage(cage, depsgraph)
-    topology, positions = cages[cage.name_full]
+    topologies, positions = cages[cage.name_full]
     count = len(positions)
     if count != settings.cage_vertex_count:
         return "cage vertices", (
             f"The cage '{cage.name}' has {count} vertices, it was bound with {settings.cage_vertex_count}: "
             "the mesh stays undeformed. Rebind"
         )
-    if topology != settings.cage_topology:
+    if settings.cage_topology not in topologies:
         return "topology", (
             f"The topology of the cage '{cage.name}' changed since binding (same vertex count): the mesh stays "
             "undeformed. Rebind"

@@ -38,21 +38,44 @@ def edge_pairs(mesh):
     return edges.reshape(-1, 2)
 
 
-def topology_fingerprint(mesh):
-    """A hash of a mesh's vertex count, edges and faces; positions do not enter it.
+# The prefix of the fingerprints this version makes (those of earlier versions, kept in files, have none).
+FINGERPRINT_VERSION = "2:"
 
-    The weights index the cage's vertices, so any change here (vertices added, removed or reordered, faces
-    rebuilt) makes them meaningless; moving vertices does not.
+
+def topology_fingerprint(mesh):
+    """A hash of a mesh's vertex count, edges (each an unordered pair, in the mesh's order) and face sizes: what
+    the weights depend on. Positions do not enter it, nor the faces' winding (Blender 5.2 reverses it when a
+    negative scale is applied, the cage unchanged); vertices added, removed or reordered change it.
+
+    Returns
+    -------
+    str
+        :data:`FINGERPRINT_VERSION` and 16 hex digits.
     """
-    digest = hashlib.sha256()
-    digest.update(np.int64(len(mesh.vertices)).tobytes())
-    digest.update(edge_pairs(mesh).tobytes())
+    return FINGERPRINT_VERSION + _digest(len(mesh.vertices), np.sort(edge_pairs(mesh), axis=1), _face_sizes(mesh))
+
+
+def topology_fingerprints(mesh):
+    """The mesh's :func:`topology_fingerprint` and the one the version before made (which hashed the faces' corners
+    as well), for bindings stored by it: a set of two strings."""
     corners = np.empty(len(mesh.loops), dtype=np.int64)
     mesh.loops.foreach_get("vertex_index", corners)
+    legacy = _digest(len(mesh.vertices), edge_pairs(mesh), corners, _face_sizes(mesh))
+    return {topology_fingerprint(mesh), legacy}
+
+
+def _face_sizes(mesh):
     sizes = np.empty(len(mesh.polygons), dtype=np.int64)
     mesh.polygons.foreach_get("loop_total", sizes)
-    digest.update(corners.tobytes())
-    digest.update(sizes.tobytes())
+    return sizes
+
+
+def _digest(vertex_count, *arrays):
+    """16 hex digits of the SHA-256 of a count and int64 arrays."""
+    digest = hashlib.sha256()
+    digest.update(np.int64(vertex_count).tobytes())
+    for array in arrays:
+        digest.update(np.ascontiguousarray(array, dtype=np.int64).tobytes())
     return digest.hexdigest()[:16]
 
 
@@ -126,6 +149,10 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         matrix = cage_to_mesh_matrix(cage_eval, mesh_obj.evaluated_get(depsgraph))
         cage_points = to_local(matrix, vertex_positions(cage_mesh))
         cage_faces = polygon_faces(cage_mesh)
+        if np.linalg.det(np.array(matrix)[:3, :3]) < 0:
+            # A mirroring transform (a negative scale) turns outward faces inward in the mesh's space; turned back
+            # here, so that lbc_core does not report faces the artist sees pointing outward as reversed.
+            cage_faces = [face[::-1] for face in cage_faces]
         cage_topology = topology_fingerprint(cage_mesh)
         flat = None if mode == "3D" else flatten(cage_points, cage_faces, points, edge_pairs(cage_mesh))
         if mode == "2D" and flat is None:

@@ -52,6 +52,14 @@ def test_api_bind_warns_when_every_vertex_lies_outside_the_cage_and_refuses_an_e
     assert not is_bound(empty) and not empty.modifiers
 
 
+def test_a_mirrored_cage_binds_without_a_warning_about_its_faces():
+    mesh, cage = sphere_in_box_scene()
+    cage.scale.x *= -1.0  # mirrored: its faces still point outward in Blender
+    summary = api.bind(mesh, cage, cells=1000)
+    assert summary["warnings"] == []  # no "reversed all cage faces: they pointed inward"
+    assert api.status(mesh) == (True, "Following 'Box'")
+
+
 def test_api_bind_raises_lbc_cores_error_and_changes_nothing():
     mesh, cage = sphere_in_box_scene()
     cage.data.vertices[0].co = cage.data.vertices[7].co  # two vertices on top of each other, faces folded

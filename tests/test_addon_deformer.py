@@ -134,6 +134,16 @@ def test_cage_topology_change_with_the_same_vertex_count_stops_the_deformer(boun
     _assert_one_modifier_error(mesh, "topology changed")
 
 
+def test_a_cage_whose_winding_blender_reversed_keeps_deforming(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    cage.data.flip_normals()  # what Blender 5.2's Apply Scale does to a cage with a negative scale
+    cage.data.update()
+    cage.location.x += 0.5
+    moved = evaluated_positions(mesh)
+    assert mesh.lbc.status == f"Following '{cage.name}'"
+    assert np.abs(moved - positions(mesh.data)).max() > 0.1
+
+
 def test_deleted_cage_is_reported_and_nothing_crashes(bound_gargoyle, capsys):
     mesh, cage = bound_gargoyle
     bpy.data.objects.remove(cage)

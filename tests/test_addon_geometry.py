@@ -1,5 +1,7 @@
 """Reading Blender: topology fingerprints, positions in mesh space, the snapshot of a bind request."""
 
+import hashlib
+
 import bpy
 import numpy as np
 import pytest
@@ -17,15 +19,39 @@ def _grid(name, size=3):
     return mesh_object(name, points, quads)
 
 
-def test_fingerprint_ignores_positions_and_sees_topology():
+def test_fingerprint_ignores_positions_and_winding_and_sees_reordered_vertices():
     reset()
     grid = _grid("Grid")
     before = geometry.topology_fingerprint(grid.data)
+    assert before.startswith(geometry.FINGERPRINT_VERSION)
     grid.data.vertices[4].co.z = 1.0
     assert geometry.topology_fingerprint(grid.data) == before
-    other = _grid("Other")
-    other.data.polygons[0].vertices = (1, 4, 3, 0)  # the same face, its corners rotated
-    assert geometry.topology_fingerprint(other.data) != before
+    flipped = _grid("Flipped")
+    flipped.data.flip_normals()  # every face's winding reversed, as Blender 5.2's Apply Scale does for a negative scale
+    assert geometry.topology_fingerprint(flipped.data) == before
+    relabelled = _grid("Relabelled")
+    bpy.context.view_layer.objects.active = relabelled
+    with bpy.context.temp_override(active_object=relabelled, object=relabelled):
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="SELECT")
+        bpy.ops.mesh.sort_elements(type="REVERSE", elements={"VERT"})
+        bpy.ops.object.mode_set(mode="OBJECT")
+    assert geometry.topology_fingerprint(relabelled.data) != before
+
+
+def test_fingerprints_of_the_version_before_still_match():
+    """Bindings saved before the fingerprint left the winding out keep theirs: it hashed the corners too."""
+    reset()
+    grid = _grid("Grid")
+    corners = np.empty(len(grid.data.loops), dtype=np.int64)
+    grid.data.loops.foreach_get("vertex_index", corners)
+    sizes = np.array([len(polygon.vertices) for polygon in grid.data.polygons], dtype=np.int64)
+    edges = np.array([edge.vertices[:] for edge in grid.data.edges], dtype=np.int64)
+    digest = hashlib.sha256()
+    for part in (np.int64(len(grid.data.vertices)), edges, corners, sizes):
+        digest.update(part.tobytes())
+    assert geometry.topology_fingerprints(grid.data) == {digest.hexdigest()[:16],
+                                                         geometry.topology_fingerprint(grid.data)}
 
 
 def test_snapshot_of_a_flat_grid_cage_is_a_2d_request_on_its_outline():
