@@ -155,6 +155,9 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
             cage_faces = [face[::-1] for face in cage_faces]
         cage_topology = topology_fingerprint(cage_mesh)
         flat = None if mode == "3D" else flatten(cage_points, cage_faces, points, edge_pairs(cage_mesh))
+        if flat is None and not cage_faces:
+            raise CageError(f"the cage '{cage_obj.name}' has no faces: a cage is a closed surface around the mesh "
+                            "(fill its holes: Edit Mode, Select All, F)")
         if mode == "2D" and flat is None:
             raise CageError(
                 "2D binding needs a flat cage with the mesh lying in its plane: flatten them, or bind in 3D"

@@ -429,9 +429,9 @@ def _check_polygon_simple(vertices, zero, names):
 def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     if vertices.shape[1] != 3:
         raise CageError("a cage with faces must have 3D vertices; for a 2D polygon pass faces=None")
+    faces = _face_list(faces, len(vertices))  # first: a cage without faces is told so, whatever its vertex count
     if len(vertices) < 4:
         raise CageError(f"a 3D cage needs at least 4 vertices (a tetrahedron), got {len(vertices)}")
-    faces = _face_list(faces, len(vertices))
     warnings = []
     welded, vertex_map = _weld(vertices, weld_tolerance)
     if len(welded) < len(vertices):

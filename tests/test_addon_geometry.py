@@ -87,3 +87,11 @@ def test_snapshot_refuses_shared_mesh_data_and_non_mesh_cages():
     empty = bpy.data.objects.new("Empty", None)
     with pytest.raises(CageError, match="not a mesh"):
         geometry.snapshot(twin, empty, bpy.context.evaluated_depsgraph_get())
+
+
+def test_snapshot_refuses_a_cage_of_edges_without_faces_and_says_so():
+    reset()
+    wire = mesh_object("Wire", [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.5]], [], edges=[(0, 1), (1, 2), (2, 0)])
+    mesh = mesh_object("Mesh", [[0.5, 0.5, 1.0]], [])
+    with pytest.raises(CageError, match="the cage 'Wire' has no faces: a cage is a closed surface"):
+        geometry.snapshot(mesh, wire, bpy.context.evaluated_depsgraph_get())

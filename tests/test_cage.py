@@ -82,6 +82,7 @@ def test_too_few_distinct_polygon_vertices_after_welding():
 
 def test_too_few_3d_vertices():
     assert_refused(TETRA[:3], [[0, 1, 2]], "at least 4 vertices")
+    assert_refused(TETRA[:3], [], "the 3D cage has no faces")  # what is missing first: three edges, no face
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
