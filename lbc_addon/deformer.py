@@ -29,7 +29,7 @@ GROUP_NAME = "LBC Deform"
 _COLUMN = 220  # node editor spacing, for a readable node group
 
 # Causes (see :func:`diagnose`) the node group cannot see, so the add-on clears its "Enabled" input.
-STOPPED_HERE = ("topology", "welded apart")
+STOPPED_HERE = ("topology", "welded apart", "rest moved")
 
 # The modifier inputs that are the artist's (kept when the mesh is bound again); the others are the add-on's.
 USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")
@@ -37,6 +37,8 @@ USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")
 # The slots beyond those every vertex evaluates are left to at most this share of the vertices (see
 # :func:`shared_slot_count`; bench/RESULTS.md: 5 % gave the fastest split on both benchmark scenes).
 TAIL_SHARE = 0.05
+# Vertices :func:`rest_moved` compares with their rest positions, spread over the mesh's order.
+REST_SAMPLES = 16
 
 
 def build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots=None):
@@ -560,6 +562,33 @@ def evaluated_cage(cage_obj, depsgraph):
         cage_eval.to_mesh_clear()
 
 
+def rest_moved(mesh):
+    """Whether a bound mesh's vertices were moved as a whole since binding: a sample of them (:data:`REST_SAMPLES`)
+    is an affine image, other than the identity, of the rest positions the weights reproduce. Apply Transforms does
+    this to the mesh data, and the deformer would add the cage's displacement to a rest it no longer has: a jump.
+    Edits of part of the mesh (sculpting) are no affine image; vertices outside the cage (bound to the closest point
+    inside) make none either, so such a mesh is not checked."""
+    rest_attribute = mesh.attributes.get(storage.REST_NAME)
+    count = len(mesh.vertices)
+    if rest_attribute is None or count < 4 or len(rest_attribute.data) != count:
+        return False
+    sample = np.unique(np.linspace(0, count - 1, min(count, REST_SAMPLES)).astype(int)).tolist()
+    rest = np.array([rest_attribute.data[i].vector[:] for i in sample])
+    now = np.array([mesh.vertices[i].co[:] for i in sample])
+    return moved_affinely(rest, now)
+
+
+def moved_affinely(before, after, tolerance=1e-5):
+    """Whether (k, 3) points ``after`` are an affine image of ``before`` other than the identity, both to
+    ``tolerance`` × the size of ``before`` (float32 positions)."""
+    size = float(np.linalg.norm(np.ptp(before, axis=0)))
+    if np.abs(after - before).max() <= tolerance * size:
+        return False
+    design = np.c_[before, np.ones(len(before))]
+    fit, *_ = np.linalg.lstsq(design, after, rcond=None)
+    return bool(np.abs(design @ fit - after).max() <= tolerance * size)
+
+
 def welded_apart(welded, positions):
     """The first (copy, kept) pair of cage vertices welded at bind time that are now apart, or None.
 
@@ -589,11 +618,11 @@ def status(mesh_obj, depsgraph):
 def diagnose(mesh_obj, depsgraph, cages=None):
     """Why a bound object's deformer cannot work: (cause, message), cause None when it works.
 
-    ``cause`` is one of "modifier", "weights", "mesh vertices", "cage deleted", "cage type", "cage vertices",
-    "topology", "welded apart", "modifier above" (one that can change the vertex count), "modifier error" (an error
-    the node group raised for what only it sees). A cage with other vertices in renders still follows (cause None),
-    its message says so. Only the
-    causes in :data:`STOPPED_HERE` need the add-on to stop the deformer; the node group itself stops for the others.
+    ``cause`` is one of "modifier", "weights", "mesh vertices", "rest moved" (:func:`rest_moved`), "cage deleted",
+    "cage type", "cage vertices", "topology", "welded apart", "modifier above" (one that can change the vertex
+    count), "modifier error" (an error the node group raised for what only it sees). A cage with other vertices in
+    renders still follows (cause None), its message says so. Only the causes in :data:`STOPPED_HERE` need the add-on
+    to stop the deformer; the node group itself stops for the others.
     ``cages``: a dict keeping each cage's :func:`evaluated_cage` for the next bindings checked with the same depsgraph,
     so that the meshes bound to one cage (a body, its clothes, its eyes) evaluate and hash it once.
     """
@@ -609,6 +638,11 @@ def diagnose(mesh_obj, depsgraph, cages=None):
         return "mesh vertices", (
             f"The mesh has {count} vertices, it was bound with {settings.mesh_vertex_count}: it stays undeformed. "
             "Rebind"
+        )
+    if rest_moved(mesh_obj.data):
+        return "rest moved", (
+            "The mesh's vertices were moved as a whole since binding (Apply Transforms, or all of them moved in Edit "
+            "Mode): it stays undeformed, as it would jump. Rebind, or undo the move"
         )
     cage = settings.cage
     if cage is None:

@@ -144,6 +144,36 @@ def test_a_cage_whose_winding_blender_reversed_keeps_deforming(bound_gargoyle):
     assert np.abs(moved - positions(mesh.data)).max() > 0.1
 
 
+def test_apply_transforms_on_the_bound_mesh_stops_it_in_place_until_undone(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    world = np.array(mesh.matrix_world)
+    before = positions(mesh.data)
+    in_world = before @ world[:3, :3].T + world[:3, 3]
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh],
+                                   selected_editable_objects=[mesh]):
+        bpy.ops.object.transform_apply(location=True, rotation=True, scale=True)
+    cage.location.x += 0.3  # a pose: the deformer would add it to a rest the mesh no longer has
+    assert np.abs(evaluated_positions(mesh) - in_world).max() < 1e-5 * diagonal(mesh)  # where it was, at rest
+    assert mesh.lbc.status.startswith("The mesh's vertices were moved as a whole since binding")
+    mesh.data.vertices.foreach_set("co", before.astype(np.float32).ravel())  # the move undone (the data)
+    mesh.matrix_world = Matrix(world.tolist())
+    mesh.data.update()
+    bpy.context.evaluated_depsgraph_get()
+    assert mesh.lbc.status == f"Following '{cage.name}'"
+
+
+def test_a_sculpted_bound_mesh_keeps_following(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    for index in (0, 2673):  # two of the sampled vertices (the first and the last) pushed: an edit, not the whole mesh moved
+        mesh.data.vertices[index].co.z += 0.02
+    mesh.data.update()
+    cage.location.x += 0.3
+    bpy.context.evaluated_depsgraph_get()
+    assert mesh.lbc.status == f"Following '{cage.name}'"
+    assert deformer.moved_affinely(np.eye(4, 3), np.eye(4, 3) * 2) and not deformer.moved_affinely(np.eye(4, 3),
+                                                                                                    np.eye(4, 3))
+
+
 def test_deleted_cage_is_reported_and_nothing_crashes(bound_gargoyle, capsys):
     mesh, cage = bound_gargoyle
     bpy.data.objects.remove(cage)
