@@ -177,7 +177,16 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         cage_topology=cage_topology,
         mesh_topology=topology_fingerprint(mesh_obj.data),
         warnings=[warning for warning in (render_warning(mesh_obj, cage_obj),) if warning],
+        cage_modifiers=_named_modifiers([modifier for modifier in cage_obj.modifiers if modifier.show_viewport
+                                         and modifier.type in VERTEX_COUNT_MODIFIERS]),
     )
+
+
+def _named_modifiers(modifiers):
+    """ "modifier 'Mirror'" or "modifiers 'Mirror', 'Subdivision'", "" for none."""
+    if not modifiers:
+        return ""
+    return ("modifiers " if len(modifiers) > 1 else "modifier ") + ", ".join(f"'{m.name}'" for m in modifiers)
 
 
 def find_object(uid):

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import storage
-from .core import DEFAULT_FLOOR, lbc_core, thin_changed_rows, thin_weights
+from .core import DEFAULT_FLOOR, CageError, lbc_core, thin_changed_rows, thin_weights
 
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
@@ -63,6 +63,7 @@ class BindRequest:
     cage_topology: str
     mesh_topology: str
     warnings: list = field(default_factory=list)  # what the snapshot noticed (a cage with other vertices in renders)
+    cage_modifiers: str = ""  # the cage's modifiers that can change its vertices, e.g. "modifier 'Mirror'"
 
     @property
     def dimension(self):
@@ -153,11 +154,18 @@ def solve(request, progress=None, cancel=None):
         cage_vertices, faces, points = request.cage_points, request.cage_faces, request.points
         column_base = np.arange(len(request.cage_points))
     previous = warm_start(request)
-    if previous is not None:
-        binding = lbc_core.rebind(previous.binding, cage_vertices, faces, points, progress=progress, cancel=cancel)
-    else:
-        binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options),
-                                progress=progress, cancel=cancel)
+    try:
+        if previous is not None:
+            binding = lbc_core.rebind(previous.binding, cage_vertices, faces, points, progress=progress,
+                                      cancel=cancel)
+        else:
+            binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options),
+                                    progress=progress, cancel=cancel)
+    except CageError as error:
+        if request.cage_modifiers and "vert" in str(error):
+            # The numbers count the evaluated cage's vertices, which Edit Mode does not show.
+            raise CageError(f"{error} (vertex numbers of the cage with its {request.cage_modifiers} applied)") from error
+        raise
     column_vertex = column_base[binding.control_input_index]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
     rest = binding.rest_cage_vertices

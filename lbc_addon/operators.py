@@ -67,13 +67,28 @@ def _solve_printing(requests):
 class _Binder:
     """What Bind and Rebind share: snapshot on the main thread, solve (modal or not), apply.
 
-    Subclasses define ``targets(context)``: the (mesh, cage, options) triples to bind.
+    Subclasses define ``targets(context)``: the (mesh, cage, options) triples to bind, and ``skips_refused``: whether
+    a mesh that cannot be bound (e.g. its data shared by a linked duplicate) is left out with a warning, the others
+    bound, or stops them all.
     """
+
+    skips_refused = False
 
     def snapshot(self, context):
         depsgraph = context.evaluated_depsgraph_get()
-        return [geometry.snapshot(mesh, cage, depsgraph, **options)
-                for mesh, cage, options in self.targets(context)]
+        requests, refused = [], []
+        for mesh, cage, options in self.targets(context):
+            try:
+                requests.append(geometry.snapshot(mesh, cage, depsgraph, **options))
+            except CageError as error:
+                if not self.skips_refused:
+                    raise
+                refused.append(f"'{mesh.name}' left as it was: {error}")
+        if refused and not requests:
+            raise CageError("; ".join(refused))
+        for message in refused:
+            self.report({"WARNING"}, message)
+        return requests
 
     def execute(self, context):
         try:
@@ -221,6 +236,7 @@ class OBJECT_OT_lbc_rebind_all(_Binder, bpy.types.Operator):
     bl_idname = "object.lbc_rebind_all"
     bl_label = "Rebind All"
     bl_options = {"REGISTER", "UNDO"}
+    skips_refused = True  # one linked duplicate among them does not hold the others back
 
     @classmethod
     def poll(cls, context):

@@ -1,6 +1,7 @@
 """The script API, and a saved .blend reopened: the same deformation without any recompute."""
 
-import bpy
+import bpy  # noqa: I001  (first: importing bpy makes bmesh and mathutils importable)
+import bmesh
 import numpy as np
 import pytest
 from mathutils import Matrix
@@ -58,6 +59,21 @@ def test_a_mirrored_cage_binds_without_a_warning_about_its_faces():
     summary = api.bind(mesh, cage, cells=1000)
     assert summary["warnings"] == []  # no "reversed all cage faces: they pointed inward"
     assert api.status(mesh) == (True, "Following 'Box'")
+
+
+def test_an_error_naming_vertices_of_a_cage_with_modifiers_says_they_are_the_evaluated_ones():
+    mesh, cage = sphere_in_box_scene()
+    bmesh_cage = bmesh.new()
+    bmesh_cage.from_mesh(cage.data)
+    bmesh_cage.faces.ensure_lookup_table()
+    bmesh_cage.faces.remove(bmesh_cage.faces[0])  # a hole
+    bmesh_cage.to_mesh(cage.data)
+    bmesh_cage.free()
+    cage.modifiers.new("Subdivision", "SUBSURF").render_levels = 1
+    with pytest.raises(lbc_core.CageError, match=r"vertices .*\(vertex numbers of the cage with its modifier "
+                                                 r"'Subdivision' applied\)"):
+        api.bind(mesh, cage, cells=1000)
+    assert not is_bound(mesh)
 
 
 def test_api_bind_raises_lbc_cores_error_and_changes_nothing():

@@ -277,6 +277,22 @@ def test_rebind_all_binds_every_mesh_of_the_active_cage_again_with_its_own_optio
             bpy.ops.object.lbc_rebind_all()
 
 
+def test_rebind_all_leaves_linked_duplicates_as_they_are_and_binds_the_others():
+    mesh, cage = sphere_in_box_scene()
+    second = mesh_object("Second", positions(mesh.data) * 0.5, [list(p.vertices) for p in mesh.data.polygons],
+                         mesh.matrix_world.copy())
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
+    assert bind(second, cage, cells=CELLS) == {"FINISHED"}
+    linked = mesh.copy()  # Alt+D: the same mesh data, so the same weights
+    bpy.context.scene.collection.objects.link(linked)
+    for obj in (mesh, linked, second):
+        obj.lbc.bind_seconds = -1.0  # a mark a new bind overwrites
+    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[cage]):
+        assert bpy.ops.object.lbc_rebind_all() == {"FINISHED"}
+    assert second.lbc.bind_seconds > 0 and mesh.lbc.bind_seconds == linked.lbc.bind_seconds == -1.0
+    assert is_bound(mesh) and is_bound(linked)
+
+
 def test_rebind_after_a_small_cage_edit_starts_from_the_previous_binding(capfd):
     mesh, cage = gargoyle_scene("L12")
     assert bind(mesh, cage, cells=2000) == {"FINISHED"}
