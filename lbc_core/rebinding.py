@@ -335,4 +335,5 @@ def _near(previous, cells, what):
     centroid = previous.domain.vertices[np.unique(cells)].mean(axis=0)
     nearest = np.argsort(np.linalg.norm(previous.cage.vertices - centroid, axis=1))[:3]
     inputs = previous.control_input_index[nearest]
-    return f"{what} ({len(cells)} cells, near cage vertex {', '.join(map(str, inputs))})"
+    count = f"{len(cells)} cell" if len(cells) == 1 else f"{len(cells)} cells"
+    return f"{what} ({count}, near cage vertices {', '.join(map(str, inputs))})"

@@ -144,7 +144,7 @@ def test_an_edit_that_would_fold_the_mesh_falls_back_to_a_cold_bind(gargoyle):
     warm = rebind(first, edited, faces, progress=lambda fraction, message: messages.append(message))
     assert warm.options["start"] == "harmonic"
     reason = warm.options["rebind"]
-    assert reason.startswith("bound from scratch: the previous mesh would fold (") and "near cage vertex 0" in reason
+    assert reason.startswith("bound from scratch: the previous mesh would fold (") and "near cage vertices 0" in reason
     assert any(message.startswith("binding from scratch") for message in messages)
     assert_guarantees(warm, points)
     assert warm.solver_state is not None  # and the next re-bind can be warm again
