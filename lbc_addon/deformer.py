@@ -673,19 +673,20 @@ def diagnose(mesh_obj, depsgraph, cages=None):
             f"Cage vertices {apart[0]} and {apart[1]} of '{cage.name}' were one point when bound and are now apart: "
             "the mesh stays at rest. Move them together again, or merge them (Merge by Distance) and Rebind"
         )
+    # What only the modifier sees (Blender 4.3 and newer; the causes above are ruled out): the vertex count reaching
+    # it differs. While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone.
+    warnings = getattr(modifier, "node_warnings", ()) if is_enabled(modifier) else ()
+    messages = [warning.message[len("LBC: "):] for warning in warnings if warning.message.startswith("LBC: ")]
+    # Which modifier: one above that can change the count, as the modifier's error confirms (4.2 has no Warning node
+    # to confirm it; there the modifier's type alone says so).
     above = _vertex_count_modifier_above(mesh_obj, modifier)
-    if above is not None:
+    if above is not None and (messages or not hasattr(bpy.types, "GeometryNodeWarning")):
         return "modifier above", (
-            f"The modifier '{above.name}' above '{modifier.name}' can change the mesh's vertex count: the mesh stays "
+            f"The modifier '{above.name}' above '{modifier.name}' changes the mesh's vertex count: the mesh stays "
             f"undeformed. Move '{modifier.name}' to the top of the stack"
         )
-    # What only the modifier sees: e.g. a Geometry Nodes modifier above it that changes the vertex count (Blender 4.3
-    # and newer). While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone.
-    warnings = getattr(modifier, "node_warnings", ()) if is_enabled(modifier) else ()
-    for warning in warnings:
-        if warning.message.startswith("LBC: "):
-            message = warning.message[len("LBC: "):]
-            return "modifier error", message[:1].upper() + message[1:]
+    for message in messages:
+        return "modifier error", message[:1].upper() + message[1:]
     difference = geometry.render_difference(cage)
     if difference is not None:
         return None, (f"Following '{cage.name}' in the viewport, but renders leave the mesh undeformed: the cage's "
