@@ -145,14 +145,18 @@ def test_a_cage_whose_winding_blender_reversed_keeps_deforming(bound_gargoyle):
     assert np.abs(moved - positions(mesh.data)).max() > 0.1
 
 
-def test_apply_transforms_on_the_bound_mesh_stops_it_in_place_until_undone(bound_gargoyle):
+def test_apply_transforms_on_the_bound_mesh_stops_it_in_place_until_undone_or_bound_again(bound_gargoyle):
     mesh, cage = bound_gargoyle
     world = np.array(mesh.matrix_world)
     before = positions(mesh.data)
     in_world = before @ world[:3, :3].T + world[:3, 3]
-    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh],
-                                   selected_editable_objects=[mesh]):
-        bpy.ops.object.transform_apply(location=True, rotation=True, scale=True)
+
+    def apply_transforms():
+        with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh],
+                                       selected_editable_objects=[mesh]):
+            bpy.ops.object.transform_apply(location=True, rotation=True, scale=True)
+
+    apply_transforms()
     cage.location.x += 0.3  # a pose: the deformer would add it to a rest the mesh no longer has
     assert np.abs(evaluated_positions(mesh) - in_world).max() < 1e-5 * diagonal(mesh)  # where it was, at rest
     assert mesh.lbc.status.startswith("The mesh's vertices were moved as a whole since binding")
@@ -160,6 +164,12 @@ def test_apply_transforms_on_the_bound_mesh_stops_it_in_place_until_undone(bound
     mesh.matrix_world = Matrix(world.tolist())
     mesh.data.update()
     bpy.context.evaluated_depsgraph_get()
+    assert mesh.lbc.status == f"Following '{cage.name}'"
+    apply_transforms()
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_rebind() == {"FINISHED"}  # bound again where it now is: it follows
+    cage.location.x += 0.1
+    assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() > 0.05
     assert mesh.lbc.status == f"Following '{cage.name}'"
 
 
