@@ -9,6 +9,8 @@ Example::
     bpy.ops.wm.save_mainfile()
 """
 
+import warnings
+
 import bpy
 
 from . import deformer, geometry, jobs, writing
@@ -76,13 +78,19 @@ def unbind(mesh_obj):
 def rebind_all(cage_obj, progress=None, cancel=None):
     """Bind every mesh of the scene bound to ``cage_obj`` again, to the cage as it is now, each with its own options.
 
-    Returns the summaries of :func:`bind`, one per mesh; raises as :func:`bind` does, the meshes bound before the
-    error keeping their new binding.
+    Meshes whose data several objects share (linked duplicates, Alt+D), which no bind accepts, are left as they were
+    with a ``UserWarning`` each, as the Rebind All operator does. Returns the summaries of :func:`bind`, one per mesh
+    bound; raises as :func:`bind` does, the meshes bound before the error keeping their new binding.
     """
     _require_enabled()
-    meshes = bound_to(cage_obj, bpy.context.scene.objects)
-    return [bind(mesh_obj, cage_obj, **mesh_obj.lbc.bind_options(), progress=progress, cancel=cancel)
-            for mesh_obj in meshes]
+    summaries = []
+    for mesh_obj in bound_to(cage_obj, bpy.context.scene.objects):
+        if mesh_obj.data.users > 1:
+            warnings.warn(f"'{mesh_obj.name}' left as it was: its mesh data is shared by {mesh_obj.data.users} "
+                          "objects (linked duplicates)", stacklevel=2)
+            continue
+        summaries.append(bind(mesh_obj, cage_obj, **mesh_obj.lbc.bind_options(), progress=progress, cancel=cancel))
+    return summaries
 
 
 def set_deformer(mesh_obj, **inputs):

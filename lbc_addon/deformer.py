@@ -642,7 +642,7 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     if rest_moved(mesh_obj.data):
         return "rest moved", (
             "The mesh's vertices were moved as a whole since binding (Apply Transforms, or all of them moved in Edit "
-            "Mode): it stays undeformed, as it would jump. Rebind, or undo the move"
+            "Mode): it stays at rest, undeformed (following the cage it would jump). Rebind, or undo the move"
         )
     cage = settings.cage
     if cage is None:
@@ -679,7 +679,7 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     messages = [warning.message[len("LBC: "):] for warning in warnings if warning.message.startswith("LBC: ")]
     # Which modifier: one above that can change the count, as the modifier's error confirms (4.2 has no Warning node
     # to confirm it; there the modifier's type alone says so).
-    above = _vertex_count_modifier_above(mesh_obj, modifier)
+    above = _vertex_count_modifier_above(mesh_obj, modifier, depsgraph)
     if above is not None and (messages or not hasattr(bpy.types, "GeometryNodeWarning")):
         return "modifier above", (
             f"The modifier '{above.name}' above '{modifier.name}' changes the mesh's vertex count: the mesh stays "
@@ -694,13 +694,21 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     return None, f"Following '{cage.name}'"
 
 
-def _vertex_count_modifier_above(mesh_obj, modifier):
-    """The first modifier shown in the viewport above ``modifier`` whose type can change the vertex count (Geometry
-    Nodes left to the node group's own check), or None."""
-    for other in mesh_obj.modifiers:
-        if other == modifier:
-            return None
-        if other.show_viewport and other.type in geometry.VERTEX_COUNT_MODIFIERS and other.type != "NODES":
+def _vertex_count_modifier_above(mesh_obj, modifier, depsgraph):
+    """The first modifier shown in the viewport above ``modifier`` that can change the vertex count, or None. A
+    Geometry Nodes modifier (whose tree may keep the count) only where the evaluated mesh has another count than the
+    mesh data and no modifier below could have changed it."""
+    stack = list(mesh_obj.modifiers)
+    position = stack.index(modifier)
+
+    def may_change(other):
+        return other.show_viewport and other.type in geometry.VERTEX_COUNT_MODIFIERS
+
+    for other in filter(may_change, stack[:position]):
+        if other.type != "NODES":
+            return other
+        if not any(map(may_change, stack[position + 1:])) and (
+                len(mesh_obj.evaluated_get(depsgraph).data.vertices) != len(mesh_obj.data.vertices)):
             return other
     return None
 

@@ -76,6 +76,23 @@ def test_an_error_naming_vertices_of_a_cage_with_modifiers_says_they_are_the_eva
     assert not is_bound(mesh)
 
 
+def test_api_rebind_all_leaves_linked_duplicates_as_they_were_with_a_warning():
+    mesh, cage = sphere_in_box_scene()
+    api.bind(mesh, cage, cells=1000)
+    linked = mesh.copy()  # Alt+D: the same mesh data
+    bpy.context.scene.collection.objects.link(linked)
+    single = mesh.copy()
+    single.data = mesh.data.copy()  # Shift+D: its own data, the binding with it
+    bpy.context.scene.collection.objects.link(single)
+    with pytest.warns(UserWarning) as caught:
+        summaries = api.rebind_all(cage)
+    assert sorted(str(warning.message) for warning in caught) == [
+        f"'{name}' left as it was: its mesh data is shared by 2 objects (linked duplicates)"
+        for name in sorted((mesh.name, linked.name))]
+    assert len(summaries) == 1 and summaries[0]["control_points"] == 8
+    assert is_bound(mesh) and is_bound(linked) and is_bound(single)
+
+
 def test_api_bind_raises_lbc_cores_error_and_changes_nothing():
     mesh, cage = sphere_in_box_scene()
     cage.data.vertices[0].co = cage.data.vertices[7].co  # two vertices on top of each other, faces folded

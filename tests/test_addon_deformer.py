@@ -429,6 +429,25 @@ def test_a_cage_with_other_vertices_in_renders_says_so_while_it_follows(bound_ga
     assert "modifier 'Subdivision' has 2 levels in renders and 0 in the viewport" in mesh.lbc.status
 
 
+def test_a_geometry_nodes_modifier_above_that_changes_the_vertex_count_is_named(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    group = bpy.data.node_groups.new("Subdivide", "GeometryNodeTree")
+    group.is_modifier = True
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group_in, group_out = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    subdivide = group.nodes.new("GeometryNodeSubdivideMesh")
+    group.links.new(group_in.outputs[0], subdivide.inputs["Mesh"])
+    group.links.new(subdivide.outputs["Mesh"], group_out.inputs[0])
+    nodes = mesh.modifiers.new("Subdivide", "NODES")
+    nodes.node_group = group
+    mesh.modifiers.move(len(mesh.modifiers) - 1, 0)
+    cage.location.x += 0.3
+    bpy.context.evaluated_depsgraph_get()
+    plain = mesh.modifiers[deformer.MODIFIER_NAME]
+    assert mesh.lbc.status.startswith(f"The modifier 'Subdivide' above '{plain.name}' changes the mesh's vertex count")
+
+
 def test_a_modifier_above_that_keeps_the_vertex_count_lets_the_deformer_follow(bound_gargoyle):
     mesh, cage = bound_gargoyle
     if not hasattr(bpy.types, "GeometryNodeWarning"):
