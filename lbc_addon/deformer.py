@@ -566,8 +566,8 @@ def rest_moved(mesh):
     """Whether a bound mesh's vertices were moved as a whole since binding: a sample of them (:data:`REST_SAMPLES`)
     is an affine image, other than the identity, of the rest positions the weights reproduce. Apply Transforms does
     this to the mesh data, and the deformer would add the cage's displacement to a rest it no longer has: a jump.
-    Edits of part of the mesh (sculpting) are no affine image; vertices outside the cage (bound to the closest point
-    inside) make none either, so such a mesh is not checked."""
+    Edits of part of the mesh (sculpting) are no affine image; nor are vertices outside the cage (their rest is the
+    closest point inside), so a mesh with such vertices among the sampled ones is never flagged."""
     rest_attribute = mesh.attributes.get(storage.REST_NAME)
     count = len(mesh.vertices)
     if rest_attribute is None or count < 4 or len(rest_attribute.data) != count:
@@ -685,8 +685,8 @@ def diagnose(mesh_obj, depsgraph, cages=None):
             f"The modifier '{above.name}' above '{modifier.name}' changes the mesh's vertex count: the mesh stays "
             f"undeformed. Move '{modifier.name}' to the top of the stack"
         )
-    for message in messages:
-        return "modifier error", message[:1].upper() + message[1:]
+    if messages:
+        return "modifier error", messages[0][:1].upper() + messages[0][1:]
     difference = geometry.render_difference(cage)
     if difference is not None:
         return None, (f"Following '{cage.name}' in the viewport, but renders leave the mesh undeformed: the cage's "
