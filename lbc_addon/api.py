@@ -42,11 +42,16 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
         When the extension is installed but not enabled (before any work).
     """
     _require_enabled()
-    if progress is None and bpy.app.background:
-        progress = jobs.printed_progress()
     request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), cells=cells,
                                 weighting=weighting, epsilon=epsilon, tolerance=tolerance, thinning=thinning,
                                 influences=influences, mode=mode)
+    return _bind_request(request, progress, cancel)
+
+
+def _bind_request(request, progress, cancel):
+    """Solve and write one :class:`jobs.BindRequest`; returns :func:`bind`'s summary."""
+    if progress is None and bpy.app.background:
+        progress = jobs.printed_progress()
     result = jobs.solve(request, progress, cancel)
     bound = writing.apply(request, result)
     settings = bound.lbc
@@ -78,19 +83,18 @@ def unbind(mesh_obj):
 def rebind_all(cage_obj, progress=None, cancel=None):
     """Bind every mesh of the scene bound to ``cage_obj`` again, to the cage as it is now, each with its own options.
 
-    Meshes whose data several objects share (linked duplicates, Alt+D), which no bind accepts, are left as they were
-    with a ``UserWarning`` each, as the Rebind All operator does. Returns the summaries of :func:`bind`, one per mesh
-    bound; raises as :func:`bind` does, the meshes bound before the error keeping their new binding.
+    A mesh that cannot be bound before any work (e.g. its data shared by a linked duplicate, Alt+D) is left as it was
+    with a ``UserWarning`` saying why, as the Rebind All operator does. Returns the summaries of :func:`bind`, one
+    per mesh bound; raises as :func:`bind` does when every mesh is refused or a solve fails, the meshes bound before
+    the error keeping their new binding.
     """
     _require_enabled()
-    summaries = []
-    for mesh_obj in bound_to(cage_obj, bpy.context.scene.objects):
-        if mesh_obj.data.users > 1:
-            warnings.warn(f"'{mesh_obj.name}' left as it was: its mesh data is shared by {mesh_obj.data.users} "
-                          "objects (linked duplicates)", stacklevel=2)
-            continue
-        summaries.append(bind(mesh_obj, cage_obj, **mesh_obj.lbc.bind_options(), progress=progress, cancel=cancel))
-    return summaries
+    targets = [(mesh_obj, cage_obj, mesh_obj.lbc.bind_options())
+               for mesh_obj in bound_to(cage_obj, bpy.context.scene.objects)]
+    requests, refused = geometry.snapshots(targets, bpy.context.evaluated_depsgraph_get(), skip_refused=True)
+    for message in refused:
+        warnings.warn(message, stacklevel=2)
+    return [_bind_request(request, progress, cancel) for request in requests]
 
 
 def set_deformer(mesh_obj, **inputs):

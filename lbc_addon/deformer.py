@@ -700,14 +700,10 @@ def _vertex_count_modifier_above(mesh_obj, modifier, depsgraph):
     mesh data and no modifier below could have changed it."""
     stack = list(mesh_obj.modifiers)
     position = stack.index(modifier)
-
-    def may_change(other):
-        return other.show_viewport and other.type in geometry.VERTEX_COUNT_MODIFIERS
-
-    for other in filter(may_change, stack[:position]):
+    for other in filter(geometry.may_change_vertex_count, stack[:position]):
         if other.type != "NODES":
             return other
-        if not any(map(may_change, stack[position + 1:])) and (
+        if not any(map(geometry.may_change_vertex_count, stack[position + 1:])) and (
                 len(mesh_obj.evaluated_get(depsgraph).data.vertices) != len(mesh_obj.data.vertices)):
             return other
     return None

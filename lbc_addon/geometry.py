@@ -52,16 +52,21 @@ def topology_fingerprint(mesh):
     str
         :data:`FINGERPRINT_VERSION` and 16 hex digits.
     """
-    return FINGERPRINT_VERSION + _digest(len(mesh.vertices), np.sort(edge_pairs(mesh), axis=1), _face_sizes(mesh))
+    return _fingerprint(len(mesh.vertices), edge_pairs(mesh), _face_sizes(mesh))
 
 
 def topology_fingerprints(mesh):
     """The mesh's :func:`topology_fingerprint` and the one the version before made (which hashed the faces' corners
     as well), for bindings stored by it: a set of two strings."""
+    count, edges, sizes = len(mesh.vertices), edge_pairs(mesh), _face_sizes(mesh)
     corners = np.empty(len(mesh.loops), dtype=np.int64)
     mesh.loops.foreach_get("vertex_index", corners)
-    legacy = _digest(len(mesh.vertices), edge_pairs(mesh), corners, _face_sizes(mesh))
-    return {topology_fingerprint(mesh), legacy}
+    return {_fingerprint(count, edges, sizes), _digest(count, edges, corners, sizes)}
+
+
+def _fingerprint(vertex_count, edges, face_sizes):
+    """:func:`topology_fingerprint` from the mesh's vertex count, (E, 2) edges and face sizes."""
+    return FINGERPRINT_VERSION + _digest(vertex_count, np.sort(edges, axis=1), face_sizes)
 
 
 def _face_sizes(mesh):
@@ -85,6 +90,11 @@ VERTEX_COUNT_MODIFIERS = frozenset({
     "MIRROR", "MULTIRES", "NODES", "OCEAN", "PARTICLE_INSTANCE", "REMESH", "SCREW", "SKIN", "SOLIDIFY", "SUBSURF",
     "WELD", "WIREFRAME",
 })
+
+
+def may_change_vertex_count(modifier):
+    """Whether a modifier shown in the viewport is of a type that can change the mesh's vertex count."""
+    return modifier.show_viewport and modifier.type in VERTEX_COUNT_MODIFIERS
 
 
 def render_difference(obj):
@@ -177,9 +187,28 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         cage_topology=cage_topology,
         mesh_topology=topology_fingerprint(mesh_obj.data),
         warnings=[warning for warning in (render_warning(mesh_obj, cage_obj),) if warning],
-        cage_modifiers=_named_modifiers([modifier for modifier in cage_obj.modifiers if modifier.show_viewport
-                                         and modifier.type in VERTEX_COUNT_MODIFIERS]),
+        cage_modifiers=_named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers))),
     )
+
+
+def snapshots(targets, depsgraph, skip_refused=False):
+    """:func:`snapshot` of each (mesh, cage, options) triple of ``targets``.
+
+    Returns (requests, refused): with ``skip_refused``, a mesh :func:`snapshot` refuses (e.g. its data shared by a
+    linked duplicate) is left out and ``refused`` says why ("'Name' left as it was: …"), unless every mesh is refused,
+    which raises CageError with all the reasons; without it, the first refusal raises.
+    """
+    requests, refused = [], []
+    for mesh_obj, cage_obj, options in targets:
+        try:
+            requests.append(snapshot(mesh_obj, cage_obj, depsgraph, **options))
+        except CageError as error:
+            if not skip_refused:
+                raise
+            refused.append(f"'{mesh_obj.name}' left as it was: {error}")
+    if refused and not requests:
+        raise CageError("; ".join(refused))
+    return requests, refused
 
 
 def _named_modifiers(modifiers):

@@ -75,17 +75,8 @@ class _Binder:
     skips_refused = False
 
     def snapshot(self, context):
-        depsgraph = context.evaluated_depsgraph_get()
-        requests, refused = [], []
-        for mesh, cage, options in self.targets(context):
-            try:
-                requests.append(geometry.snapshot(mesh, cage, depsgraph, **options))
-            except CageError as error:
-                if not self.skips_refused:
-                    raise
-                refused.append(f"'{mesh.name}' left as it was: {error}")
-        if refused and not requests:
-            raise CageError("; ".join(refused))
+        requests, refused = geometry.snapshots(self.targets(context), context.evaluated_depsgraph_get(),
+                                               self.skips_refused)
         for message in refused:
             self.report({"WARNING"}, message)
         return requests

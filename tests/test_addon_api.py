@@ -87,7 +87,8 @@ def test_api_rebind_all_leaves_linked_duplicates_as_they_were_with_a_warning():
     with pytest.warns(UserWarning) as caught:
         summaries = api.rebind_all(cage)
     assert sorted(str(warning.message) for warning in caught) == [
-        f"'{name}' left as it was: its mesh data is shared by 2 objects (linked duplicates)"
+        f"'{name}' left as it was: the mesh data of '{name}' is shared by 2 objects and the weights are stored in "
+        "it: make it single user first (Object > Relations > Make Single User)"
         for name in sorted((mesh.name, linked.name))]
     assert len(summaries) == 1 and summaries[0]["control_points"] == 8
     assert is_bound(mesh) and is_bound(linked) and is_bound(single)
