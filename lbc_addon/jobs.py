@@ -137,10 +137,16 @@ def printed_progress():
 
 
 def _outside_warning(mesh_name, outside):
-    """A warning when every point of the mesh lies outside the cage (``outside``: (m,) bool), likely the wrong cage."""
-    if len(outside) and outside.all():
+    """A warning about the mesh's points outside the cage (``outside``: (m,) bool): when all are, likely the wrong
+    cage; when some are, how many, since they follow the closest points inside rather than the cage itself."""
+    count = int(np.count_nonzero(outside))
+    if count and count == len(outside):
         return [f"every vertex of '{mesh_name}' lies outside the cage: is it the right cage? (they follow the closest "
                 "points inside it)"]
+    if count:
+        if count == 1:
+            return [f"1 vertex of '{mesh_name}' lies outside the cage; it follows the closest point inside it"]
+        return [f"{count} vertices of '{mesh_name}' lie outside the cage; they follow the closest points inside it"]
     return []
 
 

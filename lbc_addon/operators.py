@@ -28,13 +28,8 @@ def _bound_selection(context):
 
 
 def _report_result(operator, mesh_obj):
-    """Warnings about a finished bind: vertices outside the cage, repairs lbc_core made."""
+    """Warnings about a finished bind: vertices outside the cage, repairs lbc_core made (:func:`jobs.solve`)."""
     settings = mesh_obj.lbc
-    if 0 < settings.outside < len(mesh_obj.data.vertices):  # all of them: one of the warnings says so
-        operator.report(
-            {"WARNING"},
-            f"{mesh_obj.name}: {settings.outside} vertices lie outside the cage; they follow the closest point inside",
-        )
     if settings.warnings:
         operator.report({"WARNING"}, f"{mesh_obj.name}: {settings.warnings}")
 

@@ -40,12 +40,18 @@ def test_api_bind_warns_when_renders_would_see_other_cage_vertices():
     assert api.status(mesh)[0] and "renders leave the mesh undeformed" in api.status(mesh)[1]
 
 
-def test_api_bind_warns_when_every_vertex_lies_outside_the_cage_and_refuses_an_empty_mesh():
+def test_api_bind_warns_about_vertices_outside_the_cage_and_refuses_an_empty_mesh():
     mesh, cage = sphere_in_box_scene()
     mesh.data.transform(Matrix.Translation((5.0, 0.0, 0.0)))  # the sphere beside the box
     summary = api.bind(mesh, cage, cells=1000)
     assert summary["outside"] == len(mesh.data.vertices)
     assert summary["warnings"][0].startswith("every vertex of 'Sphere' lies outside the cage: is it the right cage?")
+    mesh.data.transform(Matrix.Translation((-5.0, 0.0, 0.0)))
+    mesh.data.vertices[0].co.z = 3.0  # two vertices pulled out through the top of the box
+    mesh.data.vertices[1].co.z = 3.0
+    summary = api.bind(mesh, cage, cells=1000)
+    assert summary["outside"] == 2
+    assert summary["warnings"] == ["2 vertices of 'Sphere' lie outside the cage; they follow the closest points inside it"]
     empty = bpy.data.objects.new("Empty mesh", bpy.data.meshes.new("Empty mesh"))
     bpy.context.scene.collection.objects.link(empty)
     with pytest.raises(lbc_core.CageError, match="'Empty mesh' has no vertices: there is nothing to bind"):
