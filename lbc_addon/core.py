@@ -14,6 +14,7 @@ lbc_core = importlib.import_module(_BUNDLED if importlib.util.find_spec(_BUNDLED
 _cage = importlib.import_module(f"{lbc_core.__name__}.cage")
 _options = importlib.import_module(f"{lbc_core.__name__}.options")
 _planar = importlib.import_module(f"{lbc_core.__name__}.planar")
+_rebinding = importlib.import_module(f"{lbc_core.__name__}.rebinding")
 _solver = importlib.import_module(f"{lbc_core.__name__}.solver")
 _thinning = importlib.import_module(f"{lbc_core.__name__}.thinning")
 
@@ -27,3 +28,4 @@ flatten = _planar.flatten
 DEFAULT_FLOOR = _thinning.DEFAULT_FLOOR
 thin_weights = _thinning.thin_weights
 thin_changed_rows = _thinning.thin_changed_rows
+WARM = _rebinding.WARM  # lbc_core.rebind's mark of a binding that started from the previous solution

@@ -11,7 +11,9 @@ Nothing in the scene changes before step 3, so a failed or cancelled bind leaves
 
 Binding a mesh again to the same cage with the same options (Rebind, Rebind All, or Bind on a bound mesh) starts from
 its previous binding when this session still has it (``lbc_core.rebind``: a small cage edit at rest re-binds several
-times faster; only the weights it changed are thinned again). The previous bindings live in memory only, the last
+times faster; only the weights it changed are thinned again). A mesh bound to a cage another mesh was bound to with the
+same options starts from that mesh's binding likewise: the solve depends on the cage alone, so several meshes in one
+cage solve it once and each is only evaluated at its vertices. The previous bindings live in memory only, the last
 :data:`KEPT_BINDINGS` of them: their solver state is 8-30 MB a binding (their thinned weights about 8 MB for 64k
 vertices), too large for the .blend, so a reopened file, or a mesh bound long ago, binds from scratch.
 """
@@ -24,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import storage
-from .core import DEFAULT_FLOOR, CageError, lbc_core, thin_changed_rows, thin_weights
+from .core import DEFAULT_FLOOR, WARM, CageError, lbc_core, thin_changed_rows, thin_weights
 
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
@@ -38,6 +40,8 @@ _SOLVE_OPTIONS = ("cells", "weighting", "epsilon", "tolerance", "mode")
 class _Previous:
     """A mesh's last binding in this session, and what it was a binding of."""
 
+    mesh_uid: int
+    mesh_name: str
     cage_uid: int
     options: dict
     loop: np.ndarray  # the flat cage's outline of a 2D bind, else None
@@ -150,8 +154,12 @@ def _outside_warning(mesh_name, outside):
     return []
 
 
-def solve(request, progress=None, cancel=None):
-    """Compute the weights (no ``bpy`` here: safe in a worker thread). Raises CageError or lbc_core.Cancelled."""
+def solve(request, progress=None, cancel=None, earlier=()):
+    """Compute the weights (no ``bpy`` here: safe in a worker thread). Raises CageError or lbc_core.Cancelled.
+
+    ``earlier``: (request, result) pairs solved before this one and not yet written (the other meshes of one Bind),
+    which it may start from as from a binding of this session (:func:`warm_start`).
+    """
     start = time.perf_counter()
     flat = request.flat
     if flat is not None:
@@ -159,7 +167,7 @@ def solve(request, progress=None, cancel=None):
     else:
         cage_vertices, faces, points = request.cage_points, request.cage_faces, request.points
         column_base = np.arange(len(request.cage_points))
-    previous = warm_start(request)
+    previous = warm_start(request, earlier)
     try:
         if previous is not None:
             binding = lbc_core.rebind(previous.binding, cage_vertices, faces, points, progress=progress,
@@ -201,7 +209,7 @@ def solve(request, progress=None, cancel=None):
         seconds=time.perf_counter() - start,
         binding=binding,
         thinned=weights,
-        rebind=binding.options.get("rebind", ""),
+        rebind=_rebind_report(request, previous, binding),
         stages=stages,
     )
 
@@ -218,27 +226,53 @@ def _not_converged(iterations):
             "larger Tolerance stops sooner)")
 
 
-def warm_start(request):
-    """The previous binding (:class:`_Previous`) of the request's mesh to start from, or None: this session must have
-    bound the same mesh to the same cage with the same options, and a 2D bind must use the same outline."""
-    previous = _previous.get(request.mesh_uid)
-    if previous is None or previous.cage_uid != request.cage_uid:
-        return None
+def warm_start(request, earlier=()):
+    """The binding (:class:`_Previous`) to start the request from, or None: a binding of this session to the same cage
+    with the same options (a 2D bind: the same outline), the mesh's own first, else the latest other mesh's, among
+    ``earlier`` (see :func:`solve`) and the kept ones."""
+    own = _previous.get(request.mesh_uid)
+    others = [_as_previous(*pair) for pair in reversed(earlier)] + list(reversed(_previous.values()))
+    for previous in [own] + others:
+        if previous is not None and _same_solve(previous, request):
+            return previous
+    return None
+
+
+def _same_solve(previous, request):
+    """Whether ``previous`` bound to the request's cage with its solve options and, in 2D, outline."""
+    if previous.cage_uid != request.cage_uid:
+        return False
     if any(previous.options[key] != request.options[key] for key in _SOLVE_OPTIONS):
-        return None
+        return False
     loop = None if request.flat is None else request.flat.loop
-    if (previous.loop is None) != (loop is None) or (loop is not None and not np.array_equal(previous.loop, loop)):
-        return None
-    return previous
+    return (previous.loop is None) == (loop is None) and (loop is None or np.array_equal(previous.loop, loop))
+
+
+def _as_previous(request, result):
+    loop = None if request.flat is None else request.flat.loop
+    return _Previous(request.mesh_uid, request.mesh_name, request.cage_uid, dict(request.options), loop,
+                     result.binding, result.thinned)
+
+
+def _rebind_report(request, previous, binding):
+    """How a bind that started from a binding of this session went, for the user; "" for any other bind.
+
+    From the mesh's own binding, lbc_core's account (cells solved again, or why it bound from scratch); from another
+    mesh's, what it reused, and nothing when it bound from scratch (to the user, a first bind).
+    """
+    report = binding.options.get("rebind", "")
+    if previous is None or previous.mesh_uid == request.mesh_uid:
+        return report
+    if binding.options.get("start") != WARM:
+        return ""
+    return f"started from the binding of '{previous.mesh_name}' to the same cage: {report.split(': ', 1)[-1]}"
 
 
 def remember(request, result):
     """Keep ``result``'s binding as the mesh's previous one (the last KEPT_BINDINGS meshes' only); called once the
     binding is written."""
     _previous.pop(request.mesh_uid, None)
-    loop = None if request.flat is None else request.flat.loop
-    _previous[request.mesh_uid] = _Previous(request.cage_uid, dict(request.options), loop, result.binding,
-                                            result.thinned)
+    _previous[request.mesh_uid] = _as_previous(request, result)
     while len(_previous) > KEPT_BINDINGS:
         _previous.popitem(last=False)
 
@@ -290,6 +324,6 @@ class Worker:
                     self.fraction = (number + fraction) / count
                     self.message = f"{request.mesh_name}: {message}"
 
-                self.results.append((request, solve(request, progress, self._cancel.is_set)))
+                self.results.append((request, solve(request, progress, self._cancel.is_set, self.results)))
         except Exception as error:  # handed to the main thread, which reports it
             self.error = error

@@ -150,3 +150,26 @@ def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(
     index, weight = jobs.storage.slot_arrays(every_row, binding.control_input_index)
     np.testing.assert_array_equal(warm.index, index)
     np.testing.assert_allclose(warm.weight, weight, atol=1e-7)
+
+
+def test_a_second_mesh_in_the_same_cage_reuses_the_first_ones_solve(monkeypatch):
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    rng = np.random.default_rng(3)
+    first = request(points=rng.uniform(-0.8, 0.8, (150, 3)))
+    second = request(points=rng.uniform(-0.7, 0.7, (120, 3)))
+    second.mesh_uid, second.mesh_name = 7, "Other"
+    worker = jobs.Worker([first, second])
+    worker.start()
+    worker.join()
+    assert worker.error is None
+    shared = worker.results[1][1]
+    assert shared.rebind.startswith("started from the binding of 'Mesh' to the same cage: 0 of "), shared.rebind
+    alone = jobs.solve(second)  # nothing kept in this session: a cold bind
+    assert alone.rebind == ""
+    np.testing.assert_array_equal(shared.index, alone.index)
+    np.testing.assert_allclose(shared.weight, alone.weight, atol=1e-6)
+    jobs.remember(first, worker.results[0][1])  # written: kept, and found by a later bind as well
+    assert jobs.solve(second).rebind.startswith("started from the binding of 'Mesh'")
+    other_cage = request(cage_points=BOX * 1.1, points=second.points)
+    other_cage.mesh_uid, other_cage.cage_uid = 7, 9
+    assert jobs.solve(other_cage).rebind == ""  # another cage: never started from the first's
