@@ -141,12 +141,9 @@ def printed_progress():
 
 
 def _outside_warning(mesh_name, outside):
-    """A warning about the mesh's points outside the cage (``outside``: (m,) bool): when all are, likely the wrong
-    cage; when some are, how many, since they follow the closest points inside rather than the cage itself."""
+    """A warning about the mesh's points outside the cage (``outside``: (m,) bool; lbc_core refuses them all), since
+    they follow the closest points inside rather than the cage itself."""
     count = int(np.count_nonzero(outside))
-    if count and count == len(outside):
-        return [f"every vertex of '{mesh_name}' lies outside the cage: is it the right cage? (they follow the closest "
-                "points inside it)"]
     if count:
         if count == 1:
             return [f"1 vertex of '{mesh_name}' lies outside the cage; it follows the closest point inside it"]
@@ -175,6 +172,9 @@ def solve(request, progress=None, cancel=None, earlier=()):
         else:
             binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options),
                                     progress=progress, cancel=cancel)
+    except lbc_core.PointsOutside as error:
+        raise CageError(f"every vertex of '{request.mesh_name}' lies outside the cage: the cage must enclose the mesh. "
+                        "Is it the right cage? (Select the mesh, then the cage last so it is active.)") from error
     except CageError as error:
         if request.cage_modifiers and "vert" in str(error):
             # The numbers count the evaluated cage's vertices, which Edit Mode does not show.

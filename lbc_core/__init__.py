@@ -7,7 +7,7 @@
 """
 
 from .version import __version__
-from .errors import CageError, Cancelled
+from .errors import CageError, Cancelled, PointsOutside
 from .cage import Cage, make_cage
 from .options import BindOptions
 from .solver import SolveResult, solve_on_mesh
@@ -19,7 +19,8 @@ from .io import read_cage, read_mesh, write_mesh
 
 __all__ = [
     "BindOptions", "Binding", "Cage", "CageError", "Cancelled", "SolveResult", "bind", "bind_bbw", "bind_harmonic", "bind_mvc",
-    "load_binding", "make_cage", "mean_value_coordinates", "read_cage", "read_mesh", "rebind", "solve_on_mesh",
+    "load_binding", "make_cage", "mean_value_coordinates", "PointsOutside", "read_cage", "read_mesh", "rebind",
+    "solve_on_mesh",
     "write_mesh",
     "__version__",
 ]

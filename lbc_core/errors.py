@@ -7,3 +7,7 @@ class CageError(ValueError):
 
 class Cancelled(RuntimeError):
     """A long computation was cancelled through its ``cancel`` callback; nothing was returned."""
+
+
+class PointsOutside(CageError):
+    """Every point to bind lies outside the cage (raised before the solve): most likely the wrong cage."""

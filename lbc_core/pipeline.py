@@ -1,7 +1,8 @@
 """The bind pipeline: a cage and points in, a :class:`~lbc_core.binding.Binding` out, every stage called here in order.
 
-    check the request → unit frame → domain mesh → boundary values → geodesic TV weights → solve (ADMM) →
-    interpolation to the points → smooth evaluation and reduction → back to the user's frame
+    check the request → unit frame → domain mesh → boundary values → interpolation to the points (refused when
+    every point lies outside) → geodesic TV weights → solve (ADMM) → smooth evaluation and reduction → back to the
+    user's frame
 
 Each stage is a public function of its own module; this module only orders them, gives each its share of the
 progress bar and times it. The baselines (:mod:`lbc_core.baselines`) run the same first stages through
@@ -15,7 +16,7 @@ import numpy as np
 from .binding import Binding
 from .boundary import boundary_weights
 from .cage import make_cage, real_array
-from .errors import CageError
+from .errors import CageError, PointsOutside
 from .frame import UnitFrame
 from .geodesics import geodesic_distances, tv_weights
 from .interpolation import interpolation_matrix
@@ -29,8 +30,8 @@ from .solver import check_memory, solve_forecast, solve_on_mesh, solves_stretche
 # Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
 REPRODUCTION_TOLERANCE = 1e-9
 # Share of the progress bar each stage gets (the solve dominates).
-STAGES = {"meshing": (0.0, 0.08), "geodesics": (0.08, 0.164), "solve": (0.164, 0.92),
-          "interpolation": (0.92, 0.97), "reduction": (0.97, 1.0)}
+STAGES = {"meshing": (0.0, 0.08), "interpolation": (0.08, 0.13), "geodesics": (0.13, 0.214),
+          "solve": (0.214, 0.97), "reduction": (0.97, 1.0)}
 
 
 def bind(
@@ -106,6 +107,12 @@ def bind(
     fixed = boundary_weights(domain, unit_cage)
     lap("meshing")
 
+    # Located before the solve: points that all lie outside are refused before the long work.
+    located, outside, _ = interpolation_matrix(domain.vertices, domain.cells, frame.to_unit(points),
+                                               progress=progress.part(*STAGES["interpolation"]))
+    check_inside(outside)
+    lap("interpolation")
+
     distances = geodesic_distances(domain.vertices, domain.cells, domain.control_vertices,
                                    progress.part(*STAGES["geodesics"]))
     omega = tv_weights(domain.cells, distances, request.weighting)
@@ -116,10 +123,6 @@ def bind(
                            max_iterations=request.max_iterations, progress=progress.part(*STAGES["solve"]))
     timings.update(result.seconds)
     clock = time.perf_counter()
-
-    located, outside, _ = interpolation_matrix(domain.vertices, domain.cells, frame.to_unit(points),
-                                               progress=progress.part(*STAGES["interpolation"]))
-    lap("interpolation")
 
     reduction = progress.part(*STAGES["reduction"])
     smooth = SmoothInterpolation(domain.vertices, domain.cells, located, progress=reduction)
@@ -228,6 +231,15 @@ def check_cage_and_points(cage_vertices, cage_faces, points, options=None):
     if cage_faces is None and np.shape(cage_vertices)[1:] == (3,):
         plane_z = float(np.asarray(cage_vertices, dtype=float)[0, 2])
     return cage, check_points(cage, points, plane_z)
+
+
+def check_inside(outside):
+    """Refuse points that all lie outside the cage (``outside``: (m,) bool): each would follow the closest point of
+    the cage's interior, which is meant for a few stray points, and a cage around none is most likely the wrong one."""
+    if len(outside) and outside.all():
+        subject = "the point lies" if len(outside) == 1 else f"all {len(outside)} points lie"
+        raise PointsOutside(f"{subject} outside the cage: the cage must enclose the points it deforms. Is it the right "
+                        "cage (or the mesh and cage swapped)?")
 
 
 def check_points(cage, points, plane_z=None):

@@ -37,7 +37,7 @@ from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
 from .objective import tv_objective
 from .options import BindOptions
-from .pipeline import REPRODUCTION_TOLERANCE, bind, check_points, lbc_binding
+from .pipeline import REPRODUCTION_TOLERANCE, bind, check_inside, check_points, lbc_binding
 from .progress import Progress
 from .reduction import interpolate_and_reduce
 from .smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation, median_edge
@@ -122,6 +122,8 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     clock = time.perf_counter()
     located, outside_again, _ = interpolation_matrix(carried.vertices, carried.cells, unit_points[again],
                                                      progress=progress.part(*_STAGES["interpolation"]))
+    if len(again) == len(points):  # new points (e.g. another mesh in this cage): refused as bind refuses them
+        check_inside(outside_again)
     timings["interpolation"] = time.perf_counter() - clock
     clock = time.perf_counter()
     reduction = progress.part(*_STAGES["reduction"])

@@ -43,6 +43,17 @@ def test_points_outside_are_bound_and_counted():
     np.testing.assert_allclose(binding.deform(square + [2.0, 3.0]), points + [2.0, 3.0], atol=1e-12)
 
 
+def test_points_all_outside_are_refused_before_the_solve():
+    messages = []
+    with pytest.raises(lbc_core.PointsOutside, match="all 2 points lie outside the cage: the cage must enclose"):
+        lbc_core.bind(CUBE, CUBE_FACES, np.array([[2.0, 0.5, 0.5], [0.5, -1.0, 0.5]]), cells=500,
+                      progress=lambda fraction, message: messages.append(message))
+    assert not any(message.startswith(("geodesic", "ADMM")) for message in messages), messages
+    inside = lbc_core.bind(CUBE, CUBE_FACES, np.array([[0.5, 0.5, 0.5]]), cells=500)
+    with pytest.raises(lbc_core.PointsOutside, match="the point lies outside the cage"):  # new points, same cage
+        lbc_core.rebind(inside, CUBE, CUBE_FACES, np.array([[0.5, 0.5, 3.0]]))
+
+
 def test_progress_is_monotonic_and_cancel_stops():
     house = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.5, 1.5], [0.0, 1.0]])
     fractions = []
@@ -448,12 +459,14 @@ def test_mesh_partly_outside_is_bound_and_counted(star_binding):
     np.testing.assert_array_equal(star_binding.deform(STAR), GRID)  # the rest pose is exact, outside too
 
 
-def test_mesh_wholly_outside_is_bound_and_counted():
+def test_mesh_wholly_outside_is_refused():
     far = np.array([[5.0, 0.0], [0.0, -4.0], [3.0, 3.0]])
-    binding = lbc_core.bind(STAR, None, far, cells=300)
+    with pytest.raises(lbc_core.PointsOutside, match="all 3 points lie outside the cage"):
+        lbc_core.bind(STAR, None, far, cells=300)
+    binding = lbc_core.bind(STAR, None, np.vstack([far, [[0.0, 0.0]]]), cells=300)  # one inside: bound
     assert binding.outside_count == 3
     np.testing.assert_allclose(binding.weights.sum(axis=1), 1.0, atol=UNITY)
-    np.testing.assert_allclose(binding.deform(STAR + [1.0, 2.0]), far + [1.0, 2.0], atol=1e-12)
+    np.testing.assert_allclose(binding.deform(STAR + [1.0, 2.0])[:3], far + [1.0, 2.0], atol=1e-12)
 
 
 def test_empty_mesh_gives_an_empty_binding():
