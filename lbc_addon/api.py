@@ -114,13 +114,21 @@ def set_deformer(mesh_obj, **inputs):
     unknown = set(inputs) - set(names)
     if unknown:
         raise TypeError(f"set_deformer() got unknown inputs {sorted(unknown)}; it takes {sorted(names)}")
+    types = {"strength": (float, int), "vertex_group": (str,), "invert_vertex_group": (bool,)}
+    for key, value in inputs.items():
+        if not isinstance(value, types[key]) or (key == "strength" and isinstance(value, bool)):
+            expected = " or ".join(kind.__name__ for kind in types[key])
+            raise TypeError(f"set_deformer({key}=...) takes a {expected}, not {type(value).__name__} {value!r}")
     deformer.set_inputs(modifier, {names[key]: value for key, value in inputs.items()})
     mesh_obj.update_tag()
 
 
 def status(mesh_obj):
-    """(ok, message): whether the deformer of a bound mesh works, and if not, why."""
+    """(ok, message): whether the deformer of a bound mesh works, and if not, why (for an unbound object: that it
+    is not bound)."""
     _require_enabled()
+    if not is_bound(mesh_obj):
+        return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind)"
     return deformer.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from .core import CageError, flatten
 from .jobs import BindRequest
-from .properties import DEFAULT_INFLUENCES
+from .properties import DEFAULT_INFLUENCES, is_bound
 
 
 def vertex_positions(mesh):
@@ -139,6 +139,10 @@ def cage_to_mesh_matrix(cage_obj, mesh_obj):
 def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
              thinning=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
     """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
+    for role, obj in (("mesh", mesh_obj), ("cage", cage_obj)):
+        if not isinstance(obj, bpy.types.Object):
+            raise CageError(f"the {role} to bind is {obj!r}, not an object: pass it as e.g. bpy.data.objects['Name'] "
+                            "(.get returns None for a name that is not there)")
     if mesh_obj.type != "MESH":
         raise CageError(f"'{mesh_obj.name}' is not a mesh: only meshes can be bound")
     if cage_obj.type != "MESH":
@@ -150,6 +154,14 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
             f"the mesh data of '{mesh_obj.name}' is shared by {mesh_obj.data.users} objects and the weights are "
             "stored in it: make it single user first (Object > Relations > Make Single User)"
         )
+    if mesh_obj.data.is_editmode:
+        # Edit Mode keeps the mesh's vertices out of its data until it is left, and would overwrite the weights then.
+        raise CageError(f"'{mesh_obj.name}' is in Edit Mode: switch to Object Mode first (Tab, or "
+                        "bpy.ops.object.mode_set(mode='OBJECT'))")
+    deformed_by = _binding_chain(cage_obj)
+    if mesh_obj in deformed_by:
+        raise CageError(f"the cage '{cage_obj.name}' is itself deformed by '{mesh_obj.name}' (bound to it): binding "
+                        f"'{mesh_obj.name}' to it would make each follow the other. Unbind '{cage_obj.name}' first")
     if not len(mesh_obj.data.vertices):
         raise CageError(f"'{mesh_obj.name}' has no vertices: there is nothing to bind")
     points = vertex_positions(mesh_obj.data)
@@ -189,6 +201,15 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         warnings=[warning for warning in (render_warning(mesh_obj, cage_obj),) if warning],
         cage_modifiers=_named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers))),
     )
+
+
+def _binding_chain(obj):
+    """The cages ``obj`` follows: its binding's cage, that cage's cage, and so on (a cycle ends the walk)."""
+    chain = []
+    while is_bound(obj) and obj.lbc.cage is not None and obj.lbc.cage not in chain:
+        obj = obj.lbc.cage
+        chain.append(obj)
+    return chain
 
 
 def snapshots(targets, depsgraph, skip_refused=False):

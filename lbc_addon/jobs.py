@@ -127,15 +127,18 @@ def welded_pairs(copies, kept):
     return ",".join(f"{copy}:{keep}" for copy, keep in zip(copies[apart].tolist(), kept[apart].tolist()))
 
 
-def printed_progress():
-    """A progress callback printing "LBC bind: 42% message" lines, each once (background mode has no status bar)."""
-    last = [None]
+def printed_progress(interval=1.0):
+    """A progress callback printing "LBC bind: 42% message" lines (background mode has no status bar): a line when
+    the message says something new, else at most one per ``interval`` seconds (a stage's own counts can change
+    dozens of times a second)."""
+    last = {"message": None, "line": None, "time": -float("inf")}
 
     def progress(fraction, message):
         line = f"LBC bind: {100 * fraction:3.0f}% {message}"
-        if line != last[0]:
+        now = time.perf_counter()
+        if line != last["line"] and (message != last["message"] or now - last["time"] >= interval):
             print(line, flush=True)
-            last[0] = line
+            last.update(message=message, line=line, time=now)
 
     return progress
 

@@ -34,6 +34,19 @@ def _report_result(operator, mesh_obj):
         operator.report({"WARNING"}, f"{mesh_obj.name}: {settings.warnings}")
 
 
+def _bound_summary(bound, named=5):
+    """ "Bound 'Body', 'Hat' to 'Cage'": which meshes went to which cage, so that a mesh selected by mistake shows."""
+    by_cage = {}
+    for mesh_obj in bound:
+        by_cage.setdefault(mesh_obj.lbc.cage.name, []).append(mesh_obj.name)
+    parts = []
+    for cage, meshes in by_cage.items():
+        names = ", ".join(f"'{name}'" for name in meshes[:named])
+        more = f" and {len(meshes) - named} more" if len(meshes) > named else ""
+        parts.append(f"{names}{more} to '{cage}'")
+    return "Bound " + "; ".join(parts)
+
+
 def _apply_all(operator, pairs):
     """Write every solved binding; returns the bound objects. Reports what could not be written."""
     bound = []
@@ -89,7 +102,7 @@ class _Binder:
         if not bound:
             return {"CANCELLED"}
         seconds = sum(obj.lbc.bind_seconds for obj in bound)
-        self.report({"INFO"}, f"Bound {len(bound)} mesh(es) in {seconds:.1f} s")
+        self.report({"INFO"}, f"{_bound_summary(bound)} in {seconds:.1f} s")
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -131,7 +144,7 @@ class _Binder:
         bound = _apply_all(self, worker.results)
         if not bound:
             return {"CANCELLED"}
-        self.report({"INFO"}, f"Bound {len(bound)} mesh(es) in {sum(o.lbc.bind_seconds for o in bound):.1f} s")
+        self.report({"INFO"}, f"{_bound_summary(bound)} in {sum(o.lbc.bind_seconds for o in bound):.1f} s")
         return {"FINISHED"}
 
     def _finish(self, context):
@@ -163,8 +176,11 @@ def _bind_poll_message(context):
     if busy:
         return busy
     cage = context.active_object
-    if cage is None or cage.type != "MESH":
+    if cage is None:
         return "Select the mesh(es) to bind, then the cage mesh last so it is active"
+    if cage.type != "MESH":
+        return (f"The active object '{cage.name}' ({cage.type.title()}) is not a mesh, and the cage must be one: "
+                "convert it (Object > Convert > Mesh), or make the cage mesh active")
     if not any(obj.type == "MESH" and obj != cage for obj in context.selected_objects):
         return "Select the mesh(es) to bind as well as the cage (active)"
     return None

@@ -117,6 +117,28 @@ def test_api_bind_raises_lbc_cores_error_and_changes_nothing():
     assert mesh_state(mesh) == before
 
 
+def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work():
+    mesh, cage = sphere_in_box_scene()
+    assert api.status(mesh) == (False, "'Sphere' is not bound to a cage: bind it first (api.bind)")
+    with pytest.raises(lbc_core.CageError, match="the cage to bind is None, not an object"):
+        api.bind(mesh, bpy.data.objects.get("Cgae"))
+    bpy.context.view_layer.objects.active = mesh
+    bpy.ops.object.mode_set(mode="EDIT")
+    try:
+        with pytest.raises(lbc_core.CageError, match="'Sphere' is in Edit Mode: switch to Object Mode first"):
+            api.bind(mesh, cage, cells=1000)
+    finally:
+        bpy.ops.object.mode_set(mode="OBJECT")
+    api.bind(mesh, cage, cells=1000)
+    before = mesh_state(cage)
+    with pytest.raises(lbc_core.CageError, match="the cage 'Sphere' is itself deformed by 'Box' .bound to it.: "
+                                                 "binding 'Box' to it would make each follow the other"):
+        api.bind(cage, mesh, cells=1000)
+    assert mesh_state(cage) == before and not is_bound(cage) and api.status(mesh)[0]
+    with pytest.raises(TypeError, match=r"set_deformer\(strength=...\) takes a float or int, not str 'x'"):
+        api.set_deformer(mesh, strength="x")
+
+
 def test_reopened_blend_deforms_the_same_without_recomputing(bound_gargoyle, tmp_path, monkeypatch):
     mesh, cage = bound_gargoyle
     cage.data.vertices[20].co.x += 0.15

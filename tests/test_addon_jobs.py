@@ -173,3 +173,13 @@ def test_a_second_mesh_in_the_same_cage_reuses_the_first_ones_solve(monkeypatch)
     other_cage = request(cage_points=BOX * 1.1, points=second.points)
     other_cage.mesh_uid, other_cage.cage_uid = 7, 9
     assert jobs.solve(other_cage).rebind == ""  # another cage: never started from the first's
+
+
+def test_printed_progress_says_each_new_message_and_a_repeated_one_at_most_once_a_second(capsys):
+    progress = jobs.printed_progress()
+    for step in range(40):  # a stage counting fast: one line, not forty
+        progress(0.08 + step / 1000, "geodesic distances: solving")
+    progress(0.2, "ADMM iteration 10")
+    progress(0.2, "ADMM iteration 10")
+    assert capsys.readouterr().out.splitlines() == ["LBC bind:   8% geodesic distances: solving",
+                                                    "LBC bind:  20% ADMM iteration 10"]

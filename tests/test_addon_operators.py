@@ -28,7 +28,7 @@ CELLS = 1000
 def test_bind_through_the_operator_adds_the_deformer_and_reports(capfd):
     mesh, cage = sphere_in_box_scene()
     assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
-    assert "Bound 1 mesh(es)" in capfd.readouterr().out
+    assert "Bound 'Sphere' to 'Box' in " in capfd.readouterr().out
     settings = mesh.lbc
     assert settings.is_bound and settings.cage == cage and settings.dimension == 3
     assert settings.control_points == 8 and settings.cage_vertex_count == 8
@@ -44,6 +44,12 @@ def test_poll_explains_what_to_select():
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         with pytest.raises(RuntimeError, match="Select a bound mesh"):
             bpy.ops.object.lbc_unbind()
+    empty = bpy.data.objects.new("Handle", None)
+    bpy.context.scene.collection.objects.link(empty)
+    with bpy.context.temp_override(active_object=empty, object=empty, selected_objects=[mesh, empty]):
+        with pytest.raises(RuntimeError, match=r"The active object 'Handle' \(Empty\) is not a mesh, and the cage "
+                                               "must be one: convert it"):
+            bpy.ops.object.lbc_bind()
 
 
 def _decorate(mesh):
@@ -245,7 +251,7 @@ def test_modal_bind_shows_progress_and_applies_when_the_worker_is_done():
     harness = _ModalHarness(_requests(mesh, cage))
     assert harness.run() == {"FINISHED"}
     assert is_bound(mesh) and harness.status[-1] is None  # the status bar is given back
-    assert any("Bound 1 mesh(es)" in message for _, message in harness.reports)
+    assert any(message.startswith("Bound 'Sphere' to 'Box' in ") for _, message in harness.reports)
 
 
 def test_esc_during_a_modal_bind_cancels_it_and_changes_nothing():

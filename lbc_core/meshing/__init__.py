@@ -162,5 +162,5 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
     steps(0.95, "checking the mesh")
     mesh = finish(cage, frame.to_world(mesh.vertices), mesh.cells, mesh.boundary_vertices, mesh.boundary_facet,
                   mesh.boundary_bary)
-    steps(1.0, "done")
+    steps(1.0, f"meshed: {len(mesh.cells)} cells")
     return mesh
