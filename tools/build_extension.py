@@ -15,10 +15,10 @@ Steps:
    ``pip download --only-binary=:all:``, into ``wheels/`` (git-ignored: wheels are never committed). Check that each
    wheel's own requirements are bundled too (or are numpy).
 2. Check that ``blender_manifest.toml`` lists exactly these wheels (or rewrite the list with ``--write-manifest``).
-3. For each Python ABI, stage the extension (the manifest with that ABI's wheels and Blender range, ``lbc_addon``'s
-   modules at the package root, ``lbc_core`` as a sub-package: bundled wheels must be PyPI's own) and build it with
-   Blender's own builder, ``--split-platforms``: ``blender --command extension`` when a Blender binary is on the
-   PATH, else the same builder script shipped in the ``bpy`` module; then validate every zip with it.
+3. For each Python ABI and platform, stage the extension (the manifest with that ABI's Blender range and that
+   platform's wheels alone, ``lbc_addon``'s modules at the package root, ``lbc_core`` as a sub-package: bundled wheels
+   must be PyPI's own) and build it with Blender's own builder: ``blender --command extension`` when a Blender binary
+   is on the PATH, else the same builder script shipped in the ``bpy`` module; then validate the zip with it.
 
 Shewchuk's Triangle is never bundled (its licence is not GPL-compatible); the add-on uses lbc_core's own mesher.
 """
@@ -92,7 +92,7 @@ def dependencies():
 
 
 def download(platforms, pythons):
-    """pip-download the pinned wheels; returns {python: [paths of its wheels for these platforms]}.
+    """pip-download the pinned wheels; returns {python: {platform: [paths of its wheels]}}.
 
     Each (platform, Python) pair gets its own folder, emptied first, so that it holds exactly what pip chose (pip's
     cache makes a second download quick).
@@ -103,7 +103,7 @@ def download(platforms, pythons):
     pinned = pins()
     found = {}
     for python in pythons:
-        paths = []
+        found[python] = {}
         for platform in platforms:
             folder = WHEELS / platform / f"py{python}"
             shutil.rmtree(folder, ignore_errors=True)
@@ -113,8 +113,7 @@ def download(platforms, pythons):
                 command += ["--platform", tag]
             command += [f"{name}=={pinned[name]}" for name in dependencies()]
             subprocess.run(command, check=True)
-            paths += folder.glob("*.whl")
-        found[python] = sorted(paths, key=lambda path: path.name)
+            found[python][platform] = sorted(folder.glob("*.whl"), key=lambda path: path.name)
     return found
 
 
@@ -191,10 +190,11 @@ def zip_name(version, python, platform):
 def build(platforms, pythons, output, write_manifest):
     """Download, check, stage and build; returns the zips made."""
     wheels = download(platforms, pythons)
-    check_requirements([path for paths in wheels.values() for path in paths])
+    every_wheel = [path for by_platform in wheels.values() for paths in by_platform.values() for path in paths]
+    check_requirements(every_wheel)
     text = MANIFEST.read_text()
     listed = manifest_wheels(text)
-    expected = sorted(f"./wheels/{path.name}" for paths in wheels.values() for path in paths)
+    expected = sorted(f"./wheels/{path.name}" for path in every_wheel)
     if set(platforms) == set(PLATFORM_TAGS) and set(pythons) == set(PYTHON_LINES) and listed != expected:
         if not write_manifest:
             missing = sorted(set(expected) - set(listed))
@@ -213,14 +213,17 @@ def build(platforms, pythons, output, write_manifest):
     output.mkdir(parents=True, exist_ok=True)
     zips = []
     for python in pythons:
-        with tempfile.TemporaryDirectory() as scratch:
-            staging, built = Path(scratch) / "source", Path(scratch) / "built"
-            built.mkdir()
-            stage(staging, with_lists(text, platforms, [path.name for path in wheels[python]],
-                                      PYTHON_LINES[python][:2]), wheels[python])
-            subprocess.run([*builder, "build", "--source-dir", str(staging), "--output-dir", str(built),
-                            "--split-platforms"], check=True)
-            for platform in platforms:
+        for platform in platforms:
+            # One platform a build, its manifest listing that platform's wheels only: Blender 4.2.0's installer reads
+            # the top-level list (not the one --split-platforms adds) and says it skips every other platform's wheel.
+            with tempfile.TemporaryDirectory() as scratch:
+                staging, built = Path(scratch) / "source", Path(scratch) / "built"
+                built.mkdir()
+                platform_wheels = wheels[python][platform]
+                stage(staging, with_lists(text, [platform], [path.name for path in platform_wheels],
+                                          PYTHON_LINES[python][:2]), platform_wheels)
+                subprocess.run([*builder, "build", "--source-dir", str(staging), "--output-dir", str(built),
+                                "--split-platforms"], check=True)
                 target = output / zip_name(version, python, platform)
                 shutil.move(built / f"lbc-{version}-{platform.replace('-', '_')}.zip", target)
                 subprocess.run([*builder, "validate", str(target)], check=True)
