@@ -231,14 +231,27 @@ def _not_converged(iterations):
 
 def warm_start(request, earlier=()):
     """The binding (:class:`_Previous`) to start the request from, or None: a binding of this session to the same cage
-    with the same options (a 2D bind: the same outline), the mesh's own first, else the latest other mesh's, among
-    ``earlier`` (see :func:`solve`) and the kept ones."""
+    with the same options (a 2D bind: the same outline), among ``earlier`` (see :func:`solve`) and the kept ones.
+
+    First one of the cage exactly as it is now (nothing to solve again: e.g. the second mesh of a Rebind after a cage
+    edit starts from the first's new binding), the mesh's own first; else the mesh's own; else the latest other's.
+    """
     own = _previous.get(request.mesh_uid)
     others = [_as_previous(*pair) for pair in reversed(earlier)] + list(reversed(_previous.values()))
-    for previous in [own] + others:
-        if previous is not None and _same_solve(previous, request):
-            return previous
-    return None
+    candidates = [previous for previous in [own] + others if previous is not None and _same_solve(previous, request)]
+    vertices = np.asarray(request.cage_points if request.flat is None else request.flat.polygon, dtype=float)
+    unmoved = [previous for previous in candidates if _bound_at(previous.binding, vertices)]
+    return (unmoved + candidates + [None])[0]
+
+
+def _bound_at(binding, cage_vertices):
+    """Whether ``binding``'s rest cage is exactly ``cage_vertices`` (n_input, d)."""
+    if len(cage_vertices) != len(binding.cage.vertex_map):
+        return False
+    try:
+        return np.array_equal(binding.cage.control_points_from_input(cage_vertices), binding.rest_cage_vertices)
+    except CageError:  # welded copies posed apart
+        return False
 
 
 def _same_solve(previous, request):

@@ -183,3 +183,24 @@ def test_printed_progress_says_each_new_message_and_a_repeated_one_at_most_once_
     progress(0.2, "ADMM iteration 10")
     assert capsys.readouterr().out.splitlines() == ["LBC bind:   8% geodesic distances: solving",
                                                     "LBC bind:  20% ADMM iteration 10"]
+
+
+def test_after_a_cage_edit_the_second_mesh_starts_from_the_first_ones_new_binding(monkeypatch):
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    rng = np.random.default_rng(4)
+    first = request(points=rng.uniform(-0.8, 0.8, (150, 3)))
+    second = request(points=rng.uniform(-0.7, 0.7, (120, 3)))
+    second.mesh_uid, second.mesh_name = 7, "Other"
+    for job in (first, second):
+        jobs.remember(job, jobs.solve(job))
+    edited = BOX.copy()
+    edited[4:, 0] += 0.1  # the +x face moved out: faces stay flat, so a warm re-bind can carry the mesh
+    first_again = request(cage_points=edited, points=first.points)
+    second_again = request(cage_points=edited, points=second.points)
+    second_again.mesh_uid, second_again.mesh_name = 7, "Other"
+    worker = jobs.Worker([first_again, second_again])
+    worker.start()
+    worker.join()
+    assert worker.error is None
+    assert worker.results[0][1].rebind.startswith("bound again from the previous binding")  # its own, warm
+    assert worker.results[1][1].rebind.startswith("started from the binding of 'Mesh' to the same cage: 0 of ")
