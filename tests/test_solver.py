@@ -184,3 +184,19 @@ def test_the_forecast_knows_a_very_thin_cage_solves_slower():
     assert not solves_stretched(many)  # 30 control points: the cage's frame converges sooner
     plain, stretched = solve_forecast(106, 8000, 3), solve_forecast(106, 8000, 3, stretched=True)
     assert plain.endswith("roughly 7 s") and stretched.endswith("roughly 69 s")
+
+
+def test_the_time_left_blends_the_share_of_the_way_and_the_residuals_power_law():
+    from lbc_core.solver import _seconds_left
+
+    # A residual falling as (300 / k)^1.5 from its first check at k = 10: it meets the tolerance at k = 300.
+    checks = [(k, (300 / k) ** 1.5) for k in range(10, 101, 10)]
+    fraction = np.log(checks[0][1] / checks[-1][1]) / np.log(checks[0][1])
+    elapsed = 1.0  # 0.01 s per iteration: 2 s left by the power law
+    by_share = elapsed * (1 - fraction) / fraction
+    left = _seconds_left(elapsed, fraction, checks, max_iterations=10000)
+    assert by_share < left < 2.0
+    assert left == pytest.approx(np.sqrt(by_share * 2.0), rel=1e-6)
+    assert _seconds_left(elapsed, fraction, checks, max_iterations=150) == pytest.approx(np.sqrt(by_share * 0.5))
+    flat = [(10, 5.0), (20, 5.0)]  # no fall yet: the share of the way alone
+    assert _seconds_left(elapsed, 0.2, flat, 10000) == pytest.approx(4.0)
