@@ -265,6 +265,7 @@ def _same_solve(previous, request):
 
 
 def _as_previous(request, result):
+    """The :class:`_Previous` record of a solved request."""
     loop = None if request.flat is None else request.flat.loop
     return _Previous(request.mesh_uid, request.mesh_name, request.cage_uid, dict(request.options), loop,
                      result.binding, result.thinned)
