@@ -169,12 +169,15 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     cage_mesh = cage_eval.to_mesh()
     try:
         matrix = cage_to_mesh_matrix(cage_eval, mesh_obj.evaluated_get(depsgraph))
-        cage_points = to_local(matrix, vertex_positions(cage_mesh))
-        cage_faces = polygon_faces(cage_mesh)
-        if np.linalg.det(np.array(matrix)[:3, :3]) < 0:
-            # A mirroring transform (a negative scale) turns outward faces inward in the mesh's space; turned back
-            # here, so that lbc_core does not report faces the artist sees pointing outward as reversed.
-            cage_faces = [face[::-1] for face in cage_faces]
+        cage_local = vertex_positions(cage_mesh)
+        cage_points = to_local(matrix, cage_local)
+        faces = polygon_faces(cage_mesh)
+        # A mirroring transform (a negative scale) turns outward faces inward; turned back, so that lbc_core does not
+        # report faces the artist sees pointing outward as reversed.
+        cage_faces = _outward(faces, matrix)
+        # The solve's frame: world space, the same cage for every mesh bound to it (jobs.BindRequest.solve_geometry).
+        world = (to_local(cage_eval.matrix_world, cage_local), _outward(faces, cage_eval.matrix_world),
+                 to_local(mesh_obj.evaluated_get(depsgraph).matrix_world, points))
         cage_topology = topology_fingerprint(cage_mesh)
         flat = None if mode == "3D" else flatten(cage_points, cage_faces, points, edge_pairs(cage_mesh))
         if flat is None and not cage_faces:
@@ -200,7 +203,13 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         mesh_topology=topology_fingerprint(mesh_obj.data),
         warnings=[warning for warning in (render_warning(mesh_obj, cage_obj),) if warning],
         cage_modifiers=_named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers))),
+        world=world,
     )
+
+
+def _outward(faces, matrix):
+    """``faces`` as they point after ``matrix`` (4×4): reversed where it mirrors."""
+    return [face[::-1] for face in faces] if np.linalg.det(np.array(matrix)[:3, :3]) < 0 else faces
 
 
 def _binding_chain(obj):

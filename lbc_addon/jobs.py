@@ -68,10 +68,26 @@ class BindRequest:
     mesh_topology: str
     warnings: list = field(default_factory=list)  # what the snapshot noticed (a cage with other vertices in renders)
     cage_modifiers: str = ""  # the cage's modifiers that can change its vertices, e.g. "modifier 'Mirror'"
+    # The 3D solve's geometry in world space: (cage vertices, cage faces pointing outward, mesh vertices); None: the
+    # mesh-space arrays above.
+    world: tuple = None
 
     @property
     def dimension(self):
         return 2 if self.flat is not None else 3
+
+    def solve_geometry(self):
+        """(cage vertices, cage faces, points, column base): what lbc_core binds.
+
+        3D: the cage and the mesh in world space, the faces still pointing outward, so that every mesh bound to one
+        cage sees the same cage, and the solve made for one serves the others exactly (:func:`warm_start`); the
+        weights reproduce the points in any affine frame, the mesh's own included. 2D: the flat outline and the
+        points in its plane. The column base maps lbc_core's cage vertices to the Blender cage's.
+        """
+        if self.flat is not None:
+            return self.flat.polygon, None, self.flat.points, self.flat.loop
+        cage_points, faces, points = self.world or (self.cage_points, self.cage_faces, self.points)
+        return cage_points, faces, points, np.arange(len(cage_points))
 
 
 @dataclass
@@ -161,12 +177,7 @@ def solve(request, progress=None, cancel=None, earlier=()):
     which it may start from as from a binding of this session (:func:`warm_start`).
     """
     start = time.perf_counter()
-    flat = request.flat
-    if flat is not None:
-        cage_vertices, faces, points, column_base = flat.polygon, None, flat.points, flat.loop
-    else:
-        cage_vertices, faces, points = request.cage_points, request.cage_faces, request.points
-        column_base = np.arange(len(request.cage_points))
+    cage_vertices, faces, points, column_base = request.solve_geometry()
     previous = warm_start(request, earlier)
     try:
         if previous is not None:
@@ -239,7 +250,7 @@ def warm_start(request, earlier=()):
     own = _previous.get(request.mesh_uid)
     others = [_as_previous(*pair) for pair in reversed(earlier)] + list(reversed(_previous.values()))
     candidates = [previous for previous in [own] + others if previous is not None and _same_solve(previous, request)]
-    vertices = np.asarray(request.cage_points if request.flat is None else request.flat.polygon, dtype=float)
+    vertices = np.asarray(request.solve_geometry()[0], dtype=float)
     unmoved = [previous for previous in candidates if _bound_at(previous.binding, vertices)]
     return (unmoved + candidates + [None])[0]
 

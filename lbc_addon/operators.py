@@ -69,7 +69,10 @@ def _apply_all(operator, pairs):
 def _solve_printing(requests):
     """Solve in this thread, printing progress lines (background mode has no status bar)."""
     progress = jobs.printed_progress()
-    return [(request, jobs.solve(request, progress)) for request in requests]
+    pairs = []
+    for request in requests:
+        pairs.append((request, jobs.solve(request, progress, earlier=pairs)))
+    return pairs
 
 
 class _Binder:

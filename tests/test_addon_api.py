@@ -7,7 +7,7 @@ import pytest
 from mathutils import Matrix
 
 import lbc_core
-from lbc_addon import api, jobs
+from lbc_addon import api, jobs, storage
 from lbc_addon.properties import is_bound
 from blender_scenes import (
     evaluated_positions,
@@ -137,6 +137,25 @@ def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work()
     assert mesh_state(cage) == before and not is_bound(cage) and api.status(mesh)[0]
     with pytest.raises(TypeError, match=r"set_deformer\(strength=...\) takes a float or int, not str 'x'"):
         api.set_deformer(mesh, strength="x")
+
+
+def test_meshes_with_their_own_transforms_in_one_cage_share_its_solve_exactly(monkeypatch):
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    mesh, cage = sphere_in_box_scene()
+    other = bpy.data.objects.new("Other", mesh.data.copy())
+    bpy.context.scene.collection.objects.link(other)
+    other.location, other.rotation_euler, other.scale = (0.1, 0.2, 0.1), (0.3, 0.0, 0.5), (0.5, 0.8, 0.6)
+    bpy.context.view_layer.update()
+    api.bind(mesh, cage, cells=1000)
+    shared = api.bind(other, cage, cells=1000)
+    assert shared["rebind"].startswith("started from the binding of 'Sphere' to the same cage: 0 of "), shared
+    shared_slots = storage.read(other.data)
+    api.unbind(other)
+    jobs._previous.clear()
+    assert api.bind(other, cage, cells=1000)["rebind"] == ""  # alone: a cold bind
+    alone_slots = storage.read(other.data)
+    np.testing.assert_array_equal(shared_slots[0], alone_slots[0])
+    np.testing.assert_array_equal(shared_slots[1], alone_slots[1])
 
 
 def test_reopened_blend_deforms_the_same_without_recomputing(bound_gargoyle, tmp_path, monkeypatch):
