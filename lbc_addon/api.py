@@ -127,6 +127,8 @@ def status(mesh_obj):
     """(ok, message): whether the deformer of a bound mesh works, and if not, why (for an unbound object: that it
     is not bound)."""
     _require_enabled()
+    if not isinstance(mesh_obj, bpy.types.Object):
+        return False, f"{mesh_obj!r} is not an object: pass it as e.g. bpy.data.objects['Name']"
     if not is_bound(mesh_obj):
         return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind)"
     return deformer.status(mesh_obj, bpy.context.evaluated_depsgraph_get())

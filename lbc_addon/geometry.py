@@ -193,6 +193,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         mesh_uid=mesh_obj.session_uid,
         cage_uid=cage_obj.session_uid,
         mesh_name=mesh_obj.name,
+        cage_name=cage_obj.name,
         points=points,
         cage_points=cage_points,
         cage_faces=cage_faces,

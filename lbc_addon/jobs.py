@@ -68,6 +68,7 @@ class BindRequest:
     mesh_topology: str
     warnings: list = field(default_factory=list)  # what the snapshot noticed (a cage with other vertices in renders)
     cage_modifiers: str = ""  # the cage's modifiers that can change its vertices, e.g. "modifier 'Mirror'"
+    cage_name: str = ""
     # The 3D solve's geometry in world space: (cage vertices, cage faces pointing outward, mesh vertices); None: the
     # mesh-space arrays above.
     world: tuple = None
@@ -159,14 +160,14 @@ def printed_progress(interval=1.0):
     return progress
 
 
-def _outside_warning(mesh_name, outside):
+def _outside_warning(outside):
     """A warning about the mesh's points outside the cage (``outside``: (m,) bool; lbc_core refuses them all), since
     they follow the closest points inside rather than the cage itself."""
     count = int(np.count_nonzero(outside))
     if count:
         if count == 1:
-            return [f"1 vertex of '{mesh_name}' lies outside the cage; it follows the closest point inside it"]
-        return [f"{count} vertices of '{mesh_name}' lie outside the cage; they follow the closest points inside it"]
+            return ["1 vertex lies outside the cage; it follows the closest point inside it"]
+        return [f"{count} vertices lie outside the cage; they follow the closest points inside it"]
     return []
 
 
@@ -187,8 +188,9 @@ def solve(request, progress=None, cancel=None, earlier=()):
             binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options),
                                     progress=progress, cancel=cancel)
     except lbc_core.PointsOutside as error:
-        raise CageError(f"every vertex of '{request.mesh_name}' lies outside the cage: the cage must enclose the mesh. "
-                        "Is it the right cage? (Select the mesh, then the cage last so it is active.)") from error
+        raise CageError(f"every vertex of '{request.mesh_name}' lies outside the cage '{request.cage_name}': the cage "
+                        "must enclose the mesh. Is it the right cage? (Select the mesh, then the cage last so it is "
+                        "active.)") from error
     except CageError as error:
         if request.cage_modifiers and "vert" in str(error):
             # The numbers count the evaluated cage's vertices, which Edit Mode does not show.
@@ -217,7 +219,7 @@ def solve(request, progress=None, cancel=None, earlier=()):
         control_points=len(column_vertex),
         outside=int(np.count_nonzero(binding.outside)),
         core_fingerprint=binding.cage.fingerprint(),
-        warnings=request.warnings + _outside_warning(request.mesh_name, binding.outside) + list(binding.cage.warnings)
+        warnings=request.warnings + _outside_warning(binding.outside) + list(binding.cage.warnings)
         + ([] if binding.converged else [_not_converged(binding.iterations)]),
         welded=welded_pairs(column_base, column_vertex[binding.cage.vertex_map]),
         seconds=time.perf_counter() - start,

@@ -45,8 +45,8 @@ def test_api_bind_refuses_a_mesh_wholly_outside_before_the_solve_and_warns_about
     mesh.data.transform(Matrix.Translation((5.0, 0.0, 0.0)))  # the sphere beside the box
     before = mesh_state(mesh)
     stages = []
-    with pytest.raises(lbc_core.CageError, match="every vertex of 'Sphere' lies outside the cage: the cage must "
-                                                 "enclose the mesh. Is it the right cage?"):
+    with pytest.raises(lbc_core.CageError, match="every vertex of 'Sphere' lies outside the cage 'Box': the cage "
+                                                 "must enclose the mesh. Is it the right cage?"):
         api.bind(mesh, cage, cells=1000, progress=lambda fraction, message: stages.append(message))
     assert not any(message.startswith(("geodesic", "ADMM")) for message in stages), stages
     assert not is_bound(mesh) and mesh_state(mesh) == before
@@ -55,7 +55,7 @@ def test_api_bind_refuses_a_mesh_wholly_outside_before_the_solve_and_warns_about
     mesh.data.vertices[1].co.z = 3.0
     summary = api.bind(mesh, cage, cells=1000)
     assert summary["outside"] == 2
-    assert summary["warnings"] == ["2 vertices of 'Sphere' lie outside the cage; they follow the closest points inside it"]
+    assert summary["warnings"] == ["2 vertices lie outside the cage; they follow the closest points inside it"]
     empty = bpy.data.objects.new("Empty mesh", bpy.data.meshes.new("Empty mesh"))
     bpy.context.scene.collection.objects.link(empty)
     with pytest.raises(lbc_core.CageError, match="'Empty mesh' has no vertices: there is nothing to bind"):
@@ -120,6 +120,7 @@ def test_api_bind_raises_lbc_cores_error_and_changes_nothing():
 def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work():
     mesh, cage = sphere_in_box_scene()
     assert api.status(mesh) == (False, "'Sphere' is not bound to a cage: bind it first (api.bind)")
+    assert api.status(None) == (False, "None is not an object: pass it as e.g. bpy.data.objects['Name']")
     with pytest.raises(lbc_core.CageError, match="the cage to bind is None, not an object"):
         api.bind(mesh, bpy.data.objects.get("Cgae"))
     bpy.context.view_layer.objects.active = mesh

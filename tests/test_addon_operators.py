@@ -48,7 +48,13 @@ def test_poll_explains_what_to_select():
     bpy.context.scene.collection.objects.link(empty)
     with bpy.context.temp_override(active_object=empty, object=empty, selected_objects=[mesh, empty]):
         with pytest.raises(RuntimeError, match=r"The active object 'Handle' \(Empty\) is not a mesh, and the cage "
-                                               "must be one: convert it"):
+                                               "must be one: make the cage mesh active"):
+            bpy.ops.object.lbc_bind()
+    curve = bpy.data.objects.new("Path", bpy.data.curves.new("Path", "CURVE"))
+    bpy.context.scene.collection.objects.link(curve)
+    with bpy.context.temp_override(active_object=curve, object=curve, selected_objects=[mesh, curve]):
+        with pytest.raises(RuntimeError, match=r"'Path' \(Curve\) is not a mesh, and the cage must be one: convert it "
+                                               r"\(Object > Convert > Mesh\), or make the cage mesh active"):
             bpy.ops.object.lbc_bind()
 
 
@@ -133,7 +139,7 @@ def test_vertices_outside_the_cage_are_counted_and_reported(capfd):
     mesh.data.vertices[0].co = (0.0, 0.0, 3.0)  # pulled out through the top of the box
     assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     assert mesh.lbc.outside == 1
-    assert "1 vertex of 'Sphere' lies outside the cage; it follows the closest point inside it" in capfd.readouterr().out
+    assert "Sphere: 1 vertex lies outside the cage; it follows the closest point inside it" in capfd.readouterr().out
 
 
 def test_rebind_after_a_topology_change_deforms_again():
