@@ -106,10 +106,11 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
         binding = bind(cage_vertices, cage_faces, points, options=request, progress=progress)
         binding.options.update(start=COLD, rebind=f"bound from scratch: {reason}")
         return binding
-    progress.part(*_STAGES["carry"])(1.0, "the previous mesh carried onto the edited cage")
+    moved = np.any(cage.vertices != previous.rest_cage_vertices, axis=1)
+    progress.part(*_STAGES["carry"])(1.0, "the previous mesh carried onto the edited cage" if moved.any()
+                                     else "the previous mesh and solution reused: the cage has not moved")
     timings = {"carry": time.perf_counter() - clock}
 
-    moved = np.any(cage.vertices != previous.rest_cage_vertices, axis=1)
     result, objective, state, solved, free = _solve_near(previous, carried, unit_cage, moved,
                                                          progress.part(*_STAGES["solve"]))
     timings.update(result.seconds)
