@@ -152,23 +152,35 @@ def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(
     np.testing.assert_allclose(warm.weight, weight, atol=1e-7)
 
 
-def test_a_second_mesh_in_the_same_cage_reuses_the_first_ones_solve(monkeypatch):
-    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
-    rng = np.random.default_rng(3)
-    first = request(points=rng.uniform(-0.8, 0.8, (150, 3)))
-    second = request(points=rng.uniform(-0.7, 0.7, (120, 3)))
+def two_meshes(seed, cage_points=BOX):
+    """Requests of two meshes in one cage: 'Mesh' (uid 1) and 'Other' (uid 7), their points drawn from ``seed``."""
+    rng = np.random.default_rng(seed)
+    first = request(cage_points=cage_points, points=rng.uniform(-0.8, 0.8, (150, 3)))
+    second = request(cage_points=cage_points, points=rng.uniform(-0.7, 0.7, (120, 3)))
     second.mesh_uid, second.mesh_name = 7, "Other"
-    worker = jobs.Worker([first, second])
+    return first, second
+
+
+def solved_by_a_worker(requests):
+    """The (request, result) pairs of a :class:`jobs.Worker` run to its end without error."""
+    worker = jobs.Worker(requests)
     worker.start()
     worker.join()
     assert worker.error is None
-    shared = worker.results[1][1]
+    return worker.results
+
+
+def test_a_second_mesh_in_the_same_cage_reuses_the_first_ones_solve(monkeypatch):
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    first, second = two_meshes(3)
+    results = solved_by_a_worker([first, second])
+    shared = results[1][1]
     assert shared.rebind.startswith("started from the binding of 'Mesh' to the same cage: 0 of "), shared.rebind
     alone = jobs.solve(second)  # nothing kept in this session: a cold bind
     assert alone.rebind == ""
     np.testing.assert_array_equal(shared.index, alone.index)
     np.testing.assert_allclose(shared.weight, alone.weight, atol=1e-6)
-    jobs.remember(first, worker.results[0][1])  # written: kept, and found by a later bind as well
+    jobs.remember(first, results[0][1])  # written: kept, and found by a later bind as well
     assert jobs.solve(second).rebind.startswith("started from the binding of 'Mesh'")
     other_cage = request(cage_points=BOX * 1.1, points=second.points)
     other_cage.mesh_uid, other_cage.cage_uid = 7, 9
@@ -187,20 +199,10 @@ def test_printed_progress_says_each_new_message_and_a_repeated_one_at_most_once_
 
 def test_after_a_cage_edit_the_second_mesh_starts_from_the_first_ones_new_binding(monkeypatch):
     monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
-    rng = np.random.default_rng(4)
-    first = request(points=rng.uniform(-0.8, 0.8, (150, 3)))
-    second = request(points=rng.uniform(-0.7, 0.7, (120, 3)))
-    second.mesh_uid, second.mesh_name = 7, "Other"
-    for job in (first, second):
+    for job in two_meshes(4):
         jobs.remember(job, jobs.solve(job))
     edited = BOX.copy()
     edited[4:, 0] += 0.1  # the +x face moved out: faces stay flat, so a warm re-bind can carry the mesh
-    first_again = request(cage_points=edited, points=first.points)
-    second_again = request(cage_points=edited, points=second.points)
-    second_again.mesh_uid, second_again.mesh_name = 7, "Other"
-    worker = jobs.Worker([first_again, second_again])
-    worker.start()
-    worker.join()
-    assert worker.error is None
-    assert worker.results[0][1].rebind.startswith("bound again from the previous binding")  # its own, warm
-    assert worker.results[1][1].rebind.startswith("started from the binding of 'Mesh' to the same cage: 0 of ")
+    results = solved_by_a_worker(two_meshes(4, edited))
+    assert results[0][1].rebind.startswith("bound again from the previous binding")  # its own, warm
+    assert results[1][1].rebind.startswith("started from the binding of 'Mesh' to the same cage: 0 of ")
