@@ -36,6 +36,21 @@ def test_bind_through_the_operator_adds_the_deformer_and_reports(capfd):
     assert settings.state == "FOLLOWING" and settings.status == "Following 'Box'"
 
 
+def test_one_bind_of_two_meshes_solves_their_cage_once(capfd, monkeypatch):
+    from lbc_addon import jobs
+
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    mesh, cage = sphere_in_box_scene()
+    other = bpy.data.objects.new("Other", mesh.data.copy())
+    bpy.context.scene.collection.objects.link(other)
+    other.location.x = 0.1
+    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[mesh, other, cage]):
+        assert bpy.ops.object.lbc_bind(cells=CELLS) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert out.count("ADMM iteration 10,") == 1, out  # one solve
+    assert "to the same cage: 0 of " in out and is_bound(mesh) and is_bound(other)
+
+
 def test_poll_explains_what_to_select():
     mesh, cage = sphere_in_box_scene()
     with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[cage]):
