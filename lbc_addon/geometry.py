@@ -165,10 +165,10 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     if not len(mesh_obj.data.vertices):
         raise CageError(f"'{mesh_obj.name}' has no vertices: there is nothing to bind")
     points = vertex_positions(mesh_obj.data)
-    cage_eval = cage_obj.evaluated_get(depsgraph)
+    cage_eval, mesh_eval = cage_obj.evaluated_get(depsgraph), mesh_obj.evaluated_get(depsgraph)
     cage_mesh = cage_eval.to_mesh()
     try:
-        matrix = cage_to_mesh_matrix(cage_eval, mesh_obj.evaluated_get(depsgraph))
+        matrix = cage_to_mesh_matrix(cage_eval, mesh_eval)
         cage_local = vertex_positions(cage_mesh)
         cage_points = to_local(matrix, cage_local)
         faces = polygon_faces(cage_mesh)
@@ -177,7 +177,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         cage_faces = _outward(faces, matrix)
         # The solve's frame: world space, the same cage for every mesh bound to it (jobs.BindRequest.solve_geometry).
         world = (to_local(cage_eval.matrix_world, cage_local), _outward(faces, cage_eval.matrix_world),
-                 to_local(mesh_obj.evaluated_get(depsgraph).matrix_world, points))
+                 to_local(mesh_eval.matrix_world, points))
         cage_topology = topology_fingerprint(cage_mesh)
         flat = None if mode == "3D" else flatten(cage_points, cage_faces, points, edge_pairs(cage_mesh))
         if flat is None and not cage_faces:

@@ -77,6 +77,11 @@ class BindRequest:
     def dimension(self):
         return 2 if self.flat is not None else 3
 
+    @property
+    def loop(self):
+        """The flat cage's outline (its Blender vertex indices in order) of a 2D bind, else None."""
+        return None if self.flat is None else self.flat.loop
+
     def solve_geometry(self):
         """(cage vertices, cage faces, points, column base): what lbc_core binds.
 
@@ -273,14 +278,13 @@ def _same_solve(previous, request):
         return False
     if any(previous.options[key] != request.options[key] for key in _SOLVE_OPTIONS):
         return False
-    loop = None if request.flat is None else request.flat.loop
+    loop = request.loop
     return (previous.loop is None) == (loop is None) and (loop is None or np.array_equal(previous.loop, loop))
 
 
 def _as_previous(request, result):
     """The :class:`_Previous` record of a solved request."""
-    loop = None if request.flat is None else request.flat.loop
-    return _Previous(request.mesh_uid, request.mesh_name, request.cage_uid, dict(request.options), loop,
+    return _Previous(request.mesh_uid, request.mesh_name, request.cage_uid, dict(request.options), request.loop,
                      result.binding, result.thinned)
 
 
