@@ -29,3 +29,4 @@ DEFAULT_FLOOR = _thinning.DEFAULT_FLOOR
 thin_weights = _thinning.thin_weights
 thin_changed_rows = _thinning.thin_changed_rows
 WARM = _rebinding.WARM  # lbc_core.rebind's mark of a binding that started from the previous solution
+solved_again_text = _rebinding.solved_again_text

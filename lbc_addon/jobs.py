@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import storage
-from .core import DEFAULT_FLOOR, WARM, CageError, lbc_core, thin_changed_rows, thin_weights
+from .core import DEFAULT_FLOOR, WARM, CageError, lbc_core, solved_again_text, thin_changed_rows, thin_weights
 
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
@@ -299,7 +299,8 @@ def _rebind_report(request, previous, binding):
         return report
     if binding.options.get("start") != WARM:
         return ""
-    return f"started from the binding of '{previous.mesh_name}' to the same cage: {report.split(': ', 1)[-1]}"
+    solved_again = solved_again_text(binding.options["solved_again"])
+    return f"started from the binding of '{previous.mesh_name}' to the same cage: {solved_again}"
 
 
 def remember(request, result):

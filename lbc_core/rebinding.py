@@ -76,7 +76,8 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     Binding
         ``options["start"]`` is "previous solution" (:data:`WARM`) for a warm re-bind, "harmonic" (:data:`COLD`)
         for a cold one; ``options["rebind"]`` says, for the user, how many cells were solved again, or why the
-        bind started from scratch.
+        bind started from scratch; a warm one's ``options["solved_again"]`` holds those counts as numbers (see
+        :func:`solved_again_text`).
 
     Raises
     ------
@@ -142,11 +143,21 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
         weights, outside = _merged_rows(previous, again, weights_again, outside_again)
     timings["reduction"] = time.perf_counter() - clock
     progress(1.0, "bound again from the previous solution")
-    options = dict(previous.options, start=WARM,
-                   rebind=f"bound again from the previous binding: {solved} of {len(carried.cells)} cells solved, "
-                          f"{len(again)} of {len(points)} points evaluated")
+    counts = {"cells solved": int(solved), "cells": len(carried.cells), "points evaluated": len(again),
+              "points": len(points)}
+    options = dict(previous.options, start=WARM, solved_again=counts,
+                   rebind=f"bound again from the previous binding: {solved_again_text(counts)}")
     return lbc_binding(frame, cage, carried, replace(result, objective=objective, state=state), weights, outside,
                        points, options, timings)
+
+
+def solved_again_text(counts):
+    """What a warm re-bind solved again, for the user: "s of c cells solved, e of p points evaluated".
+
+    ``counts`` is its ``Binding.options["solved_again"]``: {"cells solved", "cells", "points evaluated", "points"}.
+    """
+    return (f"{counts['cells solved']} of {counts['cells']} cells solved, "
+            f"{counts['points evaluated']} of {counts['points']} points evaluated")
 
 
 def _solve_near(previous, carried, unit_cage, moved, progress):

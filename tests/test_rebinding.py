@@ -106,8 +106,10 @@ def test_points_out_of_reach_of_the_edit_keep_their_weights_and_the_rest_match_a
     cage, faces, points, first = gargoyle_l10
     edited = moved(cage, [4], 0.01)
     warm = rebind(first, edited, faces)
-    evaluated = int(warm.options["rebind"].split(" cells solved, ")[1].split(" of ")[0])
-    assert 0 < evaluated < len(points)
+    counts = warm.options["solved_again"]
+    evaluated = counts["points evaluated"]
+    assert 0 < evaluated < counts["points"] == len(points)
+    assert warm.options["rebind"].endswith(f"{evaluated} of {len(points)} points evaluated")
     kept = np.flatnonzero(np.asarray(abs(warm.weights - first.weights).sum(axis=1)).ravel() == 0)
     assert len(kept) >= len(points) - evaluated
     # One point more: every point is evaluated again on the same solve.
