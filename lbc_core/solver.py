@@ -331,11 +331,15 @@ def estimate_memory(n_control_points, n_cells, dim, n_vertices=None):
     return int(BYTES_PER_STATE_ENTRY * n_control_points * (dim * n_cells + n_vertices))
 
 
-# Seconds per ADMM iteration and state entry, and iterations to converge against √n: fits of the 3D benchmark on a
-# 2-core x86_64 (27, 106 and 168 control points at 8000 tetrahedra: 6.1 ns, and 207, 396, 501 ≈ 40 √n iterations).
-# Only for the forecast told before a solve; the solve itself then reports its time left from its own iterations.
-SECONDS_PER_STATE_ENTRY = 6.1e-9
-ITERATIONS_PER_SQRT_N = 40
+# The solve's time, told before it starts: seconds per ADMM iteration and state entry at 8000 cells, iterations
+# about ITERATIONS_SCALE · n^ITERATIONS_POWER, and both growing as (cells / 8000)^CELLS_POWER (a step's cost per entry
+# grows as the state outgrows the caches, the iterations slowly). Fitted to the gargoyle's cages L12, L10, L08 and L09
+# split (27-418 control points) at 4000-32,000 cells on a 2-core x86_64 (bench/RESULTS.md): within 25 % of each
+# solve's time. The cage's shape moves the iterations too (a UV sphere's 290 control points took 830), so this stays
+# rough; the solve itself then reports its time left from its own iterations.
+SECONDS_PER_STATE_ENTRY = 5.5e-9
+ITERATIONS_SCALE, ITERATIONS_POWER = 57, 0.28
+CELLS_POWER = 0.4
 # A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
 # (bench/RESULTS.md, bench/thin_cages.py).
 STRETCHED_TIME_FACTOR = 10
@@ -352,15 +356,16 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False):
 
     Returns
     -------
-    str, e.g. "solving 106 control points on about 8000 cells: about 0.4 GiB of memory and roughly 7 s"
+    str, e.g. "solving 106 control points on about 8000 cells: about 313 MB of memory and roughly 3 s"
     """
     entries = n_control_points * (dim * n_cells + VERTICES_PER_CELL[dim] * n_cells)
-    seconds = SECONDS_PER_STATE_ENTRY * entries * ITERATIONS_PER_SQRT_N * np.sqrt(n_control_points)
+    iterations = ITERATIONS_SCALE * n_control_points ** ITERATIONS_POWER
+    seconds = SECONDS_PER_STATE_ENTRY * entries * iterations * (n_cells / 8000) ** CELLS_POWER
     if stretched:
         seconds *= STRETCHED_TIME_FACTOR
     text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
-            f"{_size(estimate_memory(n_control_points, n_cells, dim))} of memory and roughly "
-            f"{_duration(seconds)}")
+            f"{_size(estimate_memory(n_control_points, n_cells, dim))} of memory and "
+            f"{'' if seconds < 1 else 'roughly '}{_duration(seconds)}")
     if seconds > 3600:
         text += " (beyond an hour on a 2-core machine: fewer cells or a coarser cage bind faster)"
     return text
