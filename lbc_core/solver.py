@@ -59,6 +59,15 @@ ANDERSON_PERIOD = {2: 3, 3: 5}
 # Over-relaxation α of each step: in 3D 1.9 takes 8-12 % fewer iterations than 1.6 on cages of 18 control points and
 # more, as many on smaller ones, at the same objectives (2D keeps the α its packs were tuned with; bench/RESULTS.md).
 RELAXATION = {2: 1.6, 3: 1.9}
+# The penalty is then balanced against the residuals (Boyd et al. 2011, §3.4.1) in the first BALANCE_UNTIL
+# iterations: at a scheduled check every BALANCE_SPACING iterations, a relative primal residual above BALANCE_HIGH times
+# the dual doubles it, one below BALANCE_LOW times the dual halves it; then it stays, as ADMM's convergence needs. The band is wide and lopsided: the gargoyle's cages, whose penalty c_d / n^(1/(d-1)) was tuned
+# on, sit at 0.13-0.24 throughout and are left alone, while a UV sphere of 290 control points sat at 2-9 and took 805
+# iterations (310-335 balanced), and the corpus's thin plate, torus and bent tube start below 0.05 (945, 340 and 320
+# iterations; 295, 190 and 165 balanced), at objectives within the tolerance's 0.06 % (bench/RESULTS.md).
+BALANCE_UNTIL = 300
+BALANCE_HIGH, BALANCE_LOW = 2.0, 0.05
+BALANCE_SPACING = 30
 
 
 @dataclass
@@ -79,7 +88,8 @@ class SolveResult:
     history : list of dict
         At each scheduled check (every ``check_every`` iterations) the iteration and the relative primal residual;
         where the primal test passed, a full check adds the relative dual residual and the objective of the
-        iterate Z in the input's units (the output, W projected, is lower).
+        iterate Z in the input's units (the output, W projected, is lower). Where the penalty was balanced, the
+        iteration and the new penalty.
     seconds : dict
         Time per stage.
     state : SolverState or None
@@ -116,6 +126,8 @@ class SolverState:
         √(β m_v) of each interior vertex.
     interior : (N_in,) int array
         The interior vertices, in the state's order.
+    penalty : float or None
+        The ADMM penalty the solve ended with (balanced against its residuals), for a warm start to go on with.
     """
 
     state: np.ndarray
@@ -123,6 +135,7 @@ class SolverState:
     sqrt_cell: np.ndarray
     sqrt_mass: np.ndarray
     interior: np.ndarray
+    penalty: float = None
 
     def restricted(self, cells, interior):
         """The state of a sub-problem: the cells where ``cells`` (F,) is true and the interior vertices
@@ -130,7 +143,7 @@ class SolverState:
         v_x, v_w = self._parts()
         rows = np.searchsorted(self.interior, interior)
         return SolverState(np.concatenate([v_x[:, cells].ravel(), v_w[rows].ravel()]), self.thresholds[cells],
-                           self.sqrt_cell[cells], self.sqrt_mass[rows], interior)
+                           self.sqrt_cell[cells], self.sqrt_mass[rows], interior, self.penalty)
 
     def updated(self, sub, cells):
         """This state with a sub-problem's final state (:meth:`restricted` with the same ``cells``) written in."""
@@ -141,7 +154,7 @@ class SolverState:
         thresholds, sqrt_cell, sqrt_mass = self.thresholds.copy(), self.sqrt_cell.copy(), self.sqrt_mass.copy()
         thresholds[cells], sqrt_cell[cells], sqrt_mass[rows] = sub.thresholds, sub.sqrt_cell, sub.sqrt_mass
         return SolverState(np.concatenate([v_x.ravel(), v_w.ravel()]), thresholds, sqrt_cell, sqrt_mass,
-                           self.interior)
+                           self.interior, sub.penalty)
 
     def _parts(self):
         """Views of the state as v_X (d, F, n) and v_W (N_in, n)."""
@@ -200,7 +213,8 @@ def solve_on_mesh(
         on the 3D cages measured.
     max_iterations : int
     penalty : float, optional
-        ADMM penalty ρ on the unit-diagonal cage; None picks c_d / n^(1/(d-1)).
+        The starting ADMM penalty ρ on the unit-diagonal cage; None picks the one ``start`` ended with, else
+        c_d / n^(1/(d-1)). It is balanced against the residuals in the first BALANCE_UNTIL iterations.
     relaxation : float, optional
         Over-relaxation α in (0, 2); None picks RELAXATION[d].
     check_every : int
@@ -281,7 +295,7 @@ def solve_on_mesh(
         else:
             Z, W, iterations, converged, history, state = _admm(
                 problem, tv_weights, epsilon, tolerance, max_iterations,
-                _default_penalty(d, n) if penalty is None else penalty, relaxation, check_every, anderson_memory,
+                _starting_penalty(penalty, start, d, n), relaxation, check_every, anderson_memory,
                 anderson_period, progress.part(_FACTORISATION_END, _ADMM_END), start,
             )
             for record in history:  # objectives in the input's units
@@ -453,6 +467,15 @@ def _available_memory():
         return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (AttributeError, ValueError, OSError):
         return None
+
+
+def _starting_penalty(penalty, start, d, n):
+    """The penalty asked for, else the one a warm start's solve ended with, else the default for d and n."""
+    if penalty is not None:
+        return penalty
+    if start is not None and start.penalty is not None:
+        return start.penalty
+    return _default_penalty(d, n)
 
 
 def _default_penalty(d, n):
@@ -630,6 +653,7 @@ class _DouglasRachford:
         self.tv_weights = tv_weights * p.tv_scale
         # In scaled variables the shrink threshold of cell c is √|c| ω / ρ; the clip bound of vertex v is √(β m_v).
         self.thresholds = (p.sqrt_cell * self.tv_weights / rho).astype(p.G.dtype)
+        self.penalty = rho
         # X̃ = v_X · shrink: one factor per cell and coordinate (1, F, n), or per component in a stretched frame.
         self.shape_shrink = (1 if p.axis_scale is None else p.d,) + self.shape_x[1:]
         self.secular_roots = None if p.axis_scale is None else np.zeros(self.shape_x[1:], dtype=p.G.dtype)
@@ -677,6 +701,27 @@ class _DouglasRachford:
         self.in_rounds(rescale)
         v_w *= (p.sqrt_mass / start.sqrt_mass).astype(state.dtype)
         return state
+
+    def rescale_penalty(self, state, factor):
+        """Change the penalty to ``factor`` times itself, in place on ``state``: the split variables stay, the
+        scaled duals (v minus them) shrink by ``factor``, and so do the shrink thresholds. The Y-step's matrix does
+        not depend on the penalty (both blocks are scaled alike), so nothing is factorised again."""
+        p = self.p
+        v_x, v_w = self.split(state)
+        old_thresholds = self.thresholds
+        self.thresholds = (old_thresholds / factor).astype(old_thresholds.dtype)
+        self.penalty *= factor
+
+        def rescale(chunk):
+            cells = chunk.cells
+            kept = self.shrink_factors(v_x[:, cells], old_thresholds[cells])  # X̃ = v_X · kept
+            v_x[:, cells] *= kept + (1.0 - kept) / factor
+
+        self.in_rounds(rescale)
+        W = np.minimum(np.maximum(v_w, 0.0), p.sqrt_mass)
+        v_w -= W
+        v_w /= factor
+        v_w += W
 
     def shrink_factors(self, values, thresholds, cells=None):
         """The prox of the cells' total variation as factors of ``values`` (d, F', n): (1, F', n), or (d, F', n) with
@@ -905,8 +950,9 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     fraction, first_distance, checks = 0.0, None, []
     primal_scale, early_check_done = None, False  # the last scheduled check's scale; one early check per window
     next_check = check_every
+    next_balance = check_every  # the first check that balances the penalty
     while iteration < max_iterations:
-        candidate = anderson.extrapolate(value, residual) if anderson else None
+        candidate = anderson.extrapolate(value, residual) if anderson and residual is not None else None
         progress.check()  # the extrapolation and the push below each read the whole history
         if candidate is None:
             candidate = value
@@ -920,7 +966,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             candidate = value
             next_value, out, previous, next_residual, next_norm, last_norm = advance(candidate, last, count)
             iteration += count
-        elif anderson:
+        elif anderson and residual is not None:
             anderson.push(next_value, next_residual, value, residual)
             progress.check()
         value, residual, residual_norm = next_value, next_residual, next_norm
@@ -961,10 +1007,19 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         checks.append((iteration, distance))
         left = f", {_remaining(_seconds_left(elapsed, fraction, checks, max_iterations))}" if by_residual > 0 else ""
         progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
+        if iteration >= next_balance and iteration <= BALANCE_UNTIL:
+            next_balance = iteration + BALANCE_SPACING
+            factor = _balancing_factor(_residuals(step, out, previous, primal_scale, objective=False))
+            if factor != 1.0:
+                step.rescale_penalty(value, factor)
+                history.append(dict(iteration=iteration, penalty=step.penalty))
+                if anderson:
+                    anderson.reset()
+                residual, residual_norm = None, np.inf  # the next steps start afresh from the rescaled state
     # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries faint
     # tails there until full convergence. Both go back unscaled.
     W_unscaled = out.W.astype(np.float64) / problem.sqrt_mass.astype(np.float64)
-    final = SolverState(value, step.thresholds, problem.sqrt_cell, problem.sqrt_mass, problem.interior)
+    final = SolverState(value, step.thresholds, problem.sqrt_cell, problem.sqrt_mass, problem.interior, step.penalty)
     return out.Z.astype(np.float64), W_unscaled, iteration, converged, history, final
 
 
@@ -988,7 +1043,7 @@ def _primal_scale(step, out):
                      np.hypot(np.linalg.norm(out.X), np.linalg.norm(out.W)), 1e-300))
 
 
-def _residuals(step, out, previous, primal_scale):
+def _residuals(step, out, previous, primal_scale, objective=True):
     """Relative primal and dual residuals (Boyd et al. 2011, §3.3.1) and the objective of the current iterate.
 
     ``out`` and ``previous`` are the :class:`_Step` of this iteration and the one before. The dual residual is
@@ -1000,11 +1055,17 @@ def _residuals(step, out, previous, primal_scale):
     primal = np.hypot(np.linalg.norm(out.gradient - X), np.linalg.norm(p.sqrt_mass * out.Z - W))
     dual = np.hypot(np.linalg.norm(X - previous.X), np.linalg.norm(W - previous.W))
     scale_dual = np.hypot(np.linalg.norm(out.v_x - X), np.linalg.norm(out.v_w - W))
-    return {
-        "primal": float(primal / primal_scale),
-        "dual": float(dual / max(scale_dual, 1e-300)),
-        "objective": step.objective(out.gradient),
-    }
+    record = {"primal": float(primal / primal_scale), "dual": float(dual / max(scale_dual, 1e-300))}
+    if objective:
+        record["objective"] = step.objective(out.gradient)
+    return record
+
+
+def _balancing_factor(residuals):
+    """What to multiply the penalty by, from a check's relative residuals: 2 when the primal one lags, 1/2 when the
+    dual one does (beyond the band BALANCE_LOW-BALANCE_HIGH of their ratio), else 1."""
+    ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
+    return 2.0 if ratio > BALANCE_HIGH else 0.5 if ratio < BALANCE_LOW else 1.0
 
 
 def _shrink_factor(values, thresholds, epsilon):

@@ -105,9 +105,9 @@ def test_progress_says_the_time_left_once_the_residual_has_fallen():
     assert all("left" in message for message in admm[1:]) and len(admm) > 2
 
 
-def _thin_cage_problem(name, thickness):
-    """The solve_on_mesh arguments of a corpus cage flattened along z to ``thickness`` × its width, meshed and weighted
-    as the pipeline does (unit frame)."""
+def _corpus_problem(name, thickness=None, cells=None):
+    """The solve_on_mesh arguments of a corpus cage, flattened along z to ``thickness`` × its width if given, meshed
+    at ``cells`` (None: the default) and weighted as the pipeline does (unit frame)."""
     import cage_corpus
     from lbc_core.boundary import boundary_weights
     from lbc_core.cage import make_cage
@@ -117,12 +117,13 @@ def _thin_cage_problem(name, thickness):
 
     vertices, faces = cage_corpus.load(name)
     vertices = np.array(vertices, dtype=float)
-    low = vertices[:, 2].min()
-    vertices[:, 2] = low + (vertices[:, 2] - low) * thickness * np.ptp(vertices[:, :2], axis=0).max() / np.ptp(
-        vertices[:, 2])
+    if thickness is not None:
+        low = vertices[:, 2].min()
+        vertices[:, 2] = low + (vertices[:, 2] - low) * thickness * np.ptp(vertices[:, :2], axis=0).max() / np.ptp(
+            vertices[:, 2])
     cage = make_cage(vertices, faces)
     unit = UnitFrame.of(cage).cage_to_unit(cage)
-    domain = mesh_domain(unit, None, "auto")
+    domain = mesh_domain(unit, cells, "auto")
     omega = tv_weights(domain.cells, geodesic_distances(domain.vertices, domain.cells, domain.control_vertices),
                        "quadratic")
     return (domain.vertices, domain.cells, domain.boundary_vertices, boundary_weights(domain, unit), unit.vertices,
@@ -157,7 +158,7 @@ def test_a_thin_cage_is_solved_in_its_stretched_frame_as_its_own_problem(monkeyp
     optimum as solving in the cage's frame (where a cage this thick converges too)."""
     from lbc_core import solver
 
-    problem = _thin_cage_problem("cube", 0.1)
+    problem = _corpus_problem("cube", 0.1)
     monkeypatch.setattr(solver, "STRETCHED_SOLVE_FROM", 2.0)  # this cage is stretched 2.5 times
     stretched = solve_on_mesh(*problem, tolerance=2e-5)
     monkeypatch.setattr(solver._Stretch, "of", classmethod(lambda cls, controls, epsilon: None))
@@ -170,7 +171,7 @@ def test_a_thin_cage_is_solved_in_its_stretched_frame_as_its_own_problem(monkeyp
 
 def test_a_very_thin_cage_converges():
     """Issue 12, item 4: a cube 1/1000 as thick as wide took 10,000 iterations, unconverged, in the cage's frame."""
-    problem = _thin_cage_problem("cube", 1e-3)
+    problem = _corpus_problem("cube", 1e-3)
     result = solve_on_mesh(*problem, max_iterations=1000)
     assert result.converged
     assert_quality(problem[0], result.weights, problem[4], problem[2], problem[3])
@@ -203,3 +204,46 @@ def test_the_time_left_blends_the_share_of_the_way_and_the_residuals_power_law()
     assert _seconds_left(elapsed, fraction, checks, max_iterations=150) == pytest.approx(np.sqrt(by_share * 0.5))
     flat = [(10, 5.0), (20, 5.0)]  # no fall yet: the share of the way alone
     assert _seconds_left(elapsed, 0.2, flat, 10000) == pytest.approx(4.0)
+
+
+def test_the_penalty_is_balanced_against_the_residuals_early_on(monkeypatch):
+    """Issue 12, item 4: the corpus's thin plate (as Blender makes it) took 605 iterations at 2000 cells with the
+    penalty fixed, its dual residual far above the primal; balanced, it halves the penalty twice and stops in under
+    half of them, at the same objective."""
+    from lbc_core import solver
+
+    problem = _corpus_problem("thin-plate", cells=2000)
+    balanced = solve_on_mesh(*problem)
+    monkeypatch.setattr(solver, "BALANCE_UNTIL", 0)
+    fixed = solve_on_mesh(*problem)
+    assert balanced.converged and fixed.converged
+    assert balanced.iterations < fixed.iterations / 2
+    assert balanced.objective == pytest.approx(fixed.objective, rel=6e-4)
+    changes = [record for record in balanced.history if "penalty" in record]
+    default = solver._default_penalty(3, problem[4].shape[0])
+    assert [record["penalty"] / default for record in changes] == pytest.approx([0.5, 0.25])
+    assert balanced.state.penalty == pytest.approx(default / 4)  # a warm start goes on from there
+    assert_quality(problem[0], balanced.weights, problem[4], problem[2], problem[3])
+
+
+def test_a_change_of_penalty_keeps_the_split_variables_and_rescales_the_duals():
+    from lbc_core import solver
+
+    problem = _corpus_problem("cube", cells=500)
+    p = solver._Problem(*problem[:5], np.setdiff1d(np.arange(len(problem[0])), problem[2]), solver.BETA[3],
+                        np.float64, lbc_core.progress.Progress.of(None))
+    step = solver._DouglasRachford(p, problem[5], 0.0, 1.9, 0.1, lambda: None)
+    state = step.initial_state()
+    for _ in range(5):
+        state, _ = step(state)
+    v_x, v_w = (part.copy() for part in step.split(state))
+    kept = step.shrink_factors(v_x, step.thresholds)
+    W = np.clip(v_w, 0.0, p.sqrt_mass)
+    step.rescale_penalty(state, 4.0)
+    new_x, new_w = step.split(state)
+    assert step.penalty == pytest.approx(0.4)
+    new_kept = step.shrink_factors(new_x, step.thresholds)
+    np.testing.assert_allclose(new_x * new_kept, v_x * kept, atol=1e-12)  # X̃ stays
+    np.testing.assert_allclose(new_x - new_x * new_kept, (v_x - v_x * kept) / 4.0, atol=1e-12)  # Ũ / 4
+    np.testing.assert_allclose(np.clip(new_w, 0.0, p.sqrt_mass), W, atol=1e-12)  # W̃ stays
+    np.testing.assert_allclose(new_w - W, (v_w - W) / 4.0, atol=1e-12)
