@@ -711,19 +711,32 @@ def _vertex_count_modifier_above(mesh_obj, modifier, depsgraph):
 
 
 _last_messages = {}  # object session_uid -> the last status printed, so a problem is reported once, not per redraw
+# The session_uids of cages seen in a collection. A cage in none was deleted (X) only if it was in one before: a cage
+# that came in with an appended or linked mesh, indirectly, was never in one, and Mesh Deform follows such a cage.
+_cages_in_scene = set()
+
+
+def note_cage_in_scene(cage):
+    """Remember that ``cage`` was in a collection: from now on, leaving every collection means it was deleted."""
+    _cages_in_scene.add(cage.session_uid)
 
 
 def check_bindings(depsgraph, changed=None):
     """Check every bound object of the depsgraph's scene; stop or resume its deformation; print changes of state.
 
     ``changed``: when given, the names of the objects whose geometry changed; only bindings involving one of them
-    (or whose cage is gone) are checked. Cages deleted by the user are let go first (:func:`forget_cage`).
+    (or whose cage is gone) are checked. Cages deleted by the user (no longer in any collection, having been in one)
+    are let go first (:func:`forget_cage`).
     """
     bound = [obj for obj in depsgraph.scene.objects if is_bound(obj)]
     deleted = []
     for obj in bound:
         cage = obj.lbc.cage
-        if cage is not None and not cage.users_collection and cage not in deleted:
+        if cage is None or cage in deleted:
+            continue
+        if cage.users_collection:
+            note_cage_in_scene(cage)
+        elif cage.session_uid in _cages_in_scene:
             deleted.append(cage)
     for cage in deleted:
         forget_cage(cage)
@@ -752,6 +765,7 @@ def forget_cage(cage, defer=None):
     removed once nothing else uses it (:func:`remove_if_orphan`). This runs in a depsgraph handler: in a session with
     an event loop the removal waits for a timer, outside the handler; ``defer`` None means "when there is one".
     """
+    _cages_in_scene.discard(cage.session_uid)
     for obj in bpy.data.objects:
         if is_bound(obj) and obj.lbc.cage == cage:
             obj.lbc.cage = None

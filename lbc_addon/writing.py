@@ -45,6 +45,8 @@ def _write(mesh_obj, cage_obj, request, result):
     modifier, replaced_group = deformer.attach(mesh_obj, cage_obj, result.index.shape[1], len(request.cage_points),
                                               len(request.points), deformer.shared_slot_count(result.weight))
     _store_settings(settings, request, result, cage_obj, modifier.node_group)
+    if cage_obj.users_collection:  # from now on, leaving every collection means X deleted it
+        deformer.note_cage_in_scene(cage_obj)
     if settings.show_influence:  # repainted with the new weights
         influence.show(mesh_obj, settings.influence_vertex)
     return replaced_group

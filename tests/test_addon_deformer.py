@@ -333,6 +333,27 @@ def test_a_cage_also_used_elsewhere_survives_x_and_is_only_let_go(bound_gargoyle
     assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
 
 
+@pytest.mark.parametrize("link", [False, True], ids=["append", "link"])
+def test_a_mesh_appended_or_linked_alone_follows_its_cage_that_came_along(bound_gargoyle_file, link):
+    """Its cage comes in indirectly, in no collection, as Mesh Deform's does: not a cage the artist deleted."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(str(bound_gargoyle_file), link=link) as (source, target):
+        target.objects = ["Gargoyle"]
+    mesh = target.objects[0]
+    bpy.context.scene.collection.objects.link(mesh)
+    cage = mesh.lbc.cage
+    assert cage is not None and not cage.users_collection
+    bpy.context.view_layer.update()
+    assert mesh.lbc.cage == cage and cage.name in bpy.data.objects
+    ok, message = deformer.status(mesh, bpy.context.evaluated_depsgraph_get())
+    assert ok, message
+    if not link:  # an appended cage is the artist's to move (a linked one is moved in its library)
+        rest = evaluated_positions(mesh)
+        cage.location.x += 0.3
+        shift = np.array(mesh.matrix_world.inverted().to_3x3()) @ [0.3, 0.0, 0.0]  # in the mesh's own space
+        assert np.abs(evaluated_positions(mesh) - rest - shift).max() < 1e-4
+
+
 def test_strength_scales_the_displacement(bound_gargoyle):
     mesh, cage = bound_gargoyle
     rest = positions(mesh.data)
