@@ -37,8 +37,11 @@ USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")
 # The slots beyond those every vertex evaluates are left to at most this share of the vertices (see
 # :func:`shared_slot_count`; bench/RESULTS.md: 5 % gave the fastest split on both benchmark scenes).
 TAIL_SHARE = 0.05
-# Vertices :func:`rest_moved` compares with their rest positions, spread over the mesh's order.
+# Vertices :func:`rest_moved` compares with their rest positions, spread over the mesh's order; and the rounding it
+# allows, relative to the positions' magnitude: a few float32 ulps (the mesh's and its rest attribute's positions are
+# float32, and the affine fit adds a little).
 REST_SAMPLES = 16
+FLOAT32_ROUNDING = 8 * float(np.finfo(np.float32).eps)
 
 
 def build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots=None):
@@ -581,13 +584,15 @@ def rest_moved(mesh):
 
 def moved_affinely(before, after, tolerance=1e-5):
     """Whether (k, 3) points ``after`` are an affine image of ``before`` other than the identity, both to
-    ``tolerance`` × the size of ``before`` (float32 positions)."""
+    ``tolerance`` × the size of ``before`` plus the float32 rounding of the positions (far from the origin or scaled
+    up, the rounding of the moved positions alone exceeds 1e-5 of the mesh's size)."""
     size = float(np.linalg.norm(np.ptp(before, axis=0)))
     if np.abs(after - before).max() <= tolerance * size:
         return False
+    rounding = FLOAT32_ROUNDING * (np.abs(before).max() + np.abs(after).max())
     design = np.c_[before, np.ones(len(before))]
     fit, *_ = np.linalg.lstsq(design, after, rcond=None)
-    return bool(np.abs(design @ fit - after).max() <= tolerance * size)
+    return bool(np.abs(design @ fit - after).max() <= tolerance * size + rounding)
 
 
 def welded_apart(welded, positions):

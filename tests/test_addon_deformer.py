@@ -173,6 +173,18 @@ def test_apply_transforms_on_the_bound_mesh_stops_it_in_place_until_undone_or_bo
     assert mesh.lbc.status == f"Following '{cage.name}'"
 
 
+def test_a_move_as_a_whole_is_seen_far_from_the_origin_and_at_large_scales():
+    """A new user's finding: float32 rounding of the moved positions alone passed 1e-5 of the mesh's size (a 1.6-unit
+    mesh Apply-Transformed at x = 2000 or scaled 500 jumped, its status "Following")."""
+    rest = np.random.default_rng(0).uniform(-0.8, 0.8, (16, 3)).astype(np.float32)
+    for moved in (rest + [2000.0, 0, 0], rest * 500.0, rest @ np.diag([300.0, 1.0, 2.0]) + [0, 10000.0, 0]):
+        assert deformer.moved_affinely(rest.astype(float), moved.astype(np.float32).astype(float))
+    far = (rest + [2000.0, 0, 0]).astype(np.float32)
+    sculpted = far.copy()
+    sculpted[3, 2] += 0.02  # one vertex of the sample pushed: an edit, not a move
+    assert not deformer.moved_affinely(far.astype(float), sculpted.astype(float))
+
+
 def test_a_sculpted_bound_mesh_keeps_following(bound_gargoyle):
     mesh, cage = bound_gargoyle
     for index in (0, 2673):  # two of the sampled vertices (the first and the last) pushed: an edit, not the whole mesh moved
