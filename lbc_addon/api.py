@@ -68,7 +68,8 @@ def _bind_request(request, progress, cancel):
 
 
 def unbind(mesh_obj):
-    """Remove the binding; the mesh is exactly as before it was bound. Does nothing for an unbound mesh.
+    """Remove the binding; the mesh is exactly as before it was bound. Does nothing for an unbound mesh; raises
+    CageError for one linked from a library (its binding lives in that file).
 
     Returns
     -------
@@ -77,7 +78,12 @@ def unbind(mesh_obj):
         they were removed with the binding.
     """
     _require_enabled()
-    return writing.remove(mesh_obj) if is_bound(mesh_obj) else []
+    if not is_bound(mesh_obj):
+        return []
+    linked = geometry.not_editable_here(mesh_obj)
+    if linked:
+        raise CageError(linked)
+    return writing.remove(mesh_obj)
 
 
 def rebind_all(cage_obj, progress=None, cancel=None):

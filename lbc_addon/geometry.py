@@ -136,6 +136,17 @@ def cage_to_mesh_matrix(cage_obj, mesh_obj):
     return mesh_obj.matrix_world.inverted_safe() @ cage_obj.matrix_world
 
 
+def not_editable_here(mesh_obj):
+    """Why the binding of ``mesh_obj`` cannot be changed in this file (the object or its mesh data is linked from a
+    library, as a library override's mesh data stays), or None. Changes there would be lost on saving."""
+    for what, block in ((f"'{mesh_obj.name}'", mesh_obj), (f"the mesh data of '{mesh_obj.name}'", mesh_obj.data)):
+        if block is not None and block.library is not None:
+            return (f"{what} is linked from the library '{block.library.filepath}': its binding is saved in that file "
+                    "(change it there), or make it local here first (Object > Relations > Make Local > Selected "
+                    "Objects and Data)")
+    return None
+
+
 def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
              thinning=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
     """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
@@ -149,6 +160,9 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         raise CageError(f"the cage '{cage_obj.name}' is not a mesh object: use a mesh as the cage")
     if mesh_obj == cage_obj:
         raise CageError("a mesh cannot be its own cage: select the mesh, then the cage last (active)")
+    linked = not_editable_here(mesh_obj)
+    if linked:
+        raise CageError(linked)
     if mesh_obj.data.users > 1:
         raise CageError(
             f"the mesh data of '{mesh_obj.name}' is shared by {mesh_obj.data.users} objects and the weights are "

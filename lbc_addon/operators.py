@@ -276,7 +276,15 @@ class OBJECT_OT_lbc_unbind(bpy.types.Operator):
         return _allowed(cls, message)
 
     def execute(self, context):
-        objects = _bound_selection(context)
+        objects = []
+        for obj in _bound_selection(context):
+            linked = geometry.not_editable_here(obj)
+            if linked:
+                self.report({"ERROR"}, f"Not unbound: {linked}")
+            else:
+                objects.append(obj)
+        if not objects:
+            return {"CANCELLED"}
         for obj in objects:
             mesh_name = obj.data.name
             keeping = writing.remove(obj)

@@ -140,6 +140,27 @@ def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work()
         api.set_deformer(mesh, strength="x")
 
 
+def test_a_mesh_linked_from_a_library_or_overridden_is_not_rebound_or_unbound_here(bound_gargoyle_file):
+    """A new user's finding: Rebind and Unbind ran on linked meshes and said they worked; saving lost both."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(str(bound_gargoyle_file), link=True) as (source, target):
+        target.objects = ["Gargoyle"]
+    linked = target.objects[0]
+    bpy.context.scene.collection.objects.link(linked)
+    cage = linked.lbc.cage
+    with pytest.raises(api.CageError, match="'Gargoyle' is linked from the library .*bound_gargoyle.blend.*Make Local"):
+        api.bind(linked, cage)
+    with pytest.raises(api.CageError, match="'Gargoyle' is linked from the library"):
+        api.unbind(linked)
+    with bpy.context.temp_override(active_object=linked, object=linked, selected_objects=[linked]):
+        with pytest.raises(RuntimeError, match="Not unbound: 'Gargoyle' is linked from the library"):
+            bpy.ops.object.lbc_unbind()
+    assert is_bound(linked)
+    override = linked.override_create(remap_local_usages=True)  # its mesh data stays linked
+    with pytest.raises(api.CageError, match="the mesh data of 'Gargoyle' is linked from the library"):
+        api.bind(override, cage)
+
+
 def test_meshes_with_their_own_transforms_in_one_cage_share_its_solve_exactly(monkeypatch):
     monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
     mesh, cage = sphere_in_box_scene()
