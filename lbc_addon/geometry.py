@@ -136,6 +136,13 @@ def cage_to_mesh_matrix(cage_obj, mesh_obj):
     return mesh_obj.matrix_world.inverted_safe() @ cage_obj.matrix_world
 
 
+def _evaluation_changes(obj):
+    """Whether evaluating a mesh object can change its vertices: a modifier on in viewports, or shape keys."""
+    keys = obj.data.shape_keys
+    return any(modifier.show_viewport for modifier in obj.modifiers) or (keys is not None
+                                                                         and len(keys.key_blocks) > 1)
+
+
 def not_editable_here(mesh_obj):
     """Why the binding of ``mesh_obj`` cannot be changed in this file (the object or its mesh data is linked from a
     library, as a library override's mesh data stays), or None. Changes there would be lost on saving."""
@@ -180,6 +187,12 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         raise CageError(f"'{mesh_obj.name}' has no vertices: there is nothing to bind")
     points = vertex_positions(mesh_obj.data)
     cage_eval, mesh_eval = cage_obj.evaluated_get(depsgraph), mesh_obj.evaluated_get(depsgraph)
+    if not cage_eval.is_evaluated and _evaluation_changes(cage_obj):
+        # The deformer evaluates the cage (its modifier makes the cage part of the depsgraph): the bind must too.
+        raise CageError(f"the cage '{cage_obj.name}' is not evaluated in this view layer (disabled in viewports, in an "
+                        "excluded collection, or in another scene), so its modifiers and shape keys are not applied "
+                        "and the bind would see another cage than the deformer: enable it in viewports for the bind "
+                        "(H still hides it), or apply its modifiers")
     cage_mesh = cage_eval.to_mesh()
     try:
         matrix = cage_to_mesh_matrix(cage_eval, mesh_eval)

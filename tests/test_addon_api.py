@@ -87,6 +87,22 @@ def test_an_error_naming_vertices_of_a_cage_with_modifiers_says_they_are_the_eva
     assert not is_bound(mesh)
 
 
+def test_a_cage_blender_does_not_evaluate_is_refused_when_its_modifiers_would_change_it():
+    """A new user's finding: a cage disabled in viewports bound without its Subdivision (8 control points), and the
+    deformer, which evaluates it, then saw 26 and stopped."""
+    mesh, cage = sphere_in_box_scene()
+    cage.hide_viewport = True
+    api.bind(mesh, cage, cells=1000)  # no modifiers: the same cage either way
+    api.unbind(mesh)
+    cage.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    with pytest.raises(lbc_core.CageError, match="'Box' is not evaluated in this view layer .*enable it in viewports"):
+        api.bind(mesh, cage, cells=1000)
+    assert not is_bound(mesh)
+    cage.hide_viewport = False
+    cage.hide_set(True)  # hidden (H) is still evaluated
+    assert api.bind(mesh, cage, cells=1000)["control_points"] == 26
+
+
 def test_api_rebind_all_leaves_linked_duplicates_as_they_were_with_a_warning():
     mesh, cage = sphere_in_box_scene()
     api.bind(mesh, cage, cells=1000)
