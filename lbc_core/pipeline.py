@@ -172,11 +172,12 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, op
 
 
 def _options_record(request, cells, threshold):
-    """What a binding records of its options (JSON-able): the resolved cell count and threshold."""
+    """What a binding records of its options (JSON-able): the cell count reached and the one asked (None: the
+    default), and the resolved threshold."""
     record = {"weighting": request.weighting, "epsilon": request.epsilon, "max_iterations": request.max_iterations}
     if request.tolerance is not None:
         record["tolerance"] = request.tolerance
-    return dict(record, cells=cells, threshold=threshold, method=request.method)
+    return dict(record, cells=cells, cells_asked=request.cells, threshold=threshold, method=request.method)
 
 
 def check_request(cage_vertices, cage_faces, points, options, progress=None):

@@ -278,8 +278,11 @@ def _grown(mask, cells, rings):
 
 
 def _options_of(previous):
-    """The BindOptions a previous binding was made with (its cell count is the one it reached)."""
-    recorded = previous.options
+    """The BindOptions a previous binding was made with: the cell count asked for, so that a bind from scratch is
+    the bind the artist made (bindings saved before it was recorded give the count they reached)."""
+    recorded = dict(previous.options)
+    if "cells_asked" in recorded:
+        recorded["cells"] = recorded["cells_asked"]
     return BindOptions.of(None, **{key: recorded[key] for key in ("cells", "weighting", "epsilon", "threshold",
                                                                  "method", "tolerance", "max_iterations")
                                   if recorded.get(key) is not None})

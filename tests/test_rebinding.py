@@ -158,8 +158,13 @@ def test_another_topology_or_a_loaded_binding_falls_back_to_a_cold_bind(gargoyle
     first.save(path)
     loaded = lbc_core.load_binding(path)
     assert loaded.solver_state is None
-    reason = rebind(loaded, moved(cage, [3], 0.01), faces).options["rebind"]
-    assert reason.startswith("bound from scratch: the previous binding's solver state is not at hand")
+    edited = moved(cage, [3], 0.01)
+    again = rebind(loaded, edited, faces)
+    assert again.options["rebind"].startswith("bound from scratch: the previous binding's solver state is not at hand")
+    # From scratch is the bind the artist made, at the cells asked for (not those the first mesh reached).
+    fresh = lbc_core.bind(edited, faces, points, cells=3000)
+    assert len(first.domain.cells) != 3000 and again.options["cells_asked"] == 3000
+    assert abs(again.weights - fresh.weights).max() == 0
     # The cube's quads split along their other diagonals: other facets, so the carried mesh no longer fits.
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
