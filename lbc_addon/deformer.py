@@ -350,8 +350,9 @@ def _stop_condition(group, group_in, cage_geometry, cage_vertex_count, mesh_vert
         (cage_changed, f"LBC: the cage is gone or no longer has the {cage_vertex_count} vertices it was bound with; "
                        "the mesh is left undeformed. Bind again, or restore the cage"),
         (mesh_changed, f"LBC: the mesh reaching this modifier no longer has the {mesh_vertex_count} vertices it was "
-                       "bound with; it is left undeformed. Move the LBC modifier above any modifier that adds or "
-                       "removes vertices, or Rebind in the LBC panel"),
+                       "bound with (edited, joined, separated, or a modifier above adds or removes vertices); it is "
+                       "left undeformed. Rebind in the LBC panel, or move the LBC modifier above any modifier that "
+                       "adds or removes vertices"),
         (disabled.outputs["Boolean"], "LBC: the cage's topology changed since binding (same vertex count); the mesh "
                                       "is left undeformed. Rebind in the LBC panel"),
     )
@@ -664,9 +665,10 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     topologies, positions = cages[cage.name_full]
     count = len(positions)
     if count != settings.cage_vertex_count:
+        modifiers = geometry.cage_modifiers_note(cage)
         return "cage vertices", (
-            f"The cage '{cage.name}' has {count} vertices, it was bound with {settings.cage_vertex_count}: "
-            "the mesh stays undeformed. Rebind"
+            f"The cage '{cage.name}' has {count} vertices{f' ({modifiers})' if modifiers else ''}, it was bound with "
+            f"{settings.cage_vertex_count}: the mesh stays undeformed. Rebind"
         )
     if settings.cage_topology not in topologies:
         return "topology", (

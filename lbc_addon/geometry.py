@@ -167,6 +167,11 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         raise CageError(f"the cage '{cage_obj.name}' is not a mesh object: use a mesh as the cage")
     if mesh_obj == cage_obj:
         raise CageError("a mesh cannot be its own cage: select the mesh, then the cage last (active)")
+    scales = np.linalg.svd(np.array(cage_obj.matrix_world)[:3, :3], compute_uv=False)
+    if not scales[-1] > 1e-9 * scales[0]:
+        raise CageError(f"the cage object '{cage_obj.name}' is scaled to 0 along an axis (Scale "
+                        f"{tuple(round(value, 6) for value in cage_obj.scale)}), so it encloses nothing: give it a "
+                        "scale other than 0 on every axis (Object properties > Transform)")
     linked = not_editable_here(mesh_obj)
     if linked:
         raise CageError(linked)
@@ -231,6 +236,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         mesh_topology=topology_fingerprint(mesh_obj.data),
         warnings=[warning for warning in (render_warning(mesh_obj, cage_obj),) if warning],
         cage_modifiers=_named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers))),
+        cage_modifiers_off=_named_modifiers(_modifiers_off(cage_obj)),
         world=world,
     )
 
@@ -267,6 +273,25 @@ def snapshots(targets, depsgraph, skip_refused=False):
     if refused and not requests:
         raise CageError("; ".join(refused))
     return requests, refused
+
+
+def _modifiers_off(obj):
+    """``obj``'s modifiers of a type that can change the vertex count, off in viewports."""
+    return [modifier for modifier in obj.modifiers
+            if not modifier.show_viewport and modifier.type in VERTEX_COUNT_MODIFIERS]
+
+
+def cage_modifiers_note(cage_obj):
+    """Which of the cage's modifiers make its vertices other than its mesh data's, for messages: "its modifier
+    'Subdivision' makes them", "its modifier 'Mirror' is off in viewports", both, or ""."""
+    notes = []
+    on = _named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers)))
+    if on:
+        notes.append(f"its {on} {'make' if on.startswith('modifiers') else 'makes'} them")
+    off = _named_modifiers(_modifiers_off(cage_obj))
+    if off:
+        notes.append(f"its {off} {'are' if off.startswith('modifiers') else 'is'} off in viewports")
+    return "; ".join(notes)
 
 
 def _named_modifiers(modifiers):

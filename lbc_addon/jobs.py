@@ -68,6 +68,7 @@ class BindRequest:
     mesh_topology: str
     warnings: list = field(default_factory=list)  # what the snapshot noticed (a cage with other vertices in renders)
     cage_modifiers: str = ""  # the cage's modifiers that can change its vertices, e.g. "modifier 'Mirror'"
+    cage_modifiers_off: str = ""  # those of them off in viewports (the bind, as the deformer, sees the cage without)
     cage_name: str = ""
     # The 3D solve's geometry in world space: (cage vertices, cage faces pointing outward, mesh vertices); None: the
     # mesh-space arrays above.
@@ -197,9 +198,9 @@ def solve(request, progress=None, cancel=None, earlier=()):
                         "must enclose the mesh. Is it the right cage? (Select the mesh, then the cage last so it is "
                         "active.)") from error
     except CageError as error:
-        if request.cage_modifiers and "vert" in str(error):
-            # The numbers count the evaluated cage's vertices, which Edit Mode does not show.
-            raise CageError(f"{error} (vertex numbers of the cage with its {request.cage_modifiers} applied)") from error
+        note = _cage_modifiers_note(request, str(error))
+        if note:
+            raise CageError(f"{error} ({note})") from error
         raise
     column_vertex = column_base[binding.control_input_index]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
@@ -233,6 +234,22 @@ def solve(request, progress=None, cancel=None, earlier=()):
         rebind=_rebind_report(request, previous, binding),
         stages=stages,
     )
+
+
+def _cage_modifiers_note(request, message):
+    """What to add to lbc_core's ``message`` about a cage whose modifiers make it another cage than the artist's mesh
+    data ("" for none): the error may be theirs (Solidify makes two parts; a Mirror off in viewports leaves a hole),
+    and vertex numbers count the evaluated cage's vertices, which Edit Mode does not show."""
+    notes = []
+    if request.cage_modifiers:
+        verb = "make" if request.cage_modifiers.startswith("modifiers") else "makes"
+        notes.append(f"vertex numbers of the cage with its {request.cage_modifiers} applied" if "vert" in message
+                     else f"this is the cage as its {request.cage_modifiers} {verb} it")
+    if request.cage_modifiers_off:
+        verb = "are" if request.cage_modifiers_off.startswith("modifiers") else "is"
+        notes.append(f"its {request.cage_modifiers_off} {verb} off in viewports, and the cage is bound as viewports "
+                     "show it")
+    return "; ".join(notes)
 
 
 def _thinning(options):

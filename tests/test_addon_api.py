@@ -103,6 +103,37 @@ def test_a_cage_blender_does_not_evaluate_is_refused_when_its_modifiers_would_ch
     assert api.bind(mesh, cage, cells=1000)["control_points"] == 26
 
 
+def test_a_cage_object_scaled_to_zero_on_an_axis_is_refused_as_such():
+    """A new user's finding: it was called flat, or (with a flat mesh inside) said to have no outline."""
+    mesh, cage = sphere_in_box_scene()
+    cage.scale.z = 0.0
+    with pytest.raises(lbc_core.CageError, match=r"the cage object 'Box' is scaled to 0 along an axis \(Scale \(0.8, "
+                                                 r"1.0, 0.0\)\)"):
+        api.bind(mesh, cage, cells=1000)
+    assert not is_bound(mesh)
+
+
+def test_messages_about_a_cage_name_its_modifiers_when_they_make_it_another_cage():
+    """A new user's finding: a Solidify cage was "2 separate parts" with one part in the mesh data; a Mirror turned off
+    in viewports after binding led Rebind to say "fill the holes"; a changed Subdivision level only "has 98 vertices"."""
+    mesh, cage = sphere_in_box_scene()
+    cage.modifiers.new("Solidify", "SOLIDIFY").thickness = 0.05
+    with pytest.raises(lbc_core.CageError, match=r"separate parts.*\(this is the cage as its modifier 'Solidify' "
+                                                 r"makes it\)"):
+        api.bind(mesh, cage, cells=1000)
+    cage.modifiers.clear()
+    subdivision = cage.modifiers.new("Subdivision", "SUBSURF")
+    subdivision.levels = subdivision.render_levels = 1
+    api.bind(mesh, cage, cells=1000)
+    subdivision.show_viewport = False
+    assert api.status(mesh)[1].startswith(
+        "The cage 'Box' has 8 vertices (its modifier 'Subdivision' is off in viewports), it was bound with 26")
+    subdivision.show_viewport = True
+    subdivision.levels = 2
+    assert api.status(mesh)[1].startswith(
+        "The cage 'Box' has 98 vertices (its modifier 'Subdivision' makes them), it was bound with 26")
+
+
 def test_api_rebind_all_leaves_linked_duplicates_as_they_were_with_a_warning():
     mesh, cage = sphere_in_box_scene()
     api.bind(mesh, cage, cells=1000)

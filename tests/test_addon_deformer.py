@@ -435,7 +435,7 @@ def test_below_a_modifier_that_changes_the_vertex_count_the_deformer_stops_with_
     expected = evaluated_positions(mesh)  # subdivided, undeformed
     plain.show_viewport = True
     assert np.array_equal(evaluated_positions(mesh), expected)
-    _assert_one_modifier_error(mesh, "Move the LBC modifier above any modifier that adds or removes vertices")
+    _assert_one_modifier_error(mesh, "move the LBC modifier above any modifier that adds or removes vertices")
     # The panel names the modifier in every Blender (4.2 has no Warning node): the cause is not the mesh's own vertices.
     assert mesh.lbc.status == (f"The modifier 'Subdivision' above '{plain.name}' changes the mesh's vertex count: "
                                f"the mesh stays undeformed. Move '{plain.name}' to the top of the stack")

@@ -206,3 +206,13 @@ def test_after_a_cage_edit_the_second_mesh_starts_from_the_first_ones_new_bindin
     results = solved_by_a_worker(two_meshes(4, edited))
     assert results[0][1].rebind.startswith("bound again from the previous binding")  # its own, warm
     assert results[1][1].rebind.startswith("started from the binding of 'Mesh' to the same cage: 0 of ")
+
+
+def test_an_error_about_a_cage_with_a_modifier_off_in_viewports_says_so():
+    """A Mirror turned off in viewports leaves half a cage: lbc_core says to fill its holes, the add-on says why."""
+    from dataclasses import replace
+
+    open_box = replace(request(cage_faces=BOX_FACES[1:]), cage_modifiers_off="modifier 'Mirror'")
+    with pytest.raises(jobs.CageError, match=r"not closed.*\(its modifier 'Mirror' is off in viewports, and the cage "
+                                             r"is bound as viewports show it\)"):
+        jobs.solve(open_box)
