@@ -48,6 +48,17 @@ def delete_with_x(obj):
         assert bpy.ops.object.delete() == {"FINISHED"}
 
 
+def gargoyle_alone(path, link):
+    """A new empty file with only the bound 'Gargoyle' of the .blend at ``path`` appended (or linked) into its scene:
+    its cage comes along indirectly, in no collection. Returns the mesh object."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(str(path), link=link) as (_, target):
+        target.objects = ["Gargoyle"]
+    mesh = target.objects[0]
+    bpy.context.scene.collection.objects.link(mesh)
+    return mesh
+
+
 def mesh_object(name, vertices, faces, matrix=Matrix.Identity(4), edges=()):
     """A new mesh object linked to the scene, with ``vertices`` given in world space."""
     vertices = np.asarray(vertices, dtype=float)

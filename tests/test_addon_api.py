@@ -11,6 +11,7 @@ from lbc_addon import api, jobs, storage
 from lbc_addon.properties import is_bound
 from blender_scenes import (
     evaluated_positions,
+    gargoyle_alone,
     mesh_state,
     sphere_in_box_scene,
 )
@@ -189,11 +190,7 @@ def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work()
 
 def test_a_mesh_linked_from_a_library_or_overridden_is_not_rebound_or_unbound_here(bound_gargoyle_file):
     """A new user's finding: Rebind and Unbind ran on linked meshes and said they worked; saving lost both."""
-    bpy.ops.wm.read_homefile(use_empty=True)
-    with bpy.data.libraries.load(str(bound_gargoyle_file), link=True) as (source, target):
-        target.objects = ["Gargoyle"]
-    linked = target.objects[0]
-    bpy.context.scene.collection.objects.link(linked)
+    linked = gargoyle_alone(bound_gargoyle_file, link=True)
     cage = linked.lbc.cage
     with pytest.raises(api.CageError, match="'Gargoyle' is linked from the library .*bound_gargoyle.blend.*Make Local"):
         api.bind(linked, cage)

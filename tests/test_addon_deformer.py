@@ -16,6 +16,7 @@ from blender_scenes import (
     delete_with_x,
     diagonal,
     evaluated_positions,
+    gargoyle_alone,
     positions,
     undo_context,
 )
@@ -348,11 +349,7 @@ def test_a_cage_also_used_elsewhere_survives_x_and_is_only_let_go(bound_gargoyle
 @pytest.mark.parametrize("link", [False, True], ids=["append", "link"])
 def test_a_mesh_appended_or_linked_alone_follows_its_cage_that_came_along(bound_gargoyle_file, link):
     """Its cage comes in indirectly, in no collection, as Mesh Deform's does: not a cage the artist deleted."""
-    bpy.ops.wm.read_homefile(use_empty=True)
-    with bpy.data.libraries.load(str(bound_gargoyle_file), link=link) as (source, target):
-        target.objects = ["Gargoyle"]
-    mesh = target.objects[0]
-    bpy.context.scene.collection.objects.link(mesh)
+    mesh = gargoyle_alone(bound_gargoyle_file, link)
     cage = mesh.lbc.cage
     assert cage is not None and not cage.users_collection
     bpy.context.view_layer.update()
