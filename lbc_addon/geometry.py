@@ -241,6 +241,27 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     )
 
 
+def changed_since(request, mesh_obj, cage_obj, depsgraph):
+    """What changed in the mesh or the cage since ``request`` was made (e.g. during a modal bind), or None.
+
+    The weights reproduce the mesh as it was from the cage as it was, both in the mesh's space: a vertex or object
+    moved since would make the deformer add that move to the mesh."""
+    if (topology_fingerprint(mesh_obj.data) != request.mesh_topology
+            or not np.array_equal(vertex_positions(mesh_obj.data), request.points)):
+        return f"'{mesh_obj.name}' was edited during the bind"
+    cage_eval = cage_obj.evaluated_get(depsgraph)
+    cage_mesh = cage_eval.to_mesh()
+    try:
+        if topology_fingerprint(cage_mesh) != request.cage_topology:
+            return f"the cage '{cage_obj.name}' was edited during the bind"
+        matrix = cage_to_mesh_matrix(cage_eval, mesh_obj.evaluated_get(depsgraph))
+        if not np.array_equal(to_local(matrix, vertex_positions(cage_mesh)), request.cage_points):
+            return f"the cage '{cage_obj.name}' or '{mesh_obj.name}' was moved or edited during the bind"
+    finally:
+        cage_eval.to_mesh_clear()
+    return None
+
+
 def _outward(faces, matrix):
     """``faces`` as they point after ``matrix`` (4×4): reversed where it mirrors."""
     return [face[::-1] for face in faces] if np.linalg.det(np.array(matrix)[:3, :3]) < 0 else faces

@@ -75,6 +75,15 @@ def _solve_printing(requests):
     return pairs
 
 
+def _in_edit_mode(pairs):
+    """The name of the first mesh of the solved (request, result) pairs that is in Edit Mode now, or None."""
+    for request, _ in pairs or ():
+        mesh_obj = geometry.find_object(request.mesh_uid)
+        if mesh_obj is not None and mesh_obj.type == "MESH" and mesh_obj.data.is_editmode:
+            return mesh_obj.name
+    return None
+
+
 class _Binder:
     """What Bind and Rebind share: snapshot on the main thread, solve (modal or not), apply.
 
@@ -137,6 +146,12 @@ class _Binder:
             state = "cancelling" if worker.cancelled else f"{100 * worker.fraction:.0f}% {worker.message}"
             context.workspace.status_text_set(f"LBC bind: {state} (Esc to cancel)")
             return {"RUNNING_MODAL"}
+        editing = _in_edit_mode(worker.results)
+        if editing and not worker.cancelled and worker.error is None:
+            # Leaving Edit Mode writes the edit mesh back over the mesh data, weights included: wait for it.
+            context.workspace.status_text_set(f"LBC bind: solved; switch '{editing}' to Object Mode to apply it "
+                                              "(Esc to cancel)")
+            return {"RUNNING_MODAL"}
         self._finish(context)
         if worker.cancelled:
             self.report({"WARNING"}, "Bind cancelled: nothing changed")
@@ -149,6 +164,12 @@ class _Binder:
             return {"CANCELLED"}
         self.report({"INFO"}, f"{_bound_summary(bound)} in {sum(o.lbc.bind_seconds for o in bound):.1f} s")
         return {"FINISHED"}
+
+    def cancel(self, context):
+        """Blender ends the modal operator itself (its window closed, another file opened): stop the solve and let
+        later binds run (without this, every poll would say a bind is running, and Esc could no longer reach it)."""
+        self._worker.cancel()
+        self._finish(context)
 
     def _finish(self, context):
         context.window_manager.event_timer_remove(self._timer)

@@ -20,8 +20,12 @@ def apply(request, result):
     mesh_obj, cage_obj = geometry.find_object(request.mesh_uid), geometry.find_object(request.cage_uid)
     if mesh_obj is None or cage_obj is None:
         raise CageError(f"'{request.mesh_name}' or its cage was deleted during the bind: nothing was bound")
-    if geometry.topology_fingerprint(mesh_obj.data) != request.mesh_topology:
-        raise CageError(f"'{mesh_obj.name}' was edited during the bind: bind again")
+    if mesh_obj.data.is_editmode:
+        raise CageError(f"'{mesh_obj.name}' is in Edit Mode, which would write over the weights on leaving it: switch "
+                        "to Object Mode and bind again")
+    changed = geometry.changed_since(request, mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get())
+    if changed:
+        raise CageError(f"{changed}: nothing was bound; bind again")
     saved = _SavedBinding(mesh_obj)
     try:
         replaced_group = _write(mesh_obj, cage_obj, request, result)

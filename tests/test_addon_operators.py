@@ -285,6 +285,36 @@ def test_esc_during_a_modal_bind_cancels_it_and_changes_nothing():
     assert not is_bound(mesh)
 
 
+def test_a_modal_bind_blender_ends_itself_is_cancelled_and_lets_later_binds_run():
+    """Blender calls cancel() when it removes a modal handler (its window closed, another file opened)."""
+    from lbc_addon.operators import OBJECT_OT_lbc_bind, _running
+
+    mesh, cage = sphere_in_box_scene()
+    harness = _ModalHarness(_requests(mesh, cage))
+    OBJECT_OT_lbc_bind.cancel(harness, harness.context)
+    harness._worker._thread.join(60)
+    assert harness._worker.cancelled and not _running and harness.status[-1] is None
+    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[mesh, cage]):
+        assert bpy.ops.object.lbc_bind.poll()
+    assert not is_bound(mesh)
+
+
+def test_a_modal_bind_waits_for_its_mesh_to_leave_edit_mode_before_writing():
+    mesh, cage = sphere_in_box_scene()
+    harness = _ModalHarness(_requests(mesh, cage))
+    harness._worker._thread.join(60)
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        bpy.ops.object.mode_set(mode="EDIT")  # Tab during the solve
+        from lbc_addon.operators import OBJECT_OT_lbc_bind
+
+        for _ in range(3):
+            assert OBJECT_OT_lbc_bind.modal(harness, harness.context, _Event("TIMER")) == {"RUNNING_MODAL"}
+        assert harness.status[-1].startswith("LBC bind: solved; switch 'Sphere' to Object Mode to apply it")
+        assert not is_bound(mesh)
+        bpy.ops.object.mode_set(mode="OBJECT")
+    assert harness.run() == {"FINISHED"} and is_bound(mesh)
+
+
 def test_rebind_all_binds_every_mesh_of_the_active_cage_again_with_its_own_options():
     mesh, cage = sphere_in_box_scene()
     second = mesh_object("Second", positions(mesh.data) * 0.5, [list(p.vertices) for p in mesh.data.polygons],

@@ -57,6 +57,36 @@ def test_apply_refuses_a_mesh_edited_during_the_solve():
     assert mesh_state(mesh) == before
 
 
+@pytest.mark.parametrize("change", ["cage vertex", "cage object", "mesh vertex", "edit mode"])
+def test_apply_refuses_a_cage_or_mesh_changed_during_the_solve(change):
+    mesh, cage = sphere_in_box_scene()
+    request = _request(mesh, cage)
+    result = jobs.solve(request)
+    if change == "cage vertex":
+        cage.data.vertices[0].co.x -= 0.1
+        cage.data.update()
+    elif change == "cage object":
+        cage.location.z += 0.1
+    elif change == "mesh vertex":
+        mesh.data.vertices[0].co.x += 0.01
+        mesh.data.update()
+    else:
+        with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+            bpy.ops.object.mode_set(mode="EDIT")
+    before = mesh_state(mesh) if change != "edit mode" else None
+    message = {"cage vertex": "the cage 'Box' or 'Sphere' was moved or edited during the bind",
+               "cage object": "the cage 'Box' or 'Sphere' was moved or edited during the bind",
+               "mesh vertex": "'Sphere' was edited during the bind", "edit mode": "'Sphere' is in Edit Mode"}[change]
+    with pytest.raises(CageError, match=message):
+        writing.apply(request, result)
+    assert not is_bound(mesh)
+    if before is not None:
+        assert mesh_state(mesh) == before
+    else:
+        with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+            bpy.ops.object.mode_set(mode="OBJECT")
+
+
 def test_apply_refuses_a_cage_deleted_during_the_solve():
     mesh, cage = sphere_in_box_scene()
     request = _request(mesh, cage)
@@ -94,14 +124,15 @@ WRITE_STEPS = [(storage, "write"), (deformer, "build_node_group"), (deformer, "s
 def test_a_failure_at_any_write_step_leaves_the_scene_bit_for_bit_as_before(monkeypatch, replacing):
     mesh, cage = sphere_in_box_scene()
     mesh.modifiers.new("Smooth", "SMOOTH")
-    request = _request(mesh, cage)
-    result = jobs.solve(request)
     if replacing:
-        writing.apply(request, jobs.solve(_request(mesh, cage, cells=600)))
+        first = _request(mesh, cage, cells=600)
+        writing.apply(first, jobs.solve(first))
         mesh.modifiers.move(0, 1)  # the artist moved the deformer below Smooth and set its inputs
         deformer.set_inputs(deformer.find_modifier(mesh), {"Strength": 0.5, "Vertex Group": "top"})
         influence.show(mesh, 3)
         cage.location.x += 0.2
+    request = _request(mesh, cage)  # binding again to the cage where it now is
+    result = jobs.solve(request)
     before, users = _binding_state(mesh), cage.users
     deformed = evaluated_positions(mesh)
     for module, name in WRITE_STEPS:
