@@ -943,10 +943,10 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
     else:
         progress(0.0, "ADMM: starting from the previous solve")
         initial = step.carried_state(start)
-    value, out, _, residual, residual_norm, _ = advance(initial, None, period)
+    iteration = min(period, max_iterations)
+    value, out, _, residual, residual_norm, _ = advance(initial, None, iteration)
     history = []
     converged = False
-    iteration = period
     fraction, first_distance, checks = 0.0, None, []
     primal_scale, early_check_done = None, False  # the last scheduled check's scale; one early check per window
     next_check = check_every
@@ -957,15 +957,20 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         if candidate is None:
             candidate = value
         count = min(period, max_iterations - iteration)
-        last, out = (out if count == 1 else None), None
-        next_value, out, previous, next_residual, next_norm, last_norm = advance(candidate, last, count)
+        before, out = out, None  # the step that made ``value``: a count of 1 needs it for its residuals
+        next_value, out, previous, next_residual, next_norm, last_norm = advance(
+            candidate, before if count == 1 else None, count)
         iteration += count
-        if candidate is not value and next_norm > residual_norm:
-            # Safeguard: the extrapolation did not reduce the residual; take the plain steps instead.
+        retry = min(count, max_iterations - iteration)
+        if candidate is not value and next_norm > residual_norm and retry:
+            # Safeguard: the extrapolation did not reduce the residual; take the plain steps instead (within the
+            # iteration limit; without steps left, the extrapolated ones stand).
             anderson.reset()
             candidate = value
-            next_value, out, previous, next_residual, next_norm, last_norm = advance(candidate, last, count)
-            iteration += count
+            next_value, out, previous, next_residual, next_norm, last_norm = advance(candidate,
+                                                                                     before if retry == 1 else None,
+                                                                                     retry)
+            iteration += retry
         elif anderson and residual is not None:
             anderson.push(next_value, next_residual, value, residual)
             progress.check()

@@ -247,3 +247,11 @@ def test_a_change_of_penalty_keeps_the_split_variables_and_rescales_the_duals():
     np.testing.assert_allclose(new_x - new_x * new_kept, (v_x - v_x * kept) / 4.0, atol=1e-12)  # Ũ / 4
     np.testing.assert_allclose(np.clip(new_w, 0.0, p.sqrt_mass), W, atol=1e-12)  # W̃ stays
     np.testing.assert_allclose(new_w - W, (v_w - W) / 4.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("limit", [1, 2, 4, 7])
+def test_the_iteration_limit_is_kept(limit):
+    """A code review's finding: the first Anderson period ran whole (a limit of 1 or 2 ran 3), and a safeguarded
+    extrapolation could run a period past the limit."""
+    result = solve_pack(load_pack("LBClogo"), max_iterations=limit)
+    assert result.iterations == limit and not result.converged
