@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 
 from .core import CageError, flatten
-from .jobs import BindRequest
+from .jobs import BindRequest, check_options
 from .properties import DEFAULT_INFLUENCES, is_bound
 
 
@@ -157,6 +157,9 @@ def not_editable_here(mesh_obj):
 def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
              thinning=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
     """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
+    options = {"cells": cells, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
+               "thinning": thinning, "influences": influences, "mode": mode}
+    check_options(options)
     for role, obj in (("mesh", mesh_obj), ("cage", cage_obj)):
         if not isinstance(obj, bpy.types.Object):
             raise CageError(f"the {role} to bind is {obj!r}, not an object: pass it as e.g. bpy.data.objects['Name'] "
@@ -230,8 +233,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         cage_points=cage_points,
         cage_faces=cage_faces,
         flat=flat,
-        options={"cells": cells, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
-                 "thinning": thinning, "influences": influences, "mode": mode},
+        options=options,
         cage_topology=cage_topology,
         mesh_topology=topology_fingerprint(mesh_obj.data),
         warnings=[warning for warning in (render_warning(mesh_obj, cage_obj),) if warning],

@@ -18,6 +18,7 @@ cage solve it once and each is only evaluated at its vertices. The previous bind
 vertices), too large for the .blend, so a reopened file, or a mesh bound long ago, binds from scratch.
 """
 
+import numbers
 import threading
 import time
 from collections import OrderedDict
@@ -114,6 +115,23 @@ class BindResult:
     thinned: object = None  # the thinned weights (scipy.sparse, one column per control point), kept likewise
     rebind: str = ""  # for a bind that had a previous binding to start from: how it went (lbc_core.rebind)
     stages: dict = field(default_factory=dict)  # seconds: lbc_core's stages, then "thinning" and "slots"
+
+
+MODES = ("AUTO", "2D", "3D")  # the Dimension choices (properties.MODE_ITEMS)
+
+
+def check_options(options):
+    """Raise CageError for options a bind would fail on or misuse, before any work: lbc_core's (through
+    :func:`core_options`), and the add-on's own Thinning, Max Influences and Dimension, which a script can set to
+    anything the UI's properties would not allow."""
+    core_options(options)
+    thinning, influences, mode = options["thinning"], options["influences"], options["mode"]
+    if isinstance(thinning, bool) or not isinstance(thinning, numbers.Real) or not thinning >= 0:
+        raise CageError(f"thinning must be a number of at least 0 (0: the default, {DEFAULT_FLOOR}), not {thinning!r}")
+    if isinstance(influences, bool) or not isinstance(influences, numbers.Integral) or influences < 0:
+        raise CageError(f"influences must be a whole number of at least 0 (0: no limit), not {influences!r}")
+    if mode not in MODES:
+        raise CageError(f"mode must be one of {', '.join(map(repr, MODES))}, not {mode!r}")
 
 
 def core_options(options):

@@ -282,3 +282,20 @@ def test_api_refuses_at_once_when_the_extension_is_not_enabled():
     finally:
         register_addon()
     assert not is_bound(mesh)
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("mode", "3d", "mode must be one of 'AUTO', '2D', '3D', not '3d'"),
+    ("influences", None, "influences must be a whole number of at least 0 .* not None"),
+    ("influences", 2.5, "influences must be a whole number"),
+    ("thinning", -0.05, r"thinning must be a number of at least 0 \(0: the default, 0.005\), not -0.05"),
+    ("cells", -5, "cells"),
+])
+def test_api_bind_refuses_bad_options_before_any_work(option, value, message, monkeypatch):
+    """A code review's finding: mode '3d' and influences None failed with a TypeError after the solve, and a negative
+    thinning gave cage vertex 0 weight on rows that had none."""
+    mesh, cage = sphere_in_box_scene()
+    monkeypatch.setattr(jobs, "solve", lambda *args, **kwargs: pytest.fail("solved"))
+    with pytest.raises(api.CageError, match=message):
+        api.bind(mesh, cage, **{option: value})
+    assert not is_bound(mesh)

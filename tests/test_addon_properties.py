@@ -48,3 +48,10 @@ def test_a_file_saved_before_the_cells_rename_keeps_its_cell_count(tmp_path):
     bpy.ops.wm.open_mainfile(filepath=path)
     reopened = bpy.data.objects[name]
     assert reopened.lbc.cells == 600 and reopened.lbc.get("resolution") is None
+
+
+def test_the_dimension_choices_are_the_ones_the_options_check_accepts():
+    from lbc_addon import jobs
+    from lbc_addon.properties import MODE_ITEMS
+
+    assert sorted(item[0] for item in MODE_ITEMS) == sorted(jobs.MODES)
