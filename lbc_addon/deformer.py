@@ -291,7 +291,7 @@ def _switch(nodes, input_type, location):
 
 def _single_value(socket):
     """Make a group input a single value, never a field (no attribute toggle on the modifier): what the Switch
-    nodes of :func:`_offset` need to evaluate one input only. 4.5 and newer say it with ``structure_type``."""
+    nodes of :func:`_scaled` need to evaluate one input only. 4.5 and newer say it with ``structure_type``."""
     if hasattr(socket, "structure_type"):
         socket.structure_type = "SINGLE"
     else:
