@@ -25,6 +25,7 @@ DEFAULT_CELLS_3D = _options.DEFAULT_CELLS[3]
 DEFAULT_TOLERANCE = _solver.DEFAULT_TOLERANCE
 POSED_APART = _cage.POSED_APART
 flatten = _planar.flatten
+reframed = _planar.reframed
 DEFAULT_FLOOR = _thinning.DEFAULT_FLOOR
 thin_weights = _thinning.thin_weights
 thin_changed_rows = _thinning.thin_changed_rows

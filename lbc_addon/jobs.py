@@ -22,12 +22,12 @@ import numbers
 import threading
 import time
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from . import storage
-from .core import DEFAULT_FLOOR, WARM, CageError, lbc_core, solved_again_text, thin_changed_rows, thin_weights
+from .core import DEFAULT_FLOOR, WARM, CageError, lbc_core, reframed, solved_again_text, thin_changed_rows, thin_weights
 
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
@@ -48,6 +48,7 @@ class _Previous:
     loop: np.ndarray  # the flat cage's outline of a 2D bind, else None
     binding: object  # lbc_core.Binding
     thinned: object  # the binding's weights thinned as the options say (scipy.sparse, one column per control point)
+    plane: tuple = None  # a 2D bind's (origin, axes): the frame of its flat cage's plane
 
 
 _previous = OrderedDict()  # mesh session_uid -> _Previous, the most recent last
@@ -113,6 +114,7 @@ class BindResult:
     welded: str = ""  # "copy:kept,..." cage vertices welded into one control point (the deformer reads the kept one)
     binding: object = None  # the lbc_core.Binding, kept for a later warm re-bind once applied
     thinned: object = None  # the thinned weights (scipy.sparse, one column per control point), kept likewise
+    plane: tuple = None  # a 2D bind's (origin, axes): the frame of its flat cage's plane, for a re-bind to keep
     rebind: str = ""  # for a bind that had a previous binding to start from: how it went (lbc_core.rebind)
     stages: dict = field(default_factory=dict)  # seconds: lbc_core's stages, then "thinning" and "slots"
 
@@ -202,8 +204,9 @@ def solve(request, progress=None, cancel=None, earlier=()):
     which it may start from as from a binding of this session (:func:`warm_start`).
     """
     start = time.perf_counter()
-    cage_vertices, faces, points, column_base = request.solve_geometry()
     previous = warm_start(request, earlier)
+    request = _in_plane_of(request, previous)
+    cage_vertices, faces, points, column_base = request.solve_geometry()
     try:
         if previous is not None:
             binding = lbc_core.rebind(previous.binding, cage_vertices, faces, points, progress=progress,
@@ -249,9 +252,19 @@ def solve(request, progress=None, cancel=None, earlier=()):
         seconds=time.perf_counter() - start,
         binding=binding,
         thinned=weights,
+        plane=None if request.flat is None else (request.flat.origin, request.flat.axes),
         rebind=_rebind_report(request, previous, binding),
         stages=stages,
     )
+
+
+def _in_plane_of(request, previous):
+    """A 2D request in the plane coordinates of the binding it starts from, so that only the cage vertices that moved
+    move in 2D; the request itself for a 3D one, or when the cage left that plane."""
+    if previous is None or previous.plane is None or request.flat is None:
+        return request
+    flat = reframed(request.flat, request.cage_points, request.points, *previous.plane)
+    return request if flat is None else replace(request, flat=flat)
 
 
 def _cage_modifiers_note(request, message):
@@ -320,7 +333,7 @@ def _same_solve(previous, request):
 def _as_previous(request, result):
     """The :class:`_Previous` record of a solved request."""
     return _Previous(request.mesh_uid, request.mesh_name, request.cage_uid, dict(request.options), request.loop,
-                     result.binding, result.thinned)
+                     result.binding, result.thinned, result.plane)
 
 
 def _rebind_report(request, previous, binding):

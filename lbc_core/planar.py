@@ -150,3 +150,32 @@ def flatten(cage_vertices, cage_faces, points, edges=None):
     origin, axes = frame
     loop = boundary_loop(cage_faces, edges)
     return FlatCage((cage_vertices[loop] - origin) @ axes.T, (points - origin) @ axes.T, loop, origin, axes)
+
+
+def reframed(flat, cage_vertices, points, origin, axes):
+    """``flat`` with its cage and points in another frame of their plane, or None when they leave that plane.
+
+    A re-bind of an edited flat cage uses the previous binding's frame: the plane's own (:func:`flat_frame`, from the
+    cage's mean and principal axes) shifts with every vertex moved, and every control point would move with it.
+
+    Parameters
+    ----------
+    flat : FlatCage
+    cage_vertices : (n, 3) float array
+    points : (m, 3) float array
+        As given to :func:`flatten`.
+    origin : (3,) float array
+    axes : (2, 3) float array
+        Orthonormal, as :class:`FlatCage` holds them.
+
+    Returns
+    -------
+    FlatCage or None
+    """
+    cage_vertices, points = np.asarray(cage_vertices, dtype=float), np.asarray(points, dtype=float)
+    normal = np.cross(axes[0], axes[1])
+    diagonal = np.linalg.norm(np.ptp(cage_vertices, axis=0))
+    for array in (cage_vertices, points):
+        if len(array) and np.abs((array - origin) @ normal).max() > FLAT_TOLERANCE * diagonal:
+            return None
+    return FlatCage((cage_vertices[flat.loop] - origin) @ axes.T, (points - origin) @ axes.T, flat.loop, origin, axes)

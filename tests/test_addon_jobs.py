@@ -216,3 +216,21 @@ def test_an_error_about_a_cage_with_a_modifier_off_in_viewports_says_so():
     with pytest.raises(jobs.CageError, match=r"not closed.*\(its modifier 'Mirror' is off in viewports, and the cage "
                                              r"is bound as viewports show it\)"):
         jobs.solve(open_box)
+
+
+def test_a_2d_re_bind_after_moving_one_cage_vertex_solves_only_near_it(monkeypatch, woody):
+    """A code review's finding: the flat cage's plane frame (its mean and principal axes) shifted with the edit, so
+    every control point moved in 2D and the re-bind started from scratch. It keeps the first bind's frame now."""
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    outline, inside, _ = woody
+    cage = np.c_[outline, np.full(len(outline), 0.3)]  # the woody cage as a flat n-gon in Blender
+    points = np.c_[inside[:400], np.full(400, 0.3)]
+    faces = [list(range(len(outline)))]
+    first = request(cage, faces, points, flat=flatten(cage, faces, points))
+    jobs.remember(first, jobs.solve(first))
+    edited = cage.copy()
+    edited[5, :2] += 0.02 * np.ptp(outline, axis=0)  # one vertex moved, in the plane
+    again = jobs.solve(request(edited, faces, points, flat=flatten(edited, faces, points)))
+    counts = again.binding.options["solved_again"]
+    assert 0 < counts["cells solved"] < counts["cells"] / 4
+    np.testing.assert_allclose(again.rest, points, atol=1e-5 * np.ptp(outline))  # the mesh at rest, in 3D
