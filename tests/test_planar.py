@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from lbc_core import CageError
-from lbc_core.planar import boundary_loop, flat_frame, flatten
+from lbc_core.planar import boundary_loop, flat_frame, flatten, reframed
 
 
 def grid(size=3):
@@ -59,3 +59,18 @@ def test_flatten_gives_the_outline_polygon_and_the_points_in_the_plane():
     assert np.allclose(np.linalg.norm(np.diff(flat.polygon, axis=0), axis=1), 1.0)
     assert np.isclose(np.linalg.norm(flat.points[1] - flat.points[0]), np.linalg.norm(points[1] - points[0]))
     assert flatten(vertices, quads, points + [0.0, 0.0, 0.1]) is None
+
+
+def test_reframed_keeps_another_frame_of_the_plane_and_refuses_to_leave_it():
+    square = np.array([[0, 0, 2], [1, 0, 2], [1, 1, 2], [0, 1, 2]], dtype=float)
+    points = np.array([[0.5, 0.5, 2.0]])
+    flat = flatten(square, [[0, 1, 2, 3]], points)
+    moved = square.copy()
+    moved[2, :2] = [1.3, 1.2]  # in the plane: its own frame would shift every vertex
+    again = reframed(flatten(moved, [[0, 1, 2, 3]], points), moved, points, flat.origin, flat.axes)
+    changed = np.flatnonzero(np.abs(again.polygon - flat.polygon).max(axis=1) > 1e-12)
+    assert flat.loop[changed].tolist() == [2]
+    np.testing.assert_allclose(again.points, flat.points)
+    lifted = moved.copy()
+    lifted[2, 2] += 0.1  # out of that plane
+    assert reframed(flat, lifted, points, flat.origin, flat.axes) is None
