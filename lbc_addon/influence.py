@@ -37,6 +37,16 @@ def selected_cage_vertex(cage_obj):
     return int(selected[0]) if len(selected) else None
 
 
+def kept_vertex(welded, cage_vertex):
+    """The cage vertex whose slots hold ``cage_vertex``'s weights: the one it was welded to at bind time (the
+    binding's "copy:kept,..." pairs), else itself."""
+    for pair in filter(None, welded.split(",")):
+        copy, kept = map(int, pair.split(":"))
+        if copy == cage_vertex:
+            return kept
+    return cage_vertex
+
+
 def vertex_weights(mesh, cage_vertex):
     """Each mesh vertex's weight for one cage vertex, from the cached slots."""
     index, weight = storage.read(mesh)
@@ -69,7 +79,7 @@ def show(mesh_obj, cage_vertex):
     """
     mesh = mesh_obj.data
     settings = mesh_obj.lbc
-    values = vertex_weights(mesh, cage_vertex)
+    values = vertex_weights(mesh, kept_vertex(settings.welded, cage_vertex))
     peak = float(values.max()) if len(values) else 0.0
     attribute = mesh.color_attributes.get(ATTRIBUTE_NAME)
     if attribute is None:

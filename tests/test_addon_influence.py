@@ -53,3 +53,9 @@ def test_ramp_goes_from_dark_blue_to_red():
     colors = influence.ramp(np.array([0.0, 1.0, 2.0]))
     assert colors[0, 2] > colors[0, 0] and colors[1, 0] > colors[1, 2]
     assert np.array_equal(colors[1], colors[2]) and np.all(colors[:, 3] == 1)
+
+
+def test_a_welded_copy_shows_the_weights_of_the_vertex_it_was_welded_to():
+    """A code review's finding: the slots hold only the kept vertex, so selecting its copy painted zeros."""
+    assert influence.kept_vertex("7:3,9:4", 9) == 4 and influence.kept_vertex("7:3,9:4", 3) == 3
+    assert influence.kept_vertex("", 5) == 5
