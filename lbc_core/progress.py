@@ -29,9 +29,14 @@ class Progress:
 
     @classmethod
     def of(cls, progress=None, cancel=None):
-        """``progress`` when it already is a Progress, else a new one over the two callbacks."""
+        """``progress`` when it already is a Progress (a ``cancel`` given beside it is polled too), else a new one
+        over the two callbacks."""
         if isinstance(progress, Progress):
-            return progress
+            if cancel is None:
+                return progress
+            inner = progress._cancel
+            return cls(progress._progress, cancel if inner is None else lambda: inner() or cancel(), progress.start,
+                       progress.end)
         return cls(progress, cancel)
 
     def check(self):

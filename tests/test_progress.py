@@ -33,3 +33,18 @@ def test_of_keeps_a_progress_and_wraps_callbacks():
     seen = []
     Progress.of(lambda f, m: seen.append(f), None)(1.0, "done")
     assert seen == [1.0]
+
+
+def test_of_a_progress_with_a_cancel_beside_it_polls_both():
+    """A code review's finding: the cancel given beside a Progress was dropped."""
+    told = []
+    outer = Progress(lambda fraction, message: told.append(fraction)).part(0.5, 1.0)
+    stop = []
+    both = Progress.of(outer, lambda: bool(stop))
+    both(0.5, "half")
+    assert told == [0.75]
+    stop.append(1)
+    with pytest.raises(Cancelled):
+        both.check()
+    with pytest.raises(Cancelled):
+        Progress.of(Progress(None, lambda: True), lambda: False).check()  # the Progress's own cancel still counts
