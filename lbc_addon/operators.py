@@ -14,7 +14,7 @@ import bpy
 
 from . import geometry, influence, jobs, writing
 from .core import CageError, Cancelled
-from .properties import BindOptions, bound_to, is_bound
+from .properties import OPTION_NAMES, BindOptionProperties, bound_to, is_bound
 
 _running = []  # the Worker of the bind in progress: one at a time, so two binds never write the same mesh
 
@@ -215,7 +215,7 @@ def _bind_poll_message(context):
     return None
 
 
-class OBJECT_OT_lbc_bind(_Binder, BindOptions, bpy.types.Operator):
+class OBJECT_OT_lbc_bind(_Binder, BindOptionProperties, bpy.types.Operator):
     """Bind the selected meshes to the active cage with Local Barycentric Coordinates"""
 
     bl_idname = "object.lbc_bind"
@@ -234,7 +234,7 @@ class OBJECT_OT_lbc_bind(_Binder, BindOptions, bpy.types.Operator):
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
-        for name in ("mode", "cells", "weighting", "epsilon", "tolerance", "thinning", "influences"):
+        for name in OPTION_NAMES:
             layout.prop(self, name)
 
 

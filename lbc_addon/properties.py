@@ -37,9 +37,11 @@ STATE_ITEMS = (
 )
 
 
-class BindOptions:
-    """The bind options shared by the operators' properties and the stored binding (annotations only)."""
+class BindOptionProperties:
+    """The bind options shared by the operators' properties and the stored binding (annotations only), in the order
+    the Bind operator shows them."""
 
+    mode: EnumProperty(name="Dimension", items=MODE_ITEMS, default="AUTO")
     cells: IntProperty(
         name="Cells",
         description=f"About how many cells (triangles in 2D, tetrahedra in 3D) fill the cage; 0 uses lbc's default "
@@ -88,22 +90,16 @@ class BindOptions:
         min=0,
         soft_max=32,
     )
-    mode: EnumProperty(name="Dimension", items=MODE_ITEMS, default="AUTO")
 
     def bind_options(self):
         """The options as keyword arguments for :func:`lbc_addon.geometry.snapshot`."""
-        return {
-            "cells": self.cells,
-            "weighting": self.weighting,
-            "epsilon": self.epsilon,
-            "tolerance": self.tolerance,
-            "thinning": self.thinning,
-            "influences": self.influences,
-            "mode": self.mode,
-        }
+        return {name: getattr(self, name) for name in OPTION_NAMES}
 
 
-class LBC_PG_binding(BindOptions, bpy.types.PropertyGroup):
+OPTION_NAMES = tuple(BindOptionProperties.__annotations__)
+
+
+class LBC_PG_binding(BindOptionProperties, bpy.types.PropertyGroup):
     """A mesh object's binding to a cage."""
 
     is_bound: BoolProperty(name="Bound", default=False)
