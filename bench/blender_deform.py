@@ -1,7 +1,7 @@
 """Per-frame cost of the LBC deformer against Blender's Mesh Deform on the same mesh, cage and poses.
 
     PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
-        [--modes edit,playback] [--thin 0.002:0,0.005:12,0.005:0:0] [--sums chain,fma,fma-vector]
+        [--modes edit,playback] [--thin 0.002:0,0.005:12] [--sums chain,fma,fma-vector]
         [--shared 0,11,12] [--trees direct,pairs,points,sorted,triplets] [--reference-cells 16000] [--handler-off]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
@@ -17,8 +17,7 @@ Scenes: Suzanne subdivided to 48,612 vertices in a 56-vertex box cage, and the d
 levels: 64,130 vertices) in its 67-vertex cage L10; "suzanne507", Suzanne as Blender makes her (507 vertices) in the
 same cage, shows the deformer's cost that does not grow with the vertices. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
 the add-on's defaults, LBC with every weight (bound with a threshold of 1e-12: nothing thinned), LBC with every
-weight thinned by other thresholds and caps (``--thin floor:cap[:rise]``, rise the floor's rise with the weights'
-spread, the default's when left out, 0 a constant floor; see :func:`lbc_core.thinning.thin_weights`),
+weight thinned by other thresholds and caps (``--thin floor:cap``; see :func:`lbc_core.thinning.thin_weights`),
 LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`), the default's weights with
 another number of slots evaluated for every vertex (``--shared``; see :func:`lbc_addon.deformer.build_node_group`),
 and the default's tree changed by another lever (``--trees``; see :func:`rebuild_tree`, and :func:`triplet_variant`
@@ -51,7 +50,7 @@ from blender_scenes import (  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
 from lbc_addon import api, deformer, storage  # noqa: E402
-from lbc_core.thinning import SPREAD_RISE, thin_weights  # noqa: E402
+from lbc_core.thinning import thin_weights  # noqa: E402
 
 EVERY_WEIGHT = 1e-12  # a Threshold that thins nothing
 
@@ -101,7 +100,7 @@ def copy_object(mesh, name):
 
 
 def lbc_variant(bound, cage, name, thinning=None, sum_form=None, shared_slots=None, tree=None):
-    """A copy of the bound mesh deformed by LBC, its weights thinned by ``thinning`` = (floor, cap, rise) (None: as
+    """A copy of the bound mesh deformed by LBC, its weights thinned by ``thinning`` = (floor, cap) (None: as
     bound; see :func:`lbc_core.thinning.thin_weights`), its weighted sum built as ``sum_form`` (see
     :func:`rebuild_sum`; None: the add-on's), the slots every vertex evaluates ``shared_slots`` (see
     :func:`lbc_addon.deformer.build_node_group`; None: the add-on's choice), its tree changed as ``tree`` says (see
@@ -509,9 +508,9 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
         bpy.context.scene.collection.objects.unlink(fine)
         compare(f"LBC {reference_cells} cells", mesh, "the default resolution's")
         del variants[f"LBC {reference_cells} cells"]
-    for floor, cap, rise in thinnings:
-        key = f"LBC thin {floor:g}:{cap}:{rise:g}"
-        variants[key] = lbc_variant(mesh, cage, key, (floor, cap, rise))
+    for floor, cap in thinnings:
+        key = f"LBC thin {floor:g}:{cap}"
+        variants[key] = lbc_variant(mesh, cage, key, (floor, cap))
         compare(key, mesh, "every weight")
         print(f"    (K = {storage.slot_count(variants[key].data)} after thinning)")
     for form in sum_forms:  # at every weight, and as bound by default
@@ -550,9 +549,9 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
 
 
 def thinning(text):
-    """(floor, cap, rise) from "floor:cap" or "floor:cap:rise" (rise left out: the default's)."""
-    fields = text.split(":")
-    return float(fields[0]), int(fields[1]), float(fields[2]) if len(fields) > 2 else SPREAD_RISE
+    """(floor, cap) from "floor:cap"."""
+    floor, cap = text.split(":")
+    return float(floor), int(cap)
 
 
 def main(argv=None):
@@ -560,8 +559,8 @@ def main(argv=None):
     parser.add_argument("--frames", type=int, default=31, help="timed frames per variant (interleaved rounds)")
     parser.add_argument("--scenes", default="suzanne,gargoyle")
     parser.add_argument("--thin", default="",
-                        help="comma-separated floor:cap[:rise] thinnings of every weight to measure besides the "
-                        "default (see lbc_core.thinning.thin_weights), e.g. 0.002:0,0.005:12,0.005:0:0")
+                        help="comma-separated floor:cap thinnings of every weight to measure besides the "
+                        "default (see lbc_core.thinning.thin_weights), e.g. 0.002:0,0.005:12")
     parser.add_argument("--sums", default="",
                         help="comma-separated other shapes of the weighted sum: chain,fma,fma-vector")
     parser.add_argument("--reference-cells", type=int, default=0,

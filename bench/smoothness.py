@@ -12,7 +12,7 @@
               settings (``--settings 0.002:0,0.005:12``), against Mesh Deform precision 5 in the same process.
 --thinning    the add-on's thinning levers (issue 10, item 6) on the weights of lbc_core binds (float64): the capsule,
               Suzanne in its box cage and the demo gargoyle (bench/blender_deform.py's scenes); per setting
-              ``--thinnings floor:cap:rise`` (lbc_core.thinning.thin_weights) the influences per point, the capsule's
+              ``--thinnings floor:cap`` (lbc_core.thinning.thin_weights) the influences per point, the capsule's
               kinks, the kinks a 60° bend of Suzanne's and the gargoyle's cage gains over every weight (Mesh Deform's
               too, as a yardstick), and the largest distance to every weight over blender_deform.py's three poses,
               beside every weight's distance to a 16,000-cell bind.
@@ -163,7 +163,7 @@ def bench_thinning(settings):
         scenes[name] = (world_vertices(mesh_obj), triangles(faces_of(mesh_obj)), world_vertices(cage_obj),
                         faces_of(cage_obj))
     print(f"thinning levers; {load()}")
-    print("| scene | setting (floor : cap : rise) | influences mean / max | kinks p99 / max (capsule: of the bend; "
+    print("| scene | setting (floor : cap) | influences mean / max | kinks p99 / max (capsule: of the bend; "
           "others: gained over every weight) | distance to every weight |")
     print("| --- | --- | --- | --- | --- |")
     for name, (points, faces, cage, cage_faces) in scenes.items():
@@ -187,11 +187,11 @@ def bench_thinning(settings):
             print(f"| {name} | every weight, 16,000 cells | — | — | {distance(fine.weights, binding.weights):.2e} |")
             print(f"| {name} | Mesh Deform, precision 5 | — | {np.percentile(gained, 99):.2f}° / {gained.max():.2f}° "
                   "| — |")
-        for floor, cap, rise in settings:
-            thinned = thin_weights(binding.weights, rest, binding.weights @ rest, floor, cap, rise)
+        for floor, cap in settings:
+            thinned = thin_weights(binding.weights, rest, binding.weights @ rest, floor, cap)
             counts = np.diff(thinned.indptr)
             values = capsule.kinks(points, moved(thinned, bent), faces) - (0 if name == "capsule" else every)
-            print(f"| {name} | {floor:g} : {cap} : {rise:g} | {counts.mean():.1f} / {counts.max()} "
+            print(f"| {name} | {floor:g} : {cap} | {counts.mean():.1f} / {counts.max()} "
                   f"| {np.percentile(values, 99):.2f}° / {values.max():.2f}° "
                   f"| {distance(thinned, binding.weights):.2e} |", flush=True)
 
@@ -523,8 +523,8 @@ def main(argv=None):
     parser.add_argument("--settings", default="0:0,1e-12:0,0.002:0,0.01:0,0.005:12,0.005:16",
                         help="--addon: comma-separated Threshold:Max Influences settings (0:0 is the defaults, "
                         "1e-12:0 every weight)")
-    parser.add_argument("--thinnings", default="0.005:0:0,0.005:0:2,0.005:0:4,0.005:12:0,0.005:14:0",
-                        help="--thinning: comma-separated floor:cap:rise settings (lbc_core.thinning.thin_weights)")
+    parser.add_argument("--thinnings", default="0.005:0,0.005:12,0.005:14",
+                        help="--thinning: comma-separated floor:cap settings (lbc_core.thinning.thin_weights)")
     parser.add_argument("--baseline", default="main",
                         help="--evaluation, --speed: the git revision whose evaluation, reduction and thinning to time "
                         "against")
@@ -540,8 +540,8 @@ def main(argv=None):
     if args.addon:
         bench_addon([(float(value.split(":")[0]), int(value.split(":")[1])) for value in args.settings.split(",")])
     if args.thinning:
-        bench_thinning([(float(floor), int(cap), float(rise))
-                        for floor, cap, rise in (value.split(":") for value in args.thinnings.split(","))])
+        bench_thinning([(float(floor), int(cap))
+                        for floor, cap in (value.split(":") for value in args.thinnings.split(","))])
     if args.speed:
         bench_speed(args.baseline)
     if args.evaluation:

@@ -9,12 +9,9 @@ closest weights in the Kullback–Leibler sense, w''_j = w'_j exp(λ · (c_j −
 Newton steps), which keeps zeros at zero, stays positive and is smooth in w'. τ is a constant (the floor), smooth in
 the point; a cap on the count raises τ to the (K+1)-th largest weight, continuous but only piecewise smooth.
 
-On request (``spread_rise``) τ rises where a point's weights reach far, with their spread s = √(Σ w_j |c_j − x|²)
-(a fraction of the controls' extent, smooth in the point): deep inside a large cage many control points weigh about
-the same and the coordinates vary slowly, so a weight that fades out there bends a surface little. Points whose
-spread stays below :data:`SPREAD_ONSET` (issue 12's capsule: all of them) keep the constant floor. The default keeps
-the floor constant: on few-vertex cages a risen floor leaves many points weights that cannot reproduce them, whose
-relaxed threshold then differs from their neighbours' (spikes on a flat mesh in a box cage, bench/RESULTS.md).
+A floor that rose with the weights' spread was tried and withdrawn: on few-vertex cages it left many points weights
+that cannot reproduce them, whose relaxed threshold then differed from their neighbours' (spikes on a flat mesh in a
+box cage, bench/RESULTS.md, "The floor's rise withdrawn").
 """
 
 import numpy as np
@@ -27,14 +24,6 @@ from .progress import Progress
 # Default floor: the largest that keeps issue 12's capsule no more creased than Mesh Deform (bench/RESULTS.md).
 DEFAULT_FLOOR = 0.005
 
-# Where the floor starts to rise: the spread, as a fraction of the controls' extent, above the capsule's largest
-# (0.129); Suzanne deep in its box cage reaches 0.26, the demo gargoyle 0.15 (bench/RESULTS.md, "Blender deformer").
-SPREAD_ONSET = 0.13
-# τ = floor · (1 + rise · max(0, s / onset − 1)²): continuously differentiable in s. A rise of 2 took Suzanne's
-# deformer from 17 slots to 15, but spiked a flat grid in an 8-vertex box cage (88 of 5041 points, 0 at 0): the default
-# is 0, a constant floor (RESULTS).
-SPREAD_RISE = 0.0
-
 # Rows thinned by one thread at a time (about 0.05 s each); cancel is polled between rounds of one chunk per thread.
 ROWS_PER_CHUNK = 8192
 
@@ -44,8 +33,7 @@ ROWS_PER_CHUNK = 8192
 RELAXATIONS = 12
 
 
-def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influences=0, spread_rise=SPREAD_RISE,
-                 progress=None, cancel=None):
+def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influences=0, progress=None, cancel=None):
     """Each point's weights lowered by a threshold and clamped at 0, then made to sum to 1 and reproduce it again.
 
     Parameters
@@ -60,9 +48,6 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
         τ, subtracted from every weight (weights are fractions of 1; 0 keeps every weight).
     max_influences : int
         K > 0: τ is at least each point's (K+1)-th largest weight, so at most K weights stay; 0: no cap.
-    spread_rise : float
-        How fast the floor rises with the weights' spread beyond :data:`SPREAD_ONSET` (:func:`spread_floors`);
-        0 keeps it constant.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
         Polled between rounds of :data:`ROWS_PER_CHUNK` rows per thread; True stops with :class:`lbc_core.Cancelled`.
@@ -82,14 +67,14 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     m = weights.shape[0]
 
     def thin(rows):
-        return _thin_rows(weights[rows], controls, positions[rows], floor, max_influences, spread_rise)
+        return _thin_rows(weights[rows], controls, positions[rows], floor, max_influences)
 
     chunks = map_row_chunks(thin, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "thinning the weights"))
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
 
 
 def thin_changed_rows(thinned, before, weights, controls_before, controls, floor=DEFAULT_FLOOR, max_influences=0,
-                      spread_rise=SPREAD_RISE, progress=None, cancel=None):
+                      progress=None, cancel=None):
     """:func:`thin_weights` of ``weights`` when ``thinned`` is that of ``before``: only the rows that can differ are
     thinned again (a warm re-bind keeps the rows its edit cannot reach).
 
@@ -101,12 +86,12 @@ def thin_changed_rows(thinned, before, weights, controls_before, controls, floor
     Parameters
     ----------
     thinned : (m, n) scipy.sparse matrix
-        ``thin_weights(before, controls_before, before @ controls_before, floor, max_influences, spread_rise)``.
+        ``thin_weights(before, controls_before, before @ controls_before, floor, max_influences)``.
     before, weights : (m, n) scipy.sparse matrix
         The previous and the new weights (non-negative, summing to 1).
     controls_before, controls : (n, d) float array
         The control points ``before`` and ``weights`` reproduce with.
-    floor, max_influences, spread_rise, progress, cancel
+    floor, max_influences, progress, cancel
         As for :func:`thin_weights`, and the same as ``thinned`` was made with.
 
     Returns
@@ -119,8 +104,8 @@ def thin_changed_rows(thinned, before, weights, controls_before, controls, floor
     controls, controls_before = np.asarray(controls, dtype=float), np.asarray(controls_before, dtype=float)
     if (before.shape != weights.shape or controls_before.shape != controls.shape
             or controls_extent(controls_before) != controls_extent(controls)):
-        return thin_weights(weights, controls, weights @ controls, floor, max_influences, spread_rise, progress,
-                            cancel), weights.shape[0]
+        return (thin_weights(weights, controls, weights @ controls, floor, max_influences, progress, cancel),
+                weights.shape[0])
     difference = weights - before
     difference.eliminate_zeros()
     moved = np.flatnonzero(np.any(controls != controls_before, axis=1))
@@ -129,7 +114,7 @@ def thin_changed_rows(thinned, before, weights, controls_before, controls, floor
     if not len(again):
         return sp.csr_matrix(thinned), 0
     rows = weights[again]
-    thinned_again = thin_weights(rows, controls, rows @ controls, floor, max_influences, spread_rise, progress, cancel)
+    thinned_again = thin_weights(rows, controls, rows @ controls, floor, max_influences, progress, cancel)
     kept = sp.diags((~changed).astype(float)) @ sp.csr_matrix(thinned)
     kept.eliminate_zeros()
     return scatter_rows(kept, again, thinned_again), len(again)
@@ -140,7 +125,7 @@ def controls_extent(controls):
     return float(np.linalg.norm(np.ptp(controls, axis=0))) if len(controls) else 1.0
 
 
-def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise):
+def _thin_rows(weights, controls, positions, floor, max_influences):
     """:func:`thin_weights` on one chunk of rows."""
     values, columns = padded_rows(weights)
     order = np.argsort(-values, axis=1, kind="stable")
@@ -150,7 +135,7 @@ def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise)
     thinned = values.copy()  # rows that never reproduce keep their input
     pending = np.arange(len(values))
     slot_controls = controls[columns]  # (m, L, d)
-    floors = spread_floors(values, slot_controls, positions, extent, floor, spread_rise)
+    floors = np.full(len(values), float(floor))
     caps = np.full(len(values), int(max_influences))
     for _ in range(RELAXATIONS + 1):
         if not len(pending):
@@ -165,33 +150,6 @@ def _thin_rows(weights, controls, positions, floor, max_influences, spread_rise)
         floors[pending] /= 4
         caps[pending] += caps[pending] > 0
     return csr_from_padded(thinned, columns, weights.shape[1])
-
-
-def spread_floors(values, slot_controls, positions, extent, floor, rise=SPREAD_RISE):
-    """Each row's floor: ``floor``, raised smoothly where its weights reach far from the point.
-
-    τ = floor · (1 + rise · max(0, s / SPREAD_ONSET − 1)²), s = √(Σ_j w_j |c_j − x|²) / extent.
-
-    Parameters
-    ----------
-    values : (m, L) float array
-        Each row's weights (zero-padded), summing to 1.
-    slot_controls : (m, L, d) float array
-        The control point of each slot.
-    positions : (m, d) float array
-    extent : float
-        Length scale of the controls (their bounding box diagonal).
-    floor, rise : float
-
-    Returns
-    -------
-    (m,) float array
-    """
-    if rise == 0:
-        return np.full(len(values), float(floor))
-    squared = np.einsum("mk,mk->m", values, ((slot_controls - positions[:, None, :]) ** 2).sum(axis=2))
-    beyond = np.maximum(np.sqrt(np.maximum(squared, 0.0)) / (extent * SPREAD_ONSET) - 1.0, 0.0)
-    return float(floor) * (1.0 + rise * beyond ** 2)
 
 
 def thresholds(values, floors, caps):
