@@ -170,19 +170,6 @@ class Binding:
                     np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
 
 
-# bind and its checks lived here before the pipeline had its own module; scripts importing them from here still work
-# (read lazily: the pipeline imports this module).
-_MOVED_TO_PIPELINE = ("bind", "check_request", "check_points", "REPRODUCTION_TOLERANCE")
-
-
-def __getattr__(name):
-    if name in _MOVED_TO_PIPELINE:
-        from . import pipeline
-
-        return getattr(pipeline, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 FORMAT = "lbc-binding-1"
 # What load_binding accepts: a stored binding's rows sum to 1 and reproduce its points (the bound position) within
 # 1e-9 of the cage's diagonal; edited or damaged weights miss by far more.

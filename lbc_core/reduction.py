@@ -9,7 +9,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from .constraints import csr_from_padded, grow_support, padded_rows, restore_and_check, scatter_rows
-from .constraints import constraint_residuals, restore_constraints  # noqa: F401  (their home before constraints.py)
 from .parallel import map_row_chunks
 from .progress import Progress
 

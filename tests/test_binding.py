@@ -250,13 +250,3 @@ def test_fuzz_edited_arrays(square_file, tmp_path, key, edit, seed):
 
     path = _rewritten(square_file[0], tmp_path / "edited.npz", change)
     _loads_to_a_sound_binding_or_is_refused(path)
-
-
-def test_names_that_moved_to_the_pipeline_still_import_from_binding():
-    import lbc_core.binding as old_home
-    from lbc_core import pipeline
-
-    for name in ("bind", "check_request", "check_points", "REPRODUCTION_TOLERANCE"):
-        assert getattr(old_home, name) is getattr(pipeline, name)
-    with pytest.raises(AttributeError, match="no attribute 'solve'"):
-        old_home.solve

@@ -504,11 +504,3 @@ def test_2d_points_given_with_a_z_coordinate():
     assert binding.weights.shape == (len(GRID), len(STAR))
     with pytest.raises(CageError, match="z varies"):
         lbc_core.bind(STAR, None, np.zeros((2, 3)) + [[0, 0, 0], [0, 0, 1]], cells=300)
-
-
-def test_bind_and_its_checks_are_still_importable_from_their_old_module():
-    from lbc_core import binding, pipeline
-
-    for name in ("bind", "check_request", "check_points", "REPRODUCTION_TOLERANCE"):
-        assert getattr(binding, name) is getattr(pipeline, name)
-    assert lbc_core.bind is pipeline.bind

@@ -68,10 +68,3 @@ def test_reduce_reports_each_round_of_chunks_of_rows_and_stops_on_cancel(monkeyp
     with pytest.raises(Cancelled):
         reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, cancel=lambda: len(chunks) >= threads)
     assert len(chunks) == threads  # the first round ran, the second never started
-
-
-def test_the_constraint_restoration_still_imports_from_reduction():
-    from lbc_core import constraints, reduction
-
-    assert reduction.restore_constraints is constraints.restore_constraints
-    assert reduction.constraint_residuals is constraints.constraint_residuals
