@@ -9,7 +9,7 @@ import pytest
 
 import lbc_core
 from lbc_core.io import read_cage, read_mesh
-from random_cages import GRID, STAR
+from random_cages import GRID, STAR, inside_polygon
 
 DATA = Path(__file__).parent / "data"
 
@@ -65,11 +65,10 @@ def bound_gargoyle(bound_gargoyle_file):
 
 # Bindings that test_pipeline (the bind) and test_binding (the record and its files) both use: bound once per session.
 def polygon_points(vertices, count, seed=0):
-    from matplotlib.path import Path as PolygonPath
-
+    """The uniform random points of the polygon's bounding box that fall inside it."""
     rng = np.random.default_rng(seed)
     points = rng.uniform(vertices.min(axis=0), vertices.max(axis=0), (count, 2))
-    return points[PolygonPath(vertices).contains_points(points)]
+    return points[inside_polygon(vertices, points, 0.0)[0]]
 
 
 @pytest.fixture(scope="session")

@@ -1,11 +1,34 @@
 """Random cages for property-based tests: star-shaped polygons, radial surfaces over a sphere triangulation, and
-the 8-pointed star with a grid around it."""
+the 8-pointed star with a grid around it; an even-odd point-in-polygon test (no matplotlib, which the add-on test
+environments of the other Blender lines do not install)."""
 
 import numpy as np
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
 lengths = st.floats(0.05, 1.0, allow_nan=False)
+
+
+def inside_polygon(polygon, points, margin):
+    """Where points lie relative to a closed polygon (n, 2).
+
+    Returns
+    -------
+    inside : (m,) bool array
+        Inside by the even-odd rule.
+    clear : (m,) bool array
+        Farther than ``margin`` from every edge (where inside or outside is beyond doubt).
+    """
+    start, end = polygon, np.roll(polygon, -1, axis=0)
+    # Even-odd rule: count the edges a ray towards +x crosses.
+    straddle = (start[None, :, 1] > points[:, None, 1]) != (end[None, :, 1] > points[:, None, 1])
+    t = (points[:, None, 1] - start[None, :, 1]) / np.where(end[:, 1] == start[:, 1], 1.0, end[:, 1] - start[:, 1])
+    crossing_x = start[None, :, 0] + t * (end[None, :, 0] - start[None, :, 0])
+    odd = np.count_nonzero(straddle & (crossing_x > points[:, None, 0]), axis=1) % 2 == 1
+    along = end - start
+    s = np.clip(np.einsum("mnj,nj->mn", points[:, None] - start[None], along) / np.sum(along**2, axis=1), 0, 1)
+    distance = np.linalg.norm(points[:, None] - (start[None] + s[..., None] * along[None]), axis=2).min(axis=1)
+    return odd, distance > margin
 
 
 def star_polygon(gaps, radii):

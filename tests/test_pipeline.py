@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 import lbc_core
 from lbc_core.errors import CageError
 from lbc_core.io import read_cage, read_mesh
-from random_cages import GRID, STAR, draw_dented_sphere, lengths, star_polygon
+from random_cages import GRID, STAR, draw_dented_sphere, inside_polygon, lengths, star_polygon
 
 DATA = Path(__file__).parent / "data"
 L_POLYGON = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
@@ -278,11 +278,9 @@ GARGOYLE = [f"L{level:02d}" for level in range(8, 17)]
 
 
 def inside_grid(polygon, per_side=80):
-    from matplotlib.path import Path as PolygonPath
-
     axes = [np.linspace(low, high, per_side) for low, high in zip(polygon.min(axis=0), polygon.max(axis=0))]
     grid = np.stack(np.meshgrid(*axes), axis=-1).reshape(-1, 2)
-    return grid[PolygonPath(polygon).contains_points(grid)]
+    return grid[inside_polygon(polygon, grid, 0.0)[0]]
 
 
 def check(binding, points, cage_vertices):
@@ -380,28 +378,6 @@ def assert_quality(binding, points, inside):
     assert not np.any(binding.outside[inside])
     np.testing.assert_allclose(binding.deform(binding.cage.vertices[binding.cage.vertex_map]), points, rtol=0,
                                atol=1e-12 * diagonal)
-
-
-def inside_polygon(polygon, points, margin):
-    """Where points lie relative to a closed polygon (n, 2).
-
-    Returns
-    -------
-    inside : (m,) bool array
-        Inside by the even-odd rule.
-    clear : (m,) bool array
-        Farther than ``margin`` from every edge (where inside or outside is beyond doubt).
-    """
-    start, end = polygon, np.roll(polygon, -1, axis=0)
-    # Even-odd rule: count the edges a ray towards +x crosses.
-    straddle = (start[None, :, 1] > points[:, None, 1]) != (end[None, :, 1] > points[:, None, 1])
-    t = (points[:, None, 1] - start[None, :, 1]) / np.where(end[:, 1] == start[:, 1], 1.0, end[:, 1] - start[:, 1])
-    crossing_x = start[None, :, 0] + t * (end[None, :, 0] - start[None, :, 0])
-    odd = np.count_nonzero(straddle & (crossing_x > points[:, None, 0]), axis=1) % 2 == 1
-    along = end - start
-    s = np.clip(np.einsum("mnj,nj->mn", points[:, None] - start[None], along) / np.sum(along**2, axis=1), 0, 1)
-    distance = np.linalg.norm(points[:, None] - (start[None] + s[..., None] * along[None]), axis=2).min(axis=1)
-    return odd, distance > margin
 
 
 @TINY
