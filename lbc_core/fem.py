@@ -92,27 +92,6 @@ def stiffness_matrix(vertices, cells):
     return (G.T @ sp.diags(np.repeat(measures, d)) @ G).tocsr()
 
 
-def mass_matrix(vertices, cells, lumped=False):
-    """The P1 mass matrix M_ij = ∫ φ_i φ_j, consistent or lumped (diagonal, each cell's measure shared equally).
-
-    Returns
-    -------
-    (N, N) scipy.sparse.csr_matrix, in length^d units
-    """
-    cells = np.asarray(cells)
-    n_vertices = len(vertices)
-    corners = cells.shape[1]
-    _, measures = cell_gradients(vertices, cells)
-    if lumped:
-        return sp.diags(lumped_mass(cells, measures, n_vertices)).tocsr()
-    # ∫ φ_i φ_j = |c| (1 + δ_ij) / ((d+1)(d+2)) on a simplex.
-    local = (np.ones((corners, corners)) + np.eye(corners)) / (corners * (corners + 1))
-    values = measures[:, None, None] * local[None]
-    rows = np.broadcast_to(cells[:, :, None], values.shape)
-    cols = np.broadcast_to(cells[:, None, :], values.shape)
-    return sp.csr_matrix((values.ravel(), (rows.ravel(), cols.ravel())), shape=(n_vertices, n_vertices))
-
-
 def lumped_mass(cells, measures, n_vertices):
     """Lumped P1 mass per vertex: each cell's measure shared equally among its corners.
 

@@ -263,21 +263,11 @@ def radius_ratios(vertices, tets):
     return np.abs(signed_radius_ratios_by_coordinate(vertices.T[:, tets.T]))
 
 
-def signed_radius_ratios(corners):
-    """Radius ratios (see :func:`radius_ratios`) of tetrahedra given by their corners (T, 4, 3), negative for the
-    negatively oriented ones.
-
-    Returns
-    -------
-    (T,) float array
-    """
-    return signed_radius_ratios_by_coordinate(np.ascontiguousarray(corners.transpose(2, 1, 0)))
-
-
 def signed_radius_ratios_by_coordinate(coordinates):
-    """:func:`signed_radius_ratios` of corners given by coordinate: (3, 4, T), coordinate d of corner k of every
-    tetrahedron in one row. Every step works on whole rows of T numbers (4 to 8 times faster than on (T, 4, 3)
-    corners, whose rows hold three numbers; one row at a time, as arrays of several rows cost more to allocate).
+    """Radius ratios (see :func:`radius_ratios`) of tetrahedra, negative for the negatively oriented ones, from their
+    corners by coordinate: (3, 4, T), coordinate d of corner k of every tetrahedron in one row. Every step works on
+    whole rows of T numbers (4 to 8 times faster than on (T, 4, 3) corners, whose rows hold three numbers; one row at
+    a time, as arrays of several rows cost more to allocate).
 
     Returns
     -------

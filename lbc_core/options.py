@@ -9,7 +9,7 @@ them, before any meshing or solving.
 
 import math
 import numbers
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -114,13 +114,6 @@ class BindOptions:
         if self.threshold is None:
             return DEFAULT_THRESHOLD_SHARE / n_control_points
         return self.threshold
-
-    def as_dict(self):
-        """The fields as a dict (a callable weighting by its name), for records and JSON."""
-        fields = asdict(self)
-        if callable(self.weighting):
-            fields["weighting"] = getattr(self.weighting, "__name__", "callable")
-        return fields
 
 
 class _Bad(Exception):

@@ -18,42 +18,10 @@ from .progress import Progress
 ROWS_PER_CHUNK = 16_384
 
 
-def reduce_weights(weights, controls, positions, threshold, tolerance, progress=None, cancel=None):
-    """Drop weights below ``threshold`` and restore the constraints on what remains.
-
-    A point whose reduced support cannot meet the constraints (it lies outside the hull of its remaining control
-    points, e.g. just off a cage face) gets its largest dropped weights back, one, two, four, ... at a time, until it
-    can.
-
-    Parameters
-    ----------
-    weights : (m, n) scipy.sparse matrix
-        Full coordinates of m points (non-negative, satisfying the constraints).
-    controls : (n, d) float array
-    positions : (m, d) float array
-        The positions the weights reproduce.
-    threshold : float
-        Weights below it are dropped (the paper uses 1e-3 / n).
-    tolerance : float
-        Largest reproduction error accepted after the correction, in the units of ``positions``.
-    progress : callable(fraction, message) or Progress, optional
-    cancel : callable() -> bool, optional
-        Polled between chunks of rows; when it returns True, :class:`~lbc_core.errors.Cancelled` is raised.
-
-    Returns
-    -------
-    (m, n) scipy.sparse.csr_matrix
-    """
-    full = sp.csr_matrix(weights)
-    full.sum_duplicates()
-    progress = Progress.of(progress, cancel)
-    return _by_chunks(full.shape[0], controls.shape[0], lambda rows: _reduce_rows(
-        full[rows], controls, positions[rows], threshold, tolerance, progress.check), progress)
-
-
 def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance, progress=None,
                            cancel=None):
-    """Weights at points interpolated from a domain's vertices, reduced, one chunk of points at a time.
+    """Weights at points interpolated from a domain's vertices, reduced (weights below a threshold dropped, the
+    constraints restored on what remains), one chunk of points at a time.
 
     Parameters
     ----------
@@ -64,8 +32,15 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         Coordinates at the domain's vertices.
     controls : (n, d) float array
     domain_vertices : (N, d) float array
-    threshold, tolerance, progress, cancel
-        As in :func:`reduce_weights`.
+    threshold : float
+        Weights below it are dropped (the paper uses 1e-3 / n); a point whose reduced support cannot meet the
+        constraints (outside the hull of its remaining control points, e.g. just off a cage face) gets its largest
+        dropped weights back, one, two, four, ... at a time, until it can.
+    tolerance : float
+        Largest reproduction error accepted after the correction, in the units of ``domain_vertices``.
+    progress : callable(fraction, message) or Progress, optional
+    cancel : callable() -> bool, optional
+        Polled between chunks of rows; when it returns True, :class:`~lbc_core.errors.Cancelled` is raised.
 
     Returns
     -------
@@ -93,7 +68,8 @@ def _by_chunks(m, n, reduce_chunk, progress):
 
 
 def _reduce_rows(full, controls, positions, threshold, tolerance, check):
-    """:func:`reduce_weights` on one chunk of rows; ``check`` is called between rounds of corrections."""
+    """The reduction of :func:`interpolate_and_reduce` on one chunk of rows; ``check`` is called between rounds of
+    corrections."""
     n = controls.shape[0]
     kept = full.copy()
     kept.data[kept.data < threshold] = 0.0

@@ -13,7 +13,7 @@ from scipy.spatial import Delaunay
 from lbc_core import meshing
 from lbc_core.cage import Cage, make_cage
 from lbc_core.geometry import closest_on_triangles, orient_positive, radius_ratios, signed_measures
-from lbc_core.geometry import signed_radius_ratios
+from lbc_core.geometry import signed_radius_ratios_by_coordinate
 from lbc_core.meshing import polygon, tetrahedra
 from lbc_core.progress import Progress
 from lbc_core.errors import CageError, Cancelled
@@ -308,7 +308,8 @@ def test_signed_radius_ratios():
     regular = np.array([[1.0, -1.0, -1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
     flat = regular.copy()
     flat[3] = regular[:3].mean(axis=0)
-    ratios = signed_radius_ratios(np.stack([regular, regular[[1, 0, 2, 3]], flat]))
+    corners = np.stack([regular, regular[[1, 0, 2, 3]], flat])  # (T, 4, 3)
+    ratios = signed_radius_ratios_by_coordinate(np.ascontiguousarray(corners.transpose(2, 1, 0)))
     assert ratios[:2] == pytest.approx([1.0, -1.0]) and abs(ratios[2]) < 1e-12
 
 

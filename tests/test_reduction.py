@@ -3,9 +3,15 @@
 import numpy as np
 import scipy.sparse as sp
 
-from lbc_core.reduction import reduce_weights
+from lbc_core.reduction import interpolate_and_reduce
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+
+
+def reduce_weights(weights, controls, positions, threshold, tolerance, **keywords):
+    """The reduction alone: each point located at a domain vertex of its own, which holds its weights (m, n)."""
+    return interpolate_and_reduce(sp.identity(len(weights), format="csr"), weights, controls, positions, threshold,
+                                  tolerance, **keywords)
 
 
 def bilinear_weights(points):
@@ -28,7 +34,7 @@ def test_reduce_drops_small_weights_and_restores_linear_precision():
         dense[row, [k, (k + 1) % 8, (k + 4) % 8]] += bary
     dense /= dense.sum(axis=1, keepdims=True)
     threshold = 1e-3 / 8
-    reduced = reduce_weights(sp.csr_matrix(dense), controls, dense @ controls, threshold, tolerance=1e-9)
+    reduced = reduce_weights(dense, controls, dense @ controls, threshold, tolerance=1e-9)
     assert reduced.nnz < dense.size / 2
     assert reduced.data.min() >= 0
     values = reduced.toarray()
@@ -38,10 +44,10 @@ def test_reduce_drops_small_weights_and_restores_linear_precision():
 
 def test_reduce_keeps_more_support_where_the_reduced_one_cannot_reproduce():
     controls = SQUARE
-    point = np.array([[0.5, 0.001]])
-    # Two big weights on the bottom edge, tiny ones above: dropping them cannot reproduce y = 0.001.
-    weights = np.array([[0.4995, 0.4995, 0.0005, 0.0005]])
-    reduced = reduce_weights(sp.csr_matrix(weights), controls, point, threshold=0.01, tolerance=1e-12)
+    point = np.array([[0.5, 0.004]])
+    # Two big weights on the bottom edge, small ones above: dropping them cannot reproduce y = 0.004.
+    weights = np.array([[0.498, 0.498, 0.002, 0.002]])
+    reduced = reduce_weights(weights, controls, point, threshold=0.01, tolerance=1e-12)
     values = reduced.toarray()
     assert np.abs(values @ controls - point).max() < 1e-12
     assert values.min() >= 0 and abs(values.sum() - 1) < 1e-12
@@ -58,7 +64,7 @@ def test_reduce_reports_each_round_of_chunks_of_rows_and_stops_on_cancel(monkeyp
     threads = worker_count()
     rng = np.random.default_rng(4)
     points = rng.uniform(0.0, 1.0, (300 * threads, 2))  # three rounds of one chunk per thread
-    weights = sp.csr_matrix(bilinear_weights(points))
+    weights = bilinear_weights(points)
     fractions = []
     reduce_weights(weights, SQUARE, points, 1e-3, 1e-9, progress=lambda fraction, message: fractions.append(fraction))
     assert fractions == pytest.approx([0.0, 1 / 3, 2 / 3, 1.0])
