@@ -68,8 +68,9 @@ def _bind_request(request, progress, cancel):
 
 
 def unbind(mesh_obj):
-    """Remove the binding; the mesh is exactly as before it was bound. Does nothing for an unbound mesh; raises
-    CageError for one linked from a library (its binding lives in that file).
+    """Remove the binding; the mesh is exactly as before it was bound. For an unbound mesh, removes the LBC weights
+    it carries for no binding (a bound mesh joined into it), if any; raises CageError for a mesh linked from a library
+    (its binding lives in that file).
 
     Returns
     -------
@@ -78,11 +79,15 @@ def unbind(mesh_obj):
         they were removed with the binding.
     """
     _require_enabled()
-    if not is_bound(mesh_obj):
+    leftovers = writing.leftover_weights(mesh_obj)
+    if not is_bound(mesh_obj) and not leftovers:
         return []
     linked = geometry.not_editable_here(mesh_obj)
     if linked:
         raise CageError(linked)
+    if leftovers:
+        writing.remove_leftovers(mesh_obj)
+        return []
     return writing.remove(mesh_obj)
 
 
@@ -136,7 +141,9 @@ def status(mesh_obj):
     if not isinstance(mesh_obj, bpy.types.Object):
         return False, f"{mesh_obj!r} is not an object: pass it as e.g. bpy.data.objects['Name']"
     if not is_bound(mesh_obj):
-        return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind)"
+        leftover = ("; it carries LBC weights for no binding (from a bound mesh joined into it), which api.unbind "
+                    "removes" if writing.leftover_weights(mesh_obj) else "")
+        return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}"
     return deformer.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
 
 

@@ -27,6 +27,14 @@ def _bound_selection(context):
     return [obj for obj in objects if is_bound(obj)]
 
 
+def _leftover_selection(context):
+    """Selected unbound meshes carrying LBC weights of no binding (:func:`writing.leftover_weights`)."""
+    objects = list(context.selected_objects)
+    if context.active_object is not None and context.active_object not in objects:
+        objects.append(context.active_object)
+    return [obj for obj in objects if writing.leftover_weights(obj)]
+
+
 def _report_result(operator, mesh_obj):
     """Warnings about a finished bind: vertices outside the cage, repairs lbc_core made (:func:`jobs.solve`)."""
     settings = mesh_obj.lbc
@@ -283,7 +291,8 @@ class OBJECT_OT_lbc_rebind_all(_Binder, bpy.types.Operator):
 
 
 class OBJECT_OT_lbc_unbind(bpy.types.Operator):
-    """Remove the binding: the mesh is exactly as before binding (data, modifiers, attributes)"""
+    """Remove the binding: the mesh is exactly as before binding (data, modifiers, attributes). Also removes the LBC
+    weights a mesh carries for no binding (a bound mesh joined into it)"""
 
     bl_idname = "object.lbc_unbind"
     bl_label = "Unbind"
@@ -292,20 +301,24 @@ class OBJECT_OT_lbc_unbind(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         message = "Wait for the running bind, or cancel it with Esc" if _running else None
-        if message is None and not _bound_selection(context):
+        if message is None and not _bound_selection(context) and not _leftover_selection(context):
             message = "Select a bound mesh"
         return _allowed(cls, message)
 
     def execute(self, context):
-        objects = []
-        for obj in _bound_selection(context):
+        objects, leftovers = [], []
+        for obj in _bound_selection(context) + _leftover_selection(context):
             linked = geometry.not_editable_here(obj)
             if linked:
                 self.report({"ERROR"}, f"Not unbound: {linked}")
             else:
-                objects.append(obj)
+                (objects if is_bound(obj) else leftovers).append(obj)
+        for obj in leftovers:
+            writing.remove_leftovers(obj)
+            self.report({"INFO"}, f"{obj.name}: removed the LBC weights it carried for no binding (from a bound mesh "
+                                  "joined into it)")
         if not objects:
-            return {"CANCELLED"}
+            return {"FINISHED"} if leftovers else {"CANCELLED"}
         for obj in objects:
             mesh_name = obj.data.name
             keeping = writing.remove(obj)

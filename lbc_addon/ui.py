@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import deformer, storage
+from . import deformer, storage, writing
 from .properties import bound_to, is_bound
 
 
@@ -75,6 +75,12 @@ def draw(layout, context):
     if is_bound(obj):
         draw_binding(layout, obj)
         return
+    leftovers = writing.leftover_weights(obj)
+    if leftovers:
+        size = _format_bytes(storage.memory_bytes(len(obj.data.vertices), storage.slot_count(obj.data)))
+        box = layout.box()
+        box.label(text=f"Carries LBC weights for no binding ({size}), from a bound mesh joined into it", icon="INFO")
+        box.operator("object.lbc_unbind", icon="TRASH", text="Remove the LBC Weights")
     meshes = bound_to(obj, context.scene.objects)
     if meshes:
         layout.label(text=f"Cage of {len(meshes)} mesh(es):", icon="MOD_MESHDEFORM")

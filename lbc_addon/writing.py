@@ -149,6 +149,20 @@ def remove(mesh_obj):
     return [obj.name for obj in sharing]
 
 
+def leftover_weights(obj):
+    """The names of the LBC attributes an unbound mesh carries for no binding: a bound mesh joined into it (Ctrl+J)
+    brings its weights along, but not its binding. Dead weight in the .blend, which Unbind removes. Empty for a
+    bound mesh, and for mesh data a bound object shares (a linked duplicate's weights are in use)."""
+    if obj.type != "MESH" or is_bound(obj) or shared_with(obj):
+        return []
+    return storage.binding_names(obj.data)
+
+
+def remove_leftovers(obj):
+    """Delete the attributes :func:`leftover_weights` names, leaving the mesh's own as they were."""
+    storage.remove(obj.data)
+
+
 def shared_with(mesh_obj):
     """The other bound objects using ``mesh_obj``'s mesh data (linked duplicates)."""
     if mesh_obj.data.users < 2:

@@ -92,6 +92,18 @@ def test_cage_lists_its_meshes_and_a_selection_offers_bind(bound_gargoyle):
     assert layout.operators() == ["object.lbc_bind"]
 
 
+def test_a_mesh_carrying_weights_of_no_binding_offers_to_remove_them():
+    mesh, _ = sphere_in_box_scene()
+    carrier = bpy.data.objects.new("Carrier", mesh.data.copy())
+    bpy.context.scene.collection.objects.link(carrier)
+    carrier.data.attributes.new(".lbc_index_0", "INT", "POINT")  # what a bound mesh joined into it brings
+    carrier.data.attributes.new(".lbc_weight_0", "FLOAT", "POINT")
+    layout = _draw(carrier, [carrier])
+    assert "Carries LBC weights for no binding (" in layout.labels()
+    assert layout.operators()[0] == "object.lbc_unbind"
+    assert "Carries LBC weights" not in _draw(mesh, [mesh]).labels()
+
+
 def test_panels_are_in_the_properties_editor_and_the_sidebar():
     register_addon()
     assert bpy.types.OBJECT_PT_lbc.bl_space_type == "PROPERTIES" and bpy.types.OBJECT_PT_lbc.bl_context == "object"
