@@ -318,6 +318,28 @@ def test_gargoyle_cages(level):
     check(binding, points, cage)
 
 
+def test_a_thin_plate_cage_bent_keeps_its_mesh_inside():
+    """A new user's 56-vertex plate cage (a box cut twice, 1/50 as thick as wide) bent up at one end: the flat grid
+    inside bulged out of it by 0.17 (the half-thickness is 0.02), its middle weighing 0.65 on the far corners. The
+    heat method's distances had collapsed on the thin mesh (test_geodesics), so nothing kept the coordinates local."""
+    import cage_corpus
+
+    vertices, faces = cage_corpus.load("grid-box")
+    vertices = np.array(vertices, dtype=float)
+    vertices = (vertices - vertices.mean(axis=0)) / (np.ptp(vertices, axis=0) / 2.0) * [1.0, 1.0, 1 / 50]
+    axis = np.linspace(-0.9, 0.9, 21)
+    points = np.c_[np.stack(np.meshgrid(axis, axis), axis=-1).reshape(-1, 2), np.zeros(21 * 21)]
+    binding = lbc_core.bind(vertices, faces, points, cells=4000)
+    bend = lambda x: np.where(x > 0, 0.6 * x**2, 0.0)  # noqa: E731
+    posed = vertices + np.c_[np.zeros((len(vertices), 2)), bend(vertices[:, 0])]
+    columns = np.unique(np.round(vertices[:, 0], 9))
+    middle = np.interp(points[:, 0], columns, bend(columns))  # the posed cage's mid-surface over each point
+    assert np.abs(binding.deform(posed)[:, 2] - middle).max() < 0.02
+    corners = np.linalg.norm(vertices[:, :2], axis=1) > 1.2
+    centre = np.argmin(np.linalg.norm(points, axis=1))
+    assert binding.weights[centre, np.flatnonzero(corners)].sum() < 1e-3
+
+
 def test_clothing_cage():
     cage, faces = read_cage(DATA / "cages-3d" / "clothing" / "cage.obj")
     points, _ = read_mesh(DATA / "cages-3d" / "clothing" / "mesh.obj")
