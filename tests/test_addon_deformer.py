@@ -186,6 +186,20 @@ def test_a_move_as_a_whole_is_seen_far_from_the_origin_and_at_large_scales():
     assert not deformer.moved_affinely(far.astype(float), sculpted.astype(float))
 
 
+def test_a_small_stroke_far_from_the_origin_is_no_move_as_a_whole():
+    """A new user's finding: at x = 1000 a 0.001 stroke, at x = 10⁴ a 0.001 or 0.01 one, on one sampled vertex, was
+    within the rounding allowed there and stopped the deformer ("moved as a whole")."""
+    rest = np.random.default_rng(1).uniform(-0.8, 0.8, (16, 3))
+    for offset, stroke in ((1000.0, 0.001), (1e4, 0.001), (1e4, 0.01), (1e4, 0.015), (1e4, 0.03), (1e4, 0.05)):
+        far = (rest + [offset, 0.0, 0.0]).astype(np.float32)
+        for vertices in ([3], [3, 9]):
+            sculpted = far.copy()
+            sculpted[vertices, 2] += np.float32(stroke)
+            assert not deformer.moved_affinely(far.astype(float), sculpted.astype(float)), (offset, stroke, vertices)
+        moved = (far.astype(float) * 1.001).astype(np.float32)  # a small Apply Scale there is still seen
+        assert deformer.moved_affinely(far.astype(float), moved.astype(float))
+
+
 def test_a_sculpted_bound_mesh_keeps_following(bound_gargoyle):
     mesh, cage = bound_gargoyle
     for index in (0, 2673):  # two of the sampled vertices (the first and the last) pushed: an edit, not the whole mesh moved
