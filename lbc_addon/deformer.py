@@ -656,7 +656,8 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     if rest_moved(mesh_obj.data):
         return "rest moved", (
             "The mesh's vertices were moved as a whole since binding (Apply Transforms, or all of them moved in Edit "
-            "Mode): it stays at rest, undeformed (following the cage it would jump). Rebind, or undo the move"
+            "Mode): it stays at rest, undeformed (following the cage it would jump). Undo the move, or put the cage "
+            "in its rest pose and Rebind (Rebind binds to the cage as it is)"
         )
     cage = settings.cage
     if cage is None:

@@ -137,10 +137,23 @@ def cage_to_mesh_matrix(cage_obj, mesh_obj):
 
 
 def _evaluation_changes(obj):
-    """Whether evaluating a mesh object can change its vertices: a modifier on in viewports, or shape keys."""
+    """What evaluating a mesh object applies that can change its vertices, for a message: "its modifiers", "its shape
+    keys", both joined by "and", or "" (a shape key at value 0, or muted, changes nothing)."""
     keys = obj.data.shape_keys
-    return any(modifier.show_viewport for modifier in obj.modifiers) or (keys is not None
-                                                                         and len(keys.key_blocks) > 1)
+    keyed = keys is not None and (not keys.use_relative and len(keys.key_blocks) > 1 or any(
+        block.value != 0.0 and not block.mute for block in keys.key_blocks[1:]))
+    changes = (["its modifiers"] if any(modifier.show_viewport for modifier in obj.modifiers) else []) + (
+        ["its shape keys"] if keyed else [])
+    return " and ".join(changes)
+
+
+def _why_not_evaluated(obj, scene):
+    """Why Blender does not evaluate ``obj`` in the scene's view layer, and what makes it evaluated."""
+    if obj.name not in scene.objects:
+        return "it is not in this scene", "link it into this scene (Object > Link/Transfer Data > Link Objects to Scene)"
+    if obj.hide_viewport:
+        return "it is disabled in viewports", "enable it in viewports (the screen icon; H still hides it)"
+    return "it is in an excluded collection", "include its collection in the view layer (its checkbox in the Outliner)"
 
 
 def not_editable_here(mesh_obj):
@@ -148,9 +161,13 @@ def not_editable_here(mesh_obj):
     library, as a library override's mesh data stays), or None. Changes there would be lost on saving."""
     for what, block in ((f"'{mesh_obj.name}'", mesh_obj), (f"the mesh data of '{mesh_obj.name}'", mesh_obj.data)):
         if block is not None and block.library is not None:
+            # An object that came in a linked collection stays there: Make Local > Selected makes an orphan copy.
+            linked = [collection.name for collection in mesh_obj.users_collection if collection.library is not None]
+            local = (f"make its collection '{linked[0]}' local first (Outliner: right-click it > Make Local), or "
+                     "Object > Relations > Make Local > All" if linked else
+                     "Object > Relations > Make Local > Selected Objects and Data")
             return (f"{what} is linked from the library '{block.library.filepath}': its binding is saved in that file "
-                    "(change it there), or make it local here first (Object > Relations > Make Local > Selected "
-                    "Objects and Data)")
+                    f"(change it there), or make it local here first ({local})")
     return None
 
 
@@ -195,12 +212,13 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         raise CageError(f"'{mesh_obj.name}' has no vertices: there is nothing to bind")
     points = vertex_positions(mesh_obj.data)
     cage_eval, mesh_eval = cage_obj.evaluated_get(depsgraph), mesh_obj.evaluated_get(depsgraph)
-    if not cage_eval.is_evaluated and _evaluation_changes(cage_obj):
+    changes = _evaluation_changes(cage_obj)
+    if not cage_eval.is_evaluated and changes:
         # The deformer evaluates the cage (its modifier makes the cage part of the depsgraph): the bind must too.
-        raise CageError(f"the cage '{cage_obj.name}' is not evaluated in this view layer (disabled in viewports, in an "
-                        "excluded collection, or in another scene), so its modifiers and shape keys are not applied "
-                        "and the bind would see another cage than the deformer: enable it in viewports for the bind "
-                        "(H still hides it), or apply its modifiers")
+        why, fix = _why_not_evaluated(cage_obj, depsgraph.scene)
+        raise CageError(f"the cage '{cage_obj.name}' is not evaluated in this view layer ({why}), so {changes} would "
+                        f"not be applied and the bind would see another cage than the deformer: {fix} for the bind, "
+                        f"or apply {changes}")
     cage_mesh = cage_eval.to_mesh()
     try:
         matrix = cage_to_mesh_matrix(cage_eval, mesh_eval)

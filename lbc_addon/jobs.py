@@ -219,9 +219,9 @@ def solve(request, progress=None, cancel=None, earlier=()):
                         "must enclose the mesh. Is it the right cage? (Select the mesh, then the cage last so it is "
                         "active.)") from error
     except CageError as error:
-        note = _cage_modifiers_note(request, str(error))
-        if note:
-            raise CageError(f"{error} ({note})") from error
+        cause, note = _cage_modifiers_notes(request, str(error))
+        if cause or note:
+            raise CageError(f"{cause}{error}{f' ({note})' if note else ''}") from error
         raise
     column_vertex = column_base[binding.control_input_index]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
@@ -267,20 +267,22 @@ def _in_plane_of(request, previous):
     return request if flat is None else replace(request, flat=flat)
 
 
-def _cage_modifiers_note(request, message):
-    """What to add to lbc_core's ``message`` about a cage whose modifiers make it another cage than the artist's mesh
-    data ("" for none): the error may be theirs (Solidify makes two parts; a Mirror off in viewports leaves a hole),
-    and vertex numbers count the evaluated cage's vertices, which Edit Mode does not show."""
-    notes = []
-    if request.cage_modifiers:
-        verb = "make" if request.cage_modifiers.startswith("modifiers") else "makes"
-        notes.append(f"vertex numbers of the cage with its {request.cage_modifiers} applied" if "vert" in message
-                     else f"this is the cage as its {request.cage_modifiers} {verb} it")
+def _cage_modifiers_notes(request, message):
+    """What to say, before and after lbc_core's ``message``, about a cage whose modifiers make it another cage than
+    the artist's mesh data (each "" for none). A modifier off in viewports is the likely cause (a Mirror off leaves a
+    hole), so it leads; the others may be (Solidify makes two parts), and vertex numbers count the evaluated cage's
+    vertices, which Edit Mode does not show, so they follow."""
+    cause = ""
     if request.cage_modifiers_off:
         verb = "are" if request.cage_modifiers_off.startswith("modifiers") else "is"
-        notes.append(f"its {request.cage_modifiers_off} {verb} off in viewports, and the cage is bound as viewports "
-                     "show it")
-    return "; ".join(notes)
+        cause = (f"the cage's {request.cage_modifiers_off} {verb} off in viewports, and the cage is bound as viewports "
+                 "show it (turn it on, or apply it); so ")
+    note = ""
+    if request.cage_modifiers:
+        verb = "make" if request.cage_modifiers.startswith("modifiers") else "makes"
+        note = (f"vertex numbers of the cage with its {request.cage_modifiers} applied" if "vert" in message
+                else f"this is the cage as its {request.cage_modifiers} {verb} it")
+    return cause, note
 
 
 def _thinning(options):

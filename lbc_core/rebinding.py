@@ -264,8 +264,9 @@ def carry_domain(previous, unit_cage):
                            f"cells of the previous mesh would lose more than {1 - QUALITY_KEPT:.0%} of their shape")
     bent = _faces_off_cage(old, previous.cage, unit_cage)
     if len(bent):
-        return None, (f"cage face {', '.join(map(str, bent[:5]))} is no longer flat, and the previous mesh has "
-                      "faces across it")
+        faces = ", ".join(map(str, bent[:5]))
+        return None, (f"cage face {faces} is no longer flat, and the previous mesh has faces across it" if len(bent) == 1
+                      else f"cage faces {faces} are no longer flat, and the previous mesh has faces across them")
     return replace(old, vertices=vertices), None
 
 

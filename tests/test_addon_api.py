@@ -96,10 +96,30 @@ def test_a_cage_blender_does_not_evaluate_is_refused_when_its_modifiers_would_ch
     api.bind(mesh, cage, cells=1000)  # no modifiers: the same cage either way
     api.unbind(mesh)
     cage.modifiers.new("Subdivision", "SUBSURF").levels = 1
-    with pytest.raises(lbc_core.CageError, match="'Box' is not evaluated in this view layer .*enable it in viewports"):
+    with pytest.raises(lbc_core.CageError, match=r"'Box' is not evaluated in this view layer \(it is disabled in "
+                                                 r"viewports\), so its modifiers would not be applied .*enable it in "
+                                                 r"viewports .* or apply its modifiers$"):
         api.bind(mesh, cage, cells=1000)
     assert not is_bound(mesh)
+    cage.modifiers.clear()
+    cage.shape_key_add(name="Basis")
+    cage.shape_key_add(name="Bulge").value = 0.0  # a key at 0 changes nothing: it binds (a new user's finding)
+    api.bind(mesh, cage, cells=1000)
+    api.unbind(mesh)
+    cage.data.shape_keys.key_blocks["Bulge"].value = 0.5
+    with pytest.raises(lbc_core.CageError, match=r"so its shape keys would not be applied"):
+        api.bind(mesh, cage, cells=1000)
+    cage.shape_key_clear()
+    cage.modifiers.new("Subdivision", "SUBSURF").levels = 1
     cage.hide_viewport = False
+    cages = bpy.data.collections.new("Cages")
+    bpy.context.scene.collection.children.link(cages)
+    cages.objects.link(cage)
+    bpy.context.scene.collection.objects.unlink(cage)
+    bpy.context.view_layer.layer_collection.children["Cages"].exclude = True
+    with pytest.raises(lbc_core.CageError, match=r"\(it is in an excluded collection\).*include its collection"):
+        api.bind(mesh, cage, cells=1000)
+    bpy.context.view_layer.layer_collection.children["Cages"].exclude = False
     cage.hide_set(True)  # hidden (H) is still evaluated
     assert api.bind(mesh, cage, cells=1000)["control_points"] == 26
 
@@ -203,6 +223,27 @@ def test_a_mesh_linked_from_a_library_or_overridden_is_not_rebound_or_unbound_he
     override = linked.override_create(remap_local_usages=True)  # its mesh data stays linked
     with pytest.raises(api.CageError, match="the mesh data of 'Gargoyle' is linked from the library"):
         api.bind(override, cage)
+
+
+def test_a_mesh_linked_in_a_collection_is_told_to_make_the_collection_local(tmp_path):
+    """A new user's finding: for a rig linked as a collection, Make Local > Selected Objects and Data made an orphan
+    copy in no collection; the mesh in the scene stayed linked and Bind refused it again with the same advice."""
+    mesh, cage = sphere_in_box_scene()
+    rig = bpy.data.collections.new("Rig")
+    bpy.context.scene.collection.children.link(rig)
+    for obj in (mesh, cage):
+        rig.objects.link(obj)
+        bpy.context.scene.collection.objects.unlink(obj)
+    api.bind(mesh, cage, cells=1000)
+    path = tmp_path / "rig.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(str(path), link=True) as (_, target):
+        target.collections = ["Rig"]
+    bpy.context.scene.collection.children.link(target.collections[0])
+    linked = bpy.data.objects["Sphere"]
+    with pytest.raises(api.CageError, match="make its collection 'Rig' local first .*Make Local > All"):
+        api.bind(linked, linked.lbc.cage)
 
 
 def test_meshes_with_their_own_transforms_in_one_cage_share_its_solve_exactly(monkeypatch):

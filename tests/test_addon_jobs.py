@@ -213,8 +213,9 @@ def test_an_error_about_a_cage_with_a_modifier_off_in_viewports_says_so():
     from dataclasses import replace
 
     open_box = replace(request(cage_faces=BOX_FACES[1:]), cage_modifiers_off="modifier 'Mirror'")
-    with pytest.raises(jobs.CageError, match=r"not closed.*\(its modifier 'Mirror' is off in viewports, and the cage "
-                                             r"is bound as viewports show it\)"):
+    with pytest.raises(jobs.CageError, match=r"^the cage's modifier 'Mirror' is off in viewports, and the cage is "
+                                             r"bound as viewports show it \(turn it on, or apply it\); so .*not "
+                                             r"closed"):  # the likely cause first (a new user's finding)
         jobs.solve(open_box)
 
 

@@ -183,8 +183,8 @@ def test_a_quad_bent_out_of_its_plane_falls_back_to_a_cold_bind():
     edited = cube.copy()
     edited[7] -= 0.01  # towards the centre: each quad at vertex 7 keeps its split, but bends
     again = rebind(first, edited, quads)
-    assert again.options["rebind"] == ("bound from scratch: cage face 1, 3, 5 is no longer flat, and the previous "
-                                       "mesh has faces across it")
+    assert again.options["rebind"] == ("bound from scratch: cage faces 1, 3, 5 are no longer flat, and the previous "
+                                       "mesh has faces across them")
     assert_guarantees(again, points)
 
 
