@@ -1,8 +1,8 @@
 """Geodesic distances inside the cage (heat method) and the TV weights built from them (the paper's Section 3.3).
 
-In 3D the heat method's distances are checked against the straight line, which bounds every distance inside the
-domain from below; where they fall far under it (the flattened tetrahedra of a very thin cage, on which the heat
-step oscillates in sign), the distances along the mesh's edges replace them.
+The heat method's distances are checked against the straight line, which bounds every distance inside the domain
+from below; where they fall far under it (the flattened tetrahedra of a very thin cage, on which the heat step
+oscillates in sign; a 2D strip 1/500 as wide as long), the distances along the mesh's edges replace them.
 
 The total variation of coordinate i is weighted per cell by ω = ρ(D_i), with D_i the geodesic distance from control
 point i normalised to [0, 1]: far from its control point a coordinate pays more for varying, which keeps it local.
@@ -22,10 +22,10 @@ WEIGHTINGS = {
     "sqrt": np.sqrt,
     "constant": lambda d: np.ones_like(d),
 }
-# The heat method's check in 3D: of the (vertex, source) pairs farther apart than FAR_SHARE of the largest straight-line
+# The heat method's check: of the (vertex, source) pairs farther apart than FAR_SHARE of the largest straight-line
 # distance, at most MOST_BELOW may lie under BELOW_STRAIGHT times it. Every sound cage measured has at most 0.06 % of
-# its pairs there (the heat method smooths within a few percent); a cage 1/20 as thick as wide has 88 %, 1/50 99.9 %
-# (bench/RESULTS.md). At most CHECKED_VERTICES vertices, evenly spread, are checked.
+# its pairs there (the heat method smooths within a few percent; the paper's 2D packs none); a cage 1/20 as thick as
+# wide has 88 %, 1/50 99.9 %, a 2D strip 1/500 as wide as long 34 % (bench/RESULTS.md). At most CHECKED_VERTICES vertices, evenly spread, are checked.
 FAR_SHARE, BELOW_STRAIGHT, MOST_BELOW = 0.25, 0.8, 0.01
 CHECKED_VERTICES = 2000
 # Sources whose distances are computed together in 3D: bounds the (3 F, sources) gradient arrays and the time between
@@ -34,7 +34,8 @@ SOURCES_PER_CHUNK = 8
 
 
 def geodesic_distances(vertices, cells, sources, progress=None, cancel=None):
-    """Heat-method geodesic distance from each source vertex to every vertex of the mesh.
+    """Heat-method geodesic distance from each source vertex to every vertex of the mesh; where the heat method fails
+    (:func:`heat_distances_sound`), the shortest paths along the mesh's edges (:func:`edge_distances`).
 
     Triangles use potpourri3d's heat method; tetrahedra a P1 finite-element heat method (Crane et al. 2013):
     diffuse for time h² (h the mean edge length), normalise the gradient, and solve a Poisson problem.
@@ -54,12 +55,10 @@ def geodesic_distances(vertices, cells, sources, progress=None, cancel=None):
     """
     progress = Progress.of(progress, cancel)
     vertices = np.asarray(vertices, dtype=float)
-    if vertices.shape[1] == 2:
-        distances = _heat_distances_triangles(vertices, cells, sources, progress)
-    else:
-        distances = _heat_distances_tetrahedra(vertices, cells, sources, progress.part(0.0, 0.8))
-        if not heat_distances_sound(vertices, sources, distances):
-            distances = edge_distances(vertices, cells, sources, progress.part(0.8, 1.0))
+    heat = _heat_distances_triangles if vertices.shape[1] == 2 else _heat_distances_tetrahedra
+    distances = heat(vertices, cells, sources, progress.part(0.0, 0.8))
+    if not heat_distances_sound(vertices, sources, distances):
+        distances = edge_distances(vertices, cells, sources, progress.part(0.8, 1.0))
     progress(1.0, "geodesic distances: done")
     return distances
 

@@ -78,6 +78,19 @@ def test_a_thin_plate_gets_distances_no_shorter_than_the_straight_line():
     assert heat_distances_sound(vertices, sources, geodesic_distances(vertices, cells, sources))
 
 
+def test_a_thin_strip_gets_distances_no_shorter_than_the_straight_line():
+    """The 2D counterpart: a strip 1/500 as wide as long fails the heat method's check (a third of its far pairs
+    under 0.8 × the straight line), so its distances run along the edges too."""
+    import lbc_core
+
+    xs = np.linspace(-1.0, 1.0, 7)
+    strip = np.r_[np.c_[xs, np.full(7, -0.001)], np.c_[xs[::-1], np.full(7, 0.001)]]
+    domain = lbc_core.bind(strip, None, np.zeros((1, 2))).domain
+    vertices, sources = domain.vertices, domain.control_vertices
+    straight = np.linalg.norm(vertices[:, None] - vertices[sources][None], axis=2)
+    assert np.all(geodesic_distances(vertices, domain.cells, sources) >= straight - 1e-12)
+
+
 def test_tv_weights_shapes_and_choices():
     points, cells = grid_mesh(2, 11)
     distances = geodesic_distances(points, cells, np.array([0, len(points) - 1]))
