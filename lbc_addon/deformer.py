@@ -644,15 +644,16 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     modifier = find_modifier(mesh_obj)
     if modifier is None:
         return "modifier", "The LBC modifier was removed: Unbind to clean up, or Rebind"
-    if storage.slot_count(mesh_obj.data) != settings.slots:
-        return "weights", "The cached weights are missing from the mesh data: Rebind"
     count = len(mesh_obj.data.vertices)
-    # 0: bound by a version of the add-on that did not record it.
+    # 0: bound by a version of the add-on that did not record it. Checked first: a Join changes both the vertex count
+    # and the slots stored, and the vertex count is what the artist did.
     if settings.mesh_vertex_count and count != settings.mesh_vertex_count:
         return "mesh vertices", (
             f"The mesh has {count} vertices, it was bound with {settings.mesh_vertex_count}: it stays undeformed. "
             "Rebind"
         )
+    if storage.slot_count(mesh_obj.data) != settings.slots:
+        return "weights", "The cached weights are missing from the mesh data: Rebind"
     if rest_moved(mesh_obj.data):
         return "rest moved", (
             "The mesh's vertices were moved as a whole since binding (Apply Transforms, or all of them moved in Edit "

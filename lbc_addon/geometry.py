@@ -153,6 +153,11 @@ def _why_not_evaluated(obj, scene):
         return "it is not in this scene", "link it into this scene (Object > Link/Transfer Data > Link Objects to Scene)"
     if obj.hide_viewport:
         return "it is disabled in viewports", "enable it in viewports (the screen icon; H still hides it)"
+    disabled = [collection.name for collection in scene.collection.children_recursive
+                if collection.hide_viewport and obj.name in collection.all_objects]
+    if disabled:
+        return (f"its collection '{disabled[0]}' is disabled in viewports",
+                "enable the collection in viewports (its screen icon, shown by the Outliner's filter menu)")
     return "it is in an excluded collection", "include its collection in the view layer (its checkbox in the Outliner)"
 
 

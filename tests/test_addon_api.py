@@ -120,6 +120,11 @@ def test_a_cage_blender_does_not_evaluate_is_refused_when_its_modifiers_would_ch
     with pytest.raises(lbc_core.CageError, match=r"\(it is in an excluded collection\).*include its collection"):
         api.bind(mesh, cage, cells=1000)
     bpy.context.view_layer.layer_collection.children["Cages"].exclude = False
+    cages.hide_viewport = True  # a new user's finding: this was called an excluded collection
+    with pytest.raises(lbc_core.CageError, match=r"\(its collection 'Cages' is disabled in viewports\).*enable the "
+                                                 r"collection in viewports"):
+        api.bind(mesh, cage, cells=1000)
+    cages.hide_viewport = False
     cage.hide_set(True)  # hidden (H) is still evaluated
     assert api.bind(mesh, cage, cells=1000)["control_points"] == 26
 

@@ -124,6 +124,22 @@ def test_weights_joined_into_an_unbound_mesh_are_removed_by_unbind(capfd):
     assert api.status(target)[1] == "'Target' is not bound to a cage: bind it first (api.bind)"
 
 
+def test_two_bound_meshes_joined_are_told_their_vertex_count_changed():
+    """A new user's finding: joining two bound meshes (their slot counts differ) said the weights were missing."""
+    from lbc_addon import api
+
+    mesh, cage = sphere_in_box_scene()
+    other = bpy.data.objects.new("Other", mesh.data.copy())
+    bpy.context.scene.collection.objects.link(other)
+    assert bind(mesh, cage, cells=CELLS, influences=3) == {"FINISHED"}
+    assert bind(other, cage, cells=CELLS) == {"FINISHED"}
+    assert other.lbc.slots > mesh.lbc.slots  # so the joined mesh holds more slots than its binding
+    count = len(mesh.data.vertices)
+    _join_into(mesh, other)
+    ok, message = api.status(mesh)
+    assert not ok and message.startswith(f"The mesh has {len(mesh.data.vertices)} vertices, it was bound with {count}")
+
+
 def test_api_unbind_removes_joined_weights_and_keeps_a_linked_duplicates():
     from lbc_addon import api, writing
 
