@@ -265,8 +265,9 @@ def carry_domain(previous, unit_cage):
     bent = _faces_off_cage(old, previous.cage, unit_cage)
     if len(bent):
         faces = ", ".join(map(str, bent[:5]))
-        return None, (f"cage face {faces} is no longer flat, and the previous mesh has faces across it" if len(bent) == 1
-                      else f"cage faces {faces} are no longer flat, and the previous mesh has faces across them")
+        if len(bent) == 1:
+            return None, f"cage face {faces} is no longer flat, and the previous mesh has faces across it"
+        return None, f"cage faces {faces} are no longer flat, and the previous mesh has faces across them"
     return replace(old, vertices=vertices), None
 
 
