@@ -1018,6 +1018,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
             if factor != 1.0:
                 step.rescale_penalty(value, factor)
                 history.append(dict(iteration=iteration, penalty=step.penalty))
+                checks = checks[-1:]  # the residual falls at another rate from here: the time left reads it anew
                 if anderson:
                     anderson.reset()
                 residual, residual_norm = None, np.inf  # the next steps start afresh from the rescaled state
