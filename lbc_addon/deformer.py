@@ -21,6 +21,7 @@ from bpy.app.handlers import persistent
 
 from . import geometry, storage
 from .core import POSED_APART
+from .jobs import read_welded
 from .properties import is_bound
 
 MODIFIER_NAME = "LBC Deform"
@@ -609,9 +610,9 @@ def welded_apart(welded, positions):
     ``welded``: the binding's "copy:kept,..." pairs; apart means farther than lbc_core's POSED_APART × the cage's size,
     the tolerance of ``lbc deform``.
     """
-    if not welded:
+    pairs = read_welded(welded)
+    if not len(pairs):
         return None
-    pairs = np.array([pair.split(":") for pair in welded.split(",")], dtype=np.int64)
     size = float(np.linalg.norm(np.ptp(positions, axis=0)))
     offset = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
     apart = np.flatnonzero(offset > POSED_APART * size)

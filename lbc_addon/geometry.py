@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 
 from .core import CageError, flatten
-from .jobs import BindRequest, check_options
+from .jobs import BindRequest, check_options, verb_for
 from .properties import DEFAULT_INFLUENCES, is_bound
 
 
@@ -150,7 +150,8 @@ def _evaluation_changes(obj):
 def _why_not_evaluated(obj, scene):
     """Why Blender does not evaluate ``obj`` in the scene's view layer, and what makes it evaluated."""
     if obj.name not in scene.objects:
-        return "it is not in this scene", "link it into this scene (Object > Link/Transfer Data > Link Objects to Scene)"
+        return ("it is not in this scene",
+                "link it into this scene (Object > Link/Transfer Data > Link Objects to Scene)")
     if obj.hide_viewport:
         return "it is disabled in viewports", "enable it in viewports (the screen icon; H still hides it)"
     disabled = [collection.name for collection in scene.collection.children_recursive
@@ -333,10 +334,10 @@ def cage_modifiers_note(cage_obj):
     notes = []
     on = _named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers)))
     if on:
-        notes.append(f"its {on} {'make' if on.startswith('modifiers') else 'makes'} them")
+        notes.append(f"its {on} {verb_for(on, 'makes', 'make')} them")
     off = _named_modifiers(_modifiers_off(cage_obj))
     if off:
-        notes.append(f"its {off} {'are' if off.startswith('modifiers') else 'is'} off in viewports")
+        notes.append(f"its {off} {verb_for(off, 'is', 'are')} off in viewports")
     return "; ".join(notes)
 
 

@@ -9,6 +9,7 @@ import bmesh
 import numpy as np
 
 from . import storage
+from .jobs import read_welded
 
 ATTRIBUTE_NAME = "LBC Influence"
 
@@ -40,11 +41,9 @@ def selected_cage_vertex(cage_obj):
 def kept_vertex(welded, cage_vertex):
     """The cage vertex whose slots hold ``cage_vertex``'s weights: the one it was welded to at bind time (the
     binding's "copy:kept,..." pairs), else itself."""
-    for pair in filter(None, welded.split(",")):
-        copy, kept = map(int, pair.split(":"))
-        if copy == cage_vertex:
-            return kept
-    return cage_vertex
+    pairs = read_welded(welded)
+    kept = pairs[pairs[:, 0] == cage_vertex, 1]
+    return int(kept[0]) if len(kept) else cage_vertex
 
 
 def vertex_weights(mesh, cage_vertex):

@@ -27,7 +27,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import storage
-from .core import DEFAULT_FLOOR, WARM, CageError, lbc_core, reframed, solved_again_text, thin_changed_rows, thin_weights
+from .core import (DEFAULT_FLOOR, WARM, CageError, lbc_core, reframed, solved_again_text, thin_changed_rows,
+                   thin_weights)
 
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
@@ -170,6 +171,11 @@ def welded_pairs(copies, kept):
     return ",".join(f"{copy}:{keep}" for copy, keep in zip(copies[apart].tolist(), kept[apart].tolist()))
 
 
+def read_welded(welded):
+    """The (copy, kept) pairs of :func:`welded_pairs`' text, as a (k, 2) int64 array."""
+    return np.array([pair.split(":") for pair in welded.split(",") if pair], dtype=np.int64).reshape(-1, 2)
+
+
 def printed_progress(interval=1.0):
     """A progress callback printing "LBC bind: 42% message" lines (background mode has no status bar): a line when
     the message says something new, else at most one per ``interval`` seconds (a stage's own counts can change
@@ -267,6 +273,11 @@ def _in_plane_of(request, previous):
     return request if flat is None else replace(request, flat=flat)
 
 
+def verb_for(modifiers, singular, plural):
+    """The verb agreeing with ``modifiers``, "modifier 'Mirror'" or "modifiers 'Mirror', 'Subdivision'"."""
+    return plural if modifiers.startswith("modifiers") else singular
+
+
 def _cage_modifiers_notes(request, message):
     """What to say, before and after lbc_core's ``message``, about a cage whose modifiers make it another cage than
     the artist's mesh data (each "" for none). A modifier off in viewports is the likely cause (a Mirror off leaves a
@@ -274,12 +285,12 @@ def _cage_modifiers_notes(request, message):
     vertices, which Edit Mode does not show, so they follow."""
     cause = ""
     if request.cage_modifiers_off:
-        verb = "are" if request.cage_modifiers_off.startswith("modifiers") else "is"
+        verb = verb_for(request.cage_modifiers_off, "is", "are")
         cause = (f"the cage's {request.cage_modifiers_off} {verb} off in viewports, and the cage is bound as viewports "
                  "show it (turn it on, or apply it); so ")
     note = ""
     if request.cage_modifiers:
-        verb = "make" if request.cage_modifiers.startswith("modifiers") else "makes"
+        verb = verb_for(request.cage_modifiers, "makes", "make")
         note = (f"vertex numbers of the cage with its {request.cage_modifiers} applied" if "vert" in message
                 else f"this is the cage as its {request.cage_modifiers} {verb} it")
     return cause, note

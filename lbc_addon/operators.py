@@ -19,20 +19,22 @@ from .properties import OPTION_NAMES, BindOptionProperties, bound_to, is_bound
 _running = []  # the Worker of the bind in progress: one at a time, so two binds never write the same mesh
 
 
-def _bound_selection(context):
-    """Selected objects holding a binding (the active one included)."""
+def _selection(context):
+    """The selected objects, the active one included."""
     objects = list(context.selected_objects)
     if context.active_object is not None and context.active_object not in objects:
         objects.append(context.active_object)
-    return [obj for obj in objects if is_bound(obj)]
+    return objects
+
+
+def _bound_selection(context):
+    """Selected objects holding a binding (the active one included)."""
+    return [obj for obj in _selection(context) if is_bound(obj)]
 
 
 def _leftover_selection(context):
     """Selected unbound meshes carrying LBC weights of no binding (:func:`writing.leftover_weights`)."""
-    objects = list(context.selected_objects)
-    if context.active_object is not None and context.active_object not in objects:
-        objects.append(context.active_object)
-    return [obj for obj in objects if writing.leftover_weights(obj)]
+    return [obj for obj in _selection(context) if writing.leftover_weights(obj)]
 
 
 def _report_result(operator, mesh_obj):

@@ -61,10 +61,11 @@ ANDERSON_PERIOD = {2: 3, 3: 5}
 RELAXATION = {2: 1.6, 3: 1.9}
 # The penalty is then balanced against the residuals (Boyd et al. 2011, §3.4.1) in the first BALANCE_UNTIL
 # iterations: at a scheduled check every BALANCE_SPACING iterations, a relative primal residual above BALANCE_HIGH times
-# the dual doubles it, one below BALANCE_LOW times the dual halves it; then it stays, as ADMM's convergence needs. The band is wide and lopsided: the gargoyle's cages, whose penalty c_d / n^(1/(d-1)) was tuned
-# on, sit at 0.13-0.24 throughout and are left alone, while a UV sphere of 290 control points sat at 2-9 and took 805
-# iterations (310-335 balanced), and the corpus's thin plate, torus and bent tube start below 0.05 (945, 340 and 320
-# iterations; 295, 190 and 165 balanced), at objectives within the tolerance's 0.06 % (bench/RESULTS.md).
+# the dual doubles it, one below BALANCE_LOW times the dual halves it; then it stays, as ADMM's convergence needs. The
+# band is wide and lopsided: the gargoyle's cages, whose penalty c_d / n^(1/(d-1)) was tuned on, sit at 0.13-0.24
+# throughout and are left alone, while a UV sphere of 290 control points sat at 2-9 and took 805 iterations (310-335
+# balanced), and the corpus's thin plate, torus and bent tube start below 0.05 (945, 340 and 320 iterations; 295, 190
+# and 165 balanced), at objectives within the tolerance's 0.06 % (bench/RESULTS.md).
 BALANCE_UNTIL = 300
 BALANCE_HIGH, BALANCE_LOW = 2.0, 0.05
 BALANCE_SPACING = 30
@@ -706,7 +707,6 @@ class _DouglasRachford:
         """Change the penalty to ``factor`` times itself, in place on ``state``: the split variables stay, the
         scaled duals (v minus them) shrink by ``factor``, and so do the shrink thresholds. The Y-step's matrix does
         not depend on the penalty (both blocks are scaled alike), so nothing is factorised again."""
-        p = self.p
         v_x, v_w = self.split(state)
         old_thresholds = self.thresholds
         self.thresholds = (old_thresholds / factor).astype(old_thresholds.dtype)
@@ -718,10 +718,16 @@ class _DouglasRachford:
             v_x[:, cells] *= kept + (1.0 - kept) / factor
 
         self.in_rounds(rescale)
-        W = np.minimum(np.maximum(v_w, 0.0), p.sqrt_mass)
+        W = self.clipped(v_w)
         v_w -= W
         v_w /= factor
         v_w += W
+
+    def clipped(self, v_w):
+        """W̃ = v_W clipped to [0, √(β m_v)] per interior vertex (np.clip with a broadcast bound is several times
+        slower)."""
+        W = np.maximum(v_w, 0.0)
+        return np.minimum(W, self.p.sqrt_mass, out=W)
 
     def shrink_factors(self, values, thresholds, cells=None):
         """The prox of the cells' total variation as factors of ``values`` (d, F', n): (1, F', n), or (d, F', n) with
@@ -780,8 +786,7 @@ class _DouglasRachford:
             np.multiply(v_x[:, cells], 1.0 - alpha * shrink[:, cells], out=new_x[:, cells])
             new_x[:, cells] += alpha * g
 
-        W = np.maximum(v_w, 0.0)  # clip to [0, √(β m_v)]; np.clip with a broadcast bound is several times slower
-        np.minimum(W, p.sqrt_mass, out=W)
+        W = self.clipped(v_w)
         reflected_w = 2.0 * W
         reflected_w -= v_w
         rhs = sum(self.in_rounds(shrink_and_reflect))
