@@ -115,9 +115,12 @@ def set_deformer(mesh_obj, **inputs):
     Raises
     ------
     lbc_core.CageError
-        When the mesh is not bound or its modifier was removed.
+        When the mesh is not bound, its modifier was removed, or the object is linked from a library (not an
+        override: the change would be lost on saving).
     """
     _require_enabled()
+    if isinstance(mesh_obj, bpy.types.Object) and mesh_obj.library is not None:
+        raise CageError(geometry.not_editable_here(mesh_obj))
     modifier = deformer.find_modifier(mesh_obj) if is_bound(mesh_obj) else None
     if modifier is None:
         raise CageError(f"'{mesh_obj.name}' has no LBC modifier: bind it first")

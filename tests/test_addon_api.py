@@ -7,7 +7,7 @@ import pytest
 from mathutils import Matrix
 
 import lbc_core
-from lbc_addon import api, jobs, storage
+from lbc_addon import api, deformer, jobs, storage
 from lbc_addon.properties import is_bound
 from blender_scenes import (
     evaluated_positions,
@@ -224,10 +224,14 @@ def test_a_mesh_linked_from_a_library_or_overridden_is_not_rebound_or_unbound_he
     with bpy.context.temp_override(active_object=linked, object=linked, selected_objects=[linked]):
         with pytest.raises(RuntimeError, match="Not unbound: 'Gargoyle' is linked from the library"):
             bpy.ops.object.lbc_unbind()
+    with pytest.raises(api.CageError, match="'Gargoyle' is linked from the library"):
+        api.set_deformer(linked, strength=0.5)  # accepted before, and lost on saving
     assert is_bound(linked)
     override = linked.override_create(remap_local_usages=True)  # its mesh data stays linked
     with pytest.raises(api.CageError, match="the mesh data of 'Gargoyle' is linked from the library"):
         api.bind(override, cage)
+    api.set_deformer(override, strength=0.5)  # an override's modifier inputs are saved with it
+    assert deformer.inputs(deformer.find_modifier(override))["Strength"] == 0.5
 
 
 def test_a_mesh_linked_in_a_collection_is_told_to_make_the_collection_local(tmp_path):
