@@ -71,6 +71,28 @@ class UnitFrame:
         return dataclasses.replace(domain, vertices=vertices)
 
 
+def principal_extents(vertices):
+    """The principal directions of a point set and its extent along each.
+
+    Parameters
+    ----------
+    vertices : (n, d) float array
+
+    Returns
+    -------
+    axes : (d, d) float array
+        Columns: the principal directions, largest spread first, a right-handed frame in 3D.
+    extents : (d,) float array
+        The points' extent along each column of ``axes``, in the units of ``vertices``.
+    """
+    centred = vertices - vertices.mean(axis=0)
+    _, _, axes = np.linalg.svd(centred, full_matrices=False)
+    axes = axes.T
+    if len(axes) == 3 and np.linalg.det(axes) < 0:
+        axes[:, 2] = -axes[:, 2]
+    return axes, np.ptp(centred @ axes, axis=0)
+
+
 # A 3D cage thinner than this along a principal axis (× its largest extent) is meshed stretched to this aspect.
 ASPECT_FLOOR = 0.25
 
@@ -95,12 +117,7 @@ class MeshingFrame:
         dim = vertices.shape[1]
         matrix = np.eye(dim)
         if dim == 3:
-            centred = vertices - vertices.mean(axis=0)
-            _, _, axes = np.linalg.svd(centred, full_matrices=False)
-            axes = axes.T  # columns: principal directions
-            if np.linalg.det(axes) < 0:
-                axes[:, 2] = -axes[:, 2]
-            extents = np.ptp(centred @ axes, axis=0)
+            axes, extents = principal_extents(vertices)
             stretch = np.maximum(1.0, ASPECT_FLOOR * extents.max() / np.maximum(extents, np.finfo(float).tiny))
             if np.any(stretch > 1.0):
                 matrix = axes * stretch[None, :]

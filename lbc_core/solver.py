@@ -358,9 +358,13 @@ CELLS_POWER = 0.4
 # A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
 # (bench/RESULTS.md, bench/thin_cages.py).
 STRETCHED_TIME_FACTOR = 10
+# A thin 3D cage solved in its own frame takes more iterations: about 1 + log10(aspect / THIN_FROM_ASPECT) times
+# those above, the aspect its largest extent over its smallest along its principal axes (five corpus cages of 32-66
+# control points squashed to aspects 5-1000: 1.4x at 20, 2.2-2.8x at 50-200, 3.2x at 1000, at the median).
+THIN_FROM_ASPECT = 5
 
 
-def solve_forecast(n_control_points, n_cells, dim, stretched=False):
+def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0):
     """What a solve will take, told before it starts: its memory and roughly its time.
 
     Parameters
@@ -368,6 +372,8 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False):
     n_control_points, n_cells, dim : int
     stretched : bool
         Whether the solve runs in a stretched frame (:func:`solves_stretched`).
+    aspect : float
+        The cage's largest extent over its smallest along its principal axes (:func:`frame.principal_extents`).
 
     Returns
     -------
@@ -378,6 +384,8 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False):
     seconds = SECONDS_PER_STATE_ENTRY * entries * iterations * (n_cells / 8000) ** CELLS_POWER
     if stretched:
         seconds *= STRETCHED_TIME_FACTOR
+    elif dim == 3 and aspect > THIN_FROM_ASPECT:
+        seconds *= 1 + np.log10(aspect / THIN_FROM_ASPECT)
     text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
             f"{_size(estimate_memory(n_control_points, n_cells, dim))} of memory and "
             f"{'' if seconds < 1 else 'roughly '}{_duration(seconds)}")

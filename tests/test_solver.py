@@ -188,6 +188,11 @@ def test_the_forecast_knows_a_very_thin_cage_solves_slower():
     assert not solves_stretched(many)  # 30 control points: the cage's frame converges sooner
     plain, stretched = solve_forecast(106, 8000, 3), solve_forecast(106, 8000, 3, stretched=True)
     assert plain.endswith("roughly 3 s") and stretched.endswith("roughly 32 s")
+    # The corpus's 56-vertex grid box squashed to 1/100 took 555 iterations here, as made 190 (bench/RESULTS.md).
+    assert solve_forecast(56, 8000, 3).endswith("roughly 1 s")
+    assert solve_forecast(56, 8000, 3, aspect=100).endswith("roughly 3 s")
+    assert solve_forecast(56, 8000, 3, aspect=4) == solve_forecast(56, 8000, 3)
+    assert solve_forecast(56, 8000, 2, aspect=200) == solve_forecast(56, 8000, 2)
 
 
 def test_the_time_left_blends_the_share_of_the_way_and_the_residuals_power_law():
