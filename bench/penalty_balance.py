@@ -6,7 +6,8 @@ CAGE: a gargoyle cage (L08 ... L16), ``uv:S:R`` (a UV sphere of S segments and R
 has 290 vertices), ``capsule``, or ``corpus:NAME:VARIANT`` (tests/cage_corpus.py, e.g. corpus:thin-plate:as-made,
 corpus:torus:squashed-1e-3); ``corpus:as-made`` or ``corpus:squashed-1e-3`` stands for every corpus cage in that
 variant. Each cage is meshed once, as the pipeline does; then solved with balancing off (``BALANCE_UNTIL`` 0) and on.
-Prints iterations, objective, seconds and the penalty changes of each.
+Prints iterations, objective, seconds and the penalty changes of each. ``--lows 0.05,0.1`` solves with balancing
+on at each of these floors of the residuals' ratio (``BALANCE_LOW``) instead.
 """
 
 import argparse
@@ -83,10 +84,15 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cages", nargs="*", default=DEFAULT)
     parser.add_argument("--cells", type=int, default=8000)
+    parser.add_argument("--lows", type=lambda text: [float(low) for low in text.split(",")])
     args = parser.parse_args()
-    balance_until = solver.BALANCE_UNTIL
-    print("| cage | n | tetrahedra | fixed: iterations, objective, s | balanced: iterations, objective, s | changes |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    balance_until, balance_low = solver.BALANCE_UNTIL, solver.BALANCE_LOW
+    # (column title, BALANCE_UNTIL, BALANCE_LOW) of each solve
+    variants = ([(f"floor {low}", balance_until, low) for low in args.lows] if args.lows else
+                [("fixed", 0, balance_low), ("balanced", balance_until, balance_low)])
+    print(f"| cage | n | tetrahedra | {' | '.join(f'{title}: iterations, objective, s' for title, _, _ in variants)} "
+          "| changes |")
+    print("| --- | --- | --- |" + " --- |" * (len(variants) + 1))
     for name in expand(args.cages):
         cage = make_cage(*load(name))
         unit = UnitFrame.of(cage).cage_to_unit(cage)
@@ -95,8 +101,8 @@ def main():
                    unit.vertices, tv_weights(domain.cells, geodesic_distances(domain.vertices, domain.cells,
                                                                               domain.control_vertices), "quadratic"))
         cells = []
-        for until in (0, balance_until):
-            solver.BALANCE_UNTIL = until
+        for _, until, low in variants:
+            solver.BALANCE_UNTIL, solver.BALANCE_LOW = until, low
             start = time.perf_counter()
             result = solver.solve_on_mesh(*problem)
             seconds = time.perf_counter() - start
@@ -104,9 +110,10 @@ def main():
                        if "penalty" in record]
             cells.append((f"{result.iterations}{'' if result.converged else ' (not converged)'}, "
                           f"{result.objective:.6f}, {seconds:.1f}", changes))
-        solver.BALANCE_UNTIL = balance_until
-        print(f"| {name} | {cage.n_control_points} | {len(domain.cells)} | {cells[0][0]} | {cells[1][0]} | "
-              f"{cells[1][1] or 'none'} |", flush=True)
+        solver.BALANCE_UNTIL, solver.BALANCE_LOW = balance_until, balance_low
+        print(f"| {name} | {cage.n_control_points} | {len(domain.cells)} | "
+              f"{' | '.join(text for text, _ in cells)} | {'; '.join(str(changes or 'none') for _, changes in cells)} |",
+              flush=True)
 
 
 if __name__ == "__main__":
