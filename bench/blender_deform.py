@@ -2,7 +2,8 @@
 
     PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
         [--modes edit,playback] [--thin 0.002:0,0.005:12] [--sums chain,fma,fma-vector]
-        [--shared 0,11,12] [--trees direct,pairs,points,sorted,triplets] [--reference-cells 16000] [--handler-off]
+        [--shared 0,11,12] [--trees direct,pairs,points,displacement,compact-tail,
+        sorted,triplets] [--reference-cells 16000] [--handler-off]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
@@ -267,7 +268,13 @@ def rebuild_tree(obj, form):
     the plain path only, Strength 1 and no vertex group, and not exact where the rest differs from the vertex:
     a bound on the lever's gain). "pairs": each slot's (index, weight) in one 2D vector attribute, one Named
     Attribute read and a Separate XYZ instead of two reads. "points": the cage sampled as a point cloud (Mesh to
-    Points, once) instead of the Object Info mesh.
+    Points, once) instead of the Object Info mesh. "displacement": every slot samples the cage's displacement
+    d = c - c_rest, stored once per frame on the cage's points (its rest positions read from an attribute on the
+    mesh's first vertices), so Set Position's offset is Σ w_k d_k: no rest read or subtraction per vertex, the same
+    deformation. "compact-tail": the tail's slots (those only some vertices use) summed on the mesh's first T
+    vertices, a contiguous range, from compact copies of the T tail vertices' slots stored there, then gathered back
+    by each vertex's stored rank (none: out of range, a zero vector) instead of evaluated on the scattered tail
+    vertices.
     """
     group = obj.modifiers[0].node_group
     nodes, links = group.nodes, group.links
@@ -306,8 +313,111 @@ def rebuild_tree(obj, form):
         links.new(cage_geometry, deformer._input(points, "Mesh"))
         for sample in samples:
             links.new(points.outputs["Points"], deformer._input(sample, "Geometry"))
+    elif form == "displacement":
+        cage = deformer.inputs(obj.modifiers[0])["Cage"]
+        rest = cage_rest_local(cage, obj)
+        attribute = obj.data.attributes.new(".bench_cage_rest", "FLOAT_VECTOR", "POINT")
+        values = np.zeros((len(obj.data.vertices), 3), dtype=np.float32)
+        values[:len(rest)] = rest
+        attribute.data.foreach_set("vector", values.ravel())
+        group_in = next(n for n in nodes if n.bl_idname == "NodeGroupInput")
+        cage_geometry = deformer._input(samples[0], "Geometry").links[0].from_socket
+        rest_read = deformer._named_attribute(nodes, "FLOAT_VECTOR", ".bench_cage_rest", (0, 600))
+        rest_sample = nodes.new("GeometryNodeSampleIndex")
+        rest_sample.data_type, rest_sample.domain = "FLOAT_VECTOR", "POINT"
+        links.new(group_in.outputs["Geometry"], deformer._input(rest_sample, "Geometry"))
+        links.new(rest_read.outputs["Attribute"], deformer._input(rest_sample, "Value"))
+        links.new(nodes.new("GeometryNodeInputIndex").outputs["Index"], deformer._input(rest_sample, "Index"))
+        displacement = deformer._vector_math(nodes, "SUBTRACT", (0, 700))
+        position = nodes.new("GeometryNodeInputPosition").outputs["Position"]
+        links.new(position, deformer._inputs(displacement, "Vector")[0])
+        links.new(rest_sample.outputs["Value"], deformer._inputs(displacement, "Vector")[1])
+        store = nodes.new("GeometryNodeStoreNamedAttribute")
+        store.data_type, store.domain = "FLOAT_VECTOR", "POINT"
+        deformer._input(store, "Name").default_value = ".bench_displacement"
+        links.new(cage_geometry, deformer._input(store, "Geometry"))
+        links.new(displacement.outputs["Vector"], deformer._input(store, "Value"))
+        displacement_read = deformer._named_attribute(nodes, "FLOAT_VECTOR", ".bench_displacement", (0, 800))
+        for sample in samples:
+            links.new(store.outputs["Geometry"], deformer._input(sample, "Geometry"))
+            links.new(displacement_read.outputs["Attribute"], deformer._input(sample, "Value"))
+        subtract = next(n for n in nodes if n.bl_idname == "ShaderNodeVectorMath" and n.operation == "SUBTRACT"
+                        and n is not displacement)
+        total = deformer._inputs(subtract, "Vector")[0].links[0].from_socket
+        for link in list(subtract.outputs["Vector"].links):
+            to_socket = link.to_socket
+            links.remove(link)
+            links.new(total, to_socket)
+        nodes.remove(subtract)
+    elif form == "compact-tail":
+        compact_tail(obj, group)
     else:
         raise ValueError(f"unknown tree form {form!r}")
+
+
+def compact_tail(obj, group):
+    """The tail of :func:`rebuild_tree`'s "compact-tail"."""
+    nodes, links = group.nodes, group.links
+    index, weight = storage.read(obj.data)
+    set_tail = next(n for n in nodes if n.bl_idname == "GeometryNodeSetPosition"
+                    and deformer._input(n, "Selection").is_linked)
+    first = deformer.shared_slot_count(weight)
+    rows = np.flatnonzero(weight[:, first] != 0)
+    count = len(obj.data.vertices)
+    rank = np.full(count, count, dtype=np.int32)  # past the end: Sample Index gives zero
+    rank[rows] = np.arange(len(rows), dtype=np.int32)
+    obj.data.attributes.new(".bench_tail_rank", "INT", "POINT").data.foreach_set("value", rank)
+    terms = []
+    for slot in range(first, index.shape[1]):
+        compact_index = np.zeros(count, dtype=np.int32)
+        compact_weight = np.zeros(count, dtype=np.float32)
+        compact_index[:len(rows)], compact_weight[:len(rows)] = index[rows, slot], weight[rows, slot]
+        obj.data.attributes.new(f".bench_tail_index_{slot}", "INT", "POINT").data.foreach_set("value", compact_index)
+        obj.data.attributes.new(f".bench_tail_weight_{slot}", "FLOAT", "POINT").data.foreach_set(
+            "value", compact_weight)
+        # Each slot of the old tail: its Sample Index of the cage, re-fed with the compact index and weight.
+        old_sample = next(n for n in nodes if n.bl_idname == "GeometryNodeSampleIndex"
+                          and deformer._input(n, "Index").links[0].from_node.bl_idname
+                          == "GeometryNodeInputNamedAttribute"
+                          and deformer._input(deformer._input(n, "Index").links[0].from_node, "Name").default_value
+                          == storage.index_name(slot))
+        sample = nodes.new("GeometryNodeSampleIndex")
+        sample.data_type, sample.domain = "FLOAT_VECTOR", "POINT"
+        for name in ("Geometry", "Value"):
+            links.new(deformer._input(old_sample, name).links[0].from_socket, deformer._input(sample, name))
+        compact = deformer._named_attribute(nodes, "INT", f".bench_tail_index_{slot}", (0, 0))
+        links.new(compact.outputs["Attribute"], deformer._input(sample, "Index"))
+        scaled = deformer._vector_math(nodes, "SCALE", (0, 0))
+        links.new(sample.outputs["Value"], deformer._input(scaled, "Vector"))
+        links.new(deformer._named_attribute(nodes, "FLOAT", f".bench_tail_weight_{slot}", (0, 0)).outputs["Attribute"],
+                  deformer._input(scaled, "Scale"))
+        terms.append(scaled.outputs["Vector"])
+    total = deformer.pairwise_sum(group, terms, 0)
+    in_range = deformer._compare(nodes, "INT", "LESS_THAN", (0, 0))
+    links.new(nodes.new("GeometryNodeInputIndex").outputs["Index"], deformer._input(in_range, "A"))
+    deformer._input(in_range, "B").default_value = len(rows)
+    store = nodes.new("GeometryNodeStoreNamedAttribute")
+    store.data_type, store.domain = "FLOAT_VECTOR", "POINT"
+    deformer._input(store, "Name").default_value = ".bench_tail_sum"
+    links.new(deformer._input(set_tail, "Geometry").links[0].from_socket, deformer._input(store, "Geometry"))
+    links.new(in_range.outputs["Result"], deformer._input(store, "Selection"))
+    links.new(total, deformer._input(store, "Value"))
+    gather = nodes.new("GeometryNodeSampleIndex")
+    gather.data_type, gather.domain = "FLOAT_VECTOR", "POINT"
+    links.new(store.outputs["Geometry"], deformer._input(gather, "Geometry"))
+    links.new(deformer._named_attribute(nodes, "FLOAT_VECTOR", ".bench_tail_sum", (0, 0)).outputs["Attribute"],
+              deformer._input(gather, "Value"))
+    links.new(deformer._named_attribute(nodes, "INT", ".bench_tail_rank", (0, 0)).outputs["Attribute"],
+              deformer._input(gather, "Index"))
+    # The old tail sum feeds the Strength / mask product and its switch: the gathered sum takes its place there.
+    offset_switch = deformer._input(set_tail, "Offset").links[0].from_node
+    old_sum = deformer._input(offset_switch, "True").links[0].from_socket
+    for link in list(old_sum.links):
+        to_socket = link.to_socket
+        links.remove(link)
+        links.new(gather.outputs["Value"], to_socket)
+    links.new(store.outputs["Geometry"], deformer._input(set_tail, "Geometry"))
+    links.remove(deformer._input(set_tail, "Selection").links[0])
 
 
 def rebuild_sum(obj, form):
