@@ -23,6 +23,7 @@ Cancelled = lbc_core.Cancelled
 DEFAULT_CELLS_2D = _options.DEFAULT_CELLS[2]
 DEFAULT_CELLS_3D = _options.DEFAULT_CELLS[3]
 DEFAULT_TOLERANCE = _solver.DEFAULT_TOLERANCE
+LOOSE_TOLERANCE, LOOSE_TOLERANCE_FROM = _solver.LOOSE_TOLERANCE, _solver.LOOSE_TOLERANCE_FROM
 POSED_APART = _cage.POSED_APART
 flatten = _planar.flatten
 reframed = _planar.reframed

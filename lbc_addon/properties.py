@@ -7,7 +7,14 @@ import bpy
 from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from .core import DEFAULT_CELLS_2D, DEFAULT_CELLS_3D, DEFAULT_FLOOR, DEFAULT_TOLERANCE
+from .core import (
+    DEFAULT_CELLS_2D,
+    DEFAULT_CELLS_3D,
+    DEFAULT_FLOOR,
+    DEFAULT_TOLERANCE,
+    LOOSE_TOLERANCE,
+    LOOSE_TOLERANCE_FROM,
+)
 
 # Influences per mesh vertex by default (bench/RESULTS.md, "Blender deformer"): every weight lowered by the
 # Thinning floor (DEFAULT_FLOOR) and no cap on the count. A cap ranks the weights of each vertex, and where the ranks
@@ -64,7 +71,8 @@ class BindOptionProperties:
     tolerance: FloatProperty(
         name="Tolerance",
         description="Stopping tolerance of the solver (relative ADMM residual); 0 uses lbc's default "
-        f"({DEFAULT_TOLERANCE[2]:g} in 2D, {DEFAULT_TOLERANCE[3]:g} in 3D). Smaller: more accurate weights, slower bind",
+        f"({DEFAULT_TOLERANCE[2]:g} in 2D, {DEFAULT_TOLERANCE[3]:g} in 3D, {LOOSE_TOLERANCE:g} from "
+        f"{LOOSE_TOLERANCE_FROM} cage vertices). Smaller: more accurate weights, slower bind",
         default=0.0,
         min=0.0,
         soft_max=0.01,

@@ -88,8 +88,9 @@ def test_the_forecast_tells_memory_and_time_before_a_solve():
     small = solve_forecast(27, 8000, 3)
     assert small.startswith("solving 27 control points on about 8000 cells: about ") and small.endswith(
         " MB of memory and under 1 s")
-    # The gargoyle's L08 at 16,000 cells solved in 15-17 s here (bench/RESULTS.md).
-    assert solve_forecast(168, 16000, 3).endswith("of memory and roughly 15 s")
+    # The gargoyle's L08 at 16,000 cells solved in 15-17 s here at the tolerance 2e-4 (bench/RESULTS.md); 3e-4 takes
+    # 0.8 of its iterations (230 against 285).
+    assert solve_forecast(168, 16000, 3).endswith("of memory and roughly 12 s")
     # The 1002-vertex cage: GiB, told up front.
     large = solve_forecast(1002, 8000, 3)
     assert f"{estimate_memory(1002, 8000, 3) / 2**30:.1f} GiB of memory and roughly" in large
@@ -187,7 +188,7 @@ def test_the_forecast_knows_a_very_thin_cage_solves_slower():
     many = np.random.default_rng(1).uniform(size=(30, 3)) * [1, 1, 0.001]
     assert not solves_stretched(many)  # 30 control points: the cage's frame converges sooner
     plain, stretched = solve_forecast(106, 8000, 3), solve_forecast(106, 8000, 3, stretched=True)
-    assert plain.endswith("roughly 3 s") and stretched.endswith("roughly 32 s")
+    assert plain.endswith("roughly 3 s") and stretched.endswith("roughly 26 s")
     # The corpus's 56-vertex grid box squashed to 1/100 took 555 iterations here, as made 190 (bench/RESULTS.md).
     assert solve_forecast(56, 8000, 3).endswith("roughly 1 s")
     assert solve_forecast(56, 8000, 3, aspect=100).endswith("roughly 3 s")
