@@ -52,7 +52,7 @@ PENALTY_SCALE = {2: 1.3, 3: 1.3}
 # and the objective within 0.06 % of a tight solve, at 0.65-0.8 of the iterations of 1e-4 (see bench/RESULTS.md).
 DEFAULT_TOLERANCE = {2: 2.5e-4, 3: 2e-4}
 # From LOOSE_TOLERANCE_FROM control points on, remeshing changes more (the coordinates are narrower) and a 3D solve
-# stopped at LOOSE_TOLERANCE still stays within half of it (at most 0.32 of it on 18 cages of 42-168 control points,
+# stopped at LOOSE_TOLERANCE still stays within half of it (at most 0.32 of it on 13 cages of 42-168 control points,
 # against 0.34-0.44 at 2e-4 on cages of 11 and 27), in LOOSE_TOLERANCE_ITERATIONS of the iterations (bench/RESULTS.md).
 LOOSE_TOLERANCE, LOOSE_TOLERANCE_FROM, LOOSE_TOLERANCE_ITERATIONS = 3e-4, 40, 0.82
 # The dual residual is allowed this many times the primal tolerance: it lags, and the objective settles first.
