@@ -183,6 +183,8 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     options = {"cells": cells, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
                "thinning": thinning, "influences": influences, "mode": mode}
     check_options(options)
+    # As Object.lbc stores them, so that a Rebind, which reads them back, asks for the same solve.
+    options.update({key: float(np.float32(options[key])) for key in ("epsilon", "tolerance", "thinning")})
     for role, obj in (("mesh", mesh_obj), ("cage", cage_obj)):
         if not isinstance(obj, bpy.types.Object):
             raise CageError(f"the {role} to bind is {obj!r}, not an object: pass it as e.g. bpy.data.objects['Name'] "

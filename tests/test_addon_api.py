@@ -320,6 +320,15 @@ def test_api_prints_progress_in_background_and_says_how_a_rebind_went(capsys):
     assert again["rebind"].startswith("bound again from the previous binding")
 
 
+def test_rebind_all_after_api_bind_with_options_blender_rounds_starts_from_the_previous_binding():
+    """A reviewer's finding: Blender keeps Relaxation, Tolerance and Thinning as float32, so the options Rebind reads
+    back differed from api.bind's exact 1e-4 and every Rebind bound from scratch."""
+    mesh, cage = sphere_in_box_scene()
+    api.bind(mesh, cage, cells=1000, tolerance=1e-4, epsilon=0.01, thinning=0.003)
+    again, = api.rebind_all(cage)
+    assert again["rebind"].startswith("bound again from the previous binding"), again["rebind"]
+
+
 def test_api_refuses_at_once_when_the_extension_is_not_enabled():
     import lbc_addon
     from blender_scenes import register_addon
