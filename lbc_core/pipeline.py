@@ -130,10 +130,8 @@ def bind(
                                      tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
     lap("reduction")
     progress(1.0, "bound")
-    # A simplex cage's single cell is not a resolution: it records the one asked for, which a re-bind reuses.
-    cells = len(domain.cells) if len(domain.cells) > 1 else request.cells or DEFAULT_CELLS[cage.dim]
     return lbc_binding(frame, cage, domain, result, weights, outside, points,
-                       _options_record(request, cells, threshold), timings)
+                       _options_record(request, len(domain.cells), threshold), timings)
 
 
 def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, options, timings):

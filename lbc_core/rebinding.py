@@ -36,7 +36,7 @@ from .geometry import bary_positions, radius_ratios, signed_measures, triangle_n
 from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
 from .objective import tv_objective
-from .options import BindOptions
+from .options import WEIGHTINGS, BindOptions
 from .pipeline import REPRODUCTION_TOLERANCE, bind, check_inside, check_points, lbc_binding
 from .progress import Progress
 from .reduction import interpolate_and_reduce
@@ -283,6 +283,10 @@ def _options_of(previous):
     """The BindOptions a previous binding was made with: the cell count asked for, so that a bind from scratch is
     the bind the artist made (bindings saved before it was recorded give the count they reached)."""
     recorded = dict(previous.options)
+    weighting = recorded.get("weighting")
+    if isinstance(weighting, str) and weighting not in WEIGHTINGS:
+        raise CageError(f"this binding was made with a weighting function of its own ({weighting}), which a saved "
+                        "binding does not keep: bind from scratch with lbc_core.bind(..., weighting=that function)")
     if "cells_asked" in recorded:
         recorded["cells"] = recorded["cells_asked"]
     return BindOptions.of(None, **{key: recorded[key] for key in ("cells", "weighting", "epsilon", "threshold",

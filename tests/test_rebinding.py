@@ -236,6 +236,20 @@ def test_a_2d_polygon_rebinds_warm():
     assert warm.iterations < first.iterations
 
 
+def test_a_saved_binding_made_with_a_weighting_function_is_refused_and_told_what_to_do(tmp_path):
+    """A reviewer's finding: the saved binding keeps the function's name only, which rebind fed back to BindOptions
+    ("weighting '<function ...>' is not one of ..."), an option the user never typed."""
+    polygon = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
+    points = np.random.default_rng(0).uniform(0.05, 0.95, (50, 2))
+    first = lbc_core.bind(polygon, None, points, cells=300, weighting=np.square)
+    assert rebind(first, moved(polygon, [2], 0.02)).options["start"] == "previous solution"  # in memory: kept
+    path = tmp_path / "custom.npz"
+    first.save(path)
+    with pytest.raises(lbc_core.CageError, match=r"weighting function of its own \(.*square.*\), which a saved "
+                                                 r"binding does not keep: bind from scratch"):
+        rebind(lbc_core.load_binding(path), moved(polygon, [2], 0.02))
+
+
 def test_a_baseline_binding_is_refused(gargoyle):
     cage, faces, points, _ = gargoyle
     mvc = lbc_core.bind_mvc(cage, faces, points[:50])
