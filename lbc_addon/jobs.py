@@ -19,6 +19,7 @@ vertices), too large for the .blend, so a reopened file, or a mesh bound long ag
 """
 
 import numbers
+import re
 import threading
 import time
 from collections import OrderedDict
@@ -291,7 +292,8 @@ def _cage_modifiers_notes(request, message):
     note = ""
     if request.cage_modifiers:
         verb = verb_for(request.cage_modifiers, "makes", "make")
-        note = (f"vertex numbers of the cage with its {request.cage_modifiers} applied" if "vert" in message
+        note = (f"vertex numbers of the cage with its {request.cage_modifiers} applied"
+                if re.search(r"\bvert(ex|ices) \(?\d", message)
                 else f"this is the cage as its {request.cage_modifiers} {verb} it")
     return cause, note
 

@@ -219,6 +219,16 @@ def test_an_error_about_a_cage_with_a_modifier_off_in_viewports_says_so():
         jobs.solve(open_box)
 
 
+def test_the_note_on_vertex_numbers_follows_only_a_message_that_has_them():
+    """A reviewer's finding: "the cage is flat (all its vertices lie in one plane)" got a note on vertex numbers."""
+    from dataclasses import replace
+
+    flat = replace(request(cage_points=BOX * [1, 1, 0], mode="3D"), cage_modifiers="modifier 'Solidify'")
+    with pytest.raises(jobs.CageError, match=r"the cage is flat .*\(this is the cage as its modifier 'Solidify' "
+                                             r"makes it\)$"):
+        jobs.solve(flat)
+
+
 def test_a_2d_re_bind_after_moving_one_cage_vertex_solves_only_near_it(monkeypatch, woody):
     """A code review's finding: the flat cage's plane frame (its mean and principal axes) shifted with the edit, so
     every control point moved in 2D and the re-bind started from scratch. It keeps the first bind's frame now."""
