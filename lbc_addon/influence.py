@@ -59,16 +59,30 @@ def ramp(values):
     return np.concatenate([rgb, np.ones((len(values), 1))], axis=1)
 
 
-def _view_spaces():
-    """The 3D views of every open window: their Solid shading is switched to attribute colors and back."""
-    return [
-        space
+def _views():
+    """{(screen name, area index): space} of the 3D views of every open window: their Solid shading is switched to
+    attribute colors and back (a view is no ID, so it is remembered by its screen and place)."""
+    return {
+        (window.screen.name, index): space
         for window in bpy.context.window_manager.windows
-        for area in window.screen.areas
+        for index, area in enumerate(window.screen.areas)
         if area.type == "VIEW_3D"
         for space in area.spaces
         if space.type == "VIEW_3D"
-    ]
+    }
+
+
+def _restore_views(switched):
+    """Give the 3D views :func:`show` switched (its "screen|area|color type;..." record) their color type back, where
+    they still show attribute colors. A record of a color type alone (files saved before views were told apart)
+    applies to every view."""
+    views = _views()
+    for entry in filter(None, switched.split(";")):
+        *place, color_type = entry.rsplit("|", 2)
+        targets = [views.get((place[0], int(place[1])))] if place else list(views.values())
+        for space in targets:
+            if space is not None and space.shading.color_type == "VERTEX":
+                space.shading.color_type = color_type
 
 
 def show(mesh_obj, cage_vertex):
@@ -87,11 +101,13 @@ def show(mesh_obj, cage_vertex):
     colors = ramp(values / peak if peak > 0 else values)
     attribute.data.foreach_set("color", colors.astype(np.float32).ravel())
     mesh.color_attributes.active_color = attribute
-    for space in _view_spaces():
+    switched = [settings.previous_color_type] if settings.previous_color_type else []
+    for (screen, index), space in _views().items():
         # "VERTEX" is Solid shading's "Attribute" color: the active color attribute.
         if space.shading.color_type != "VERTEX":
-            settings.previous_color_type = space.shading.color_type
+            switched.append(f"{screen}|{index}|{space.shading.color_type}")
             space.shading.color_type = "VERTEX"
+    settings.previous_color_type = ";".join(switched)
     settings.show_influence = True
     settings.influence_vertex = cage_vertex
     mesh.update()
@@ -110,10 +126,13 @@ def hide(mesh_obj):
     # By name: Blender 5.1 and 5.2 keep a removed attribute's name as the active color unless told otherwise.
     previous = settings.previous_color
     mesh.color_attributes.active_color_name = previous if previous in mesh.color_attributes else ""
-    if settings.previous_color_type:
-        for space in _view_spaces():
-            if space.shading.color_type == "VERTEX":
-                space.shading.color_type = settings.previous_color_type
+    # While another mesh shows its influence the views stay on attribute colors; the last one hidden gives them back.
+    showing = [obj for obj in bpy.data.objects if obj != mesh_obj and obj.lbc.show_influence]
+    if showing:
+        showing[0].lbc.previous_color_type = ";".join(filter(None, (showing[0].lbc.previous_color_type,
+                                                                   settings.previous_color_type)))
+    else:
+        _restore_views(settings.previous_color_type)
     settings.show_influence = False
     settings.previous_color = ""
     settings.previous_color_type = ""

@@ -134,7 +134,10 @@ class LBC_PG_binding(BindOptionProperties, bpy.types.PropertyGroup):
     show_influence: BoolProperty(name="Show Influence", default=False)
     influence_vertex: IntProperty(name="Influence Vertex", description="The cage vertex whose weights are shown")
     previous_color: StringProperty(description="The active color attribute before showing the influence")
-    previous_color_type: StringProperty(description="The 3D views' Solid color type before showing the influence")
+    previous_color_type: StringProperty(
+        description="The 3D views switched to attribute colors by showing the influence, and their Solid color type "
+        'before: "screen|area index|color type;..."'
+    )
 
 
 def is_bound(obj):

@@ -10,7 +10,7 @@ from blender_scenes import (
 
 
 def _view_shading():
-    return [space.shading.color_type for space in influence._view_spaces()]
+    return [space.shading.color_type for space in influence._views().values()]
 
 
 def test_show_paints_the_selected_cage_vertex_and_hide_removes_it(bound_gargoyle):
@@ -39,6 +39,25 @@ def test_show_paints_the_selected_cage_vertex_and_hide_removes_it(bound_gargoyle
     # Hiding also clears the add-on's bookkeeping of what was shown, the rest is as before.
     assert after == before
     assert _view_shading() == shading
+
+
+def test_hiding_gives_each_view_its_own_color_type_back_once_no_mesh_shows_influence(bound_gargoyle):
+    """A reviewer's finding: one color type was kept per mesh, so a view already on attribute colors was set to
+    another view's type, and hiding one of two meshes showing influence turned the other's colors off."""
+    mesh, cage = bound_gargoyle
+    second = mesh.copy()
+    second.data = mesh.data.copy()
+    bpy.context.scene.collection.objects.link(second)
+    bpy.context.window.screen.areas[2].type = "VIEW_3D"  # a second 3D view
+    first_view, second_view = influence._views().values()
+    first_view.shading.color_type, second_view.shading.color_type = "VERTEX", "OBJECT"  # the artist's choices
+    influence.show(mesh, 3)
+    influence.show(second, 3)
+    assert _view_shading() == ["VERTEX", "VERTEX"]
+    influence.hide(mesh)
+    assert _view_shading() == ["VERTEX", "VERTEX"]  # the second mesh still shows its influence
+    influence.hide(second)
+    assert [first_view.shading.color_type, second_view.shading.color_type] == ["VERTEX", "OBJECT"]
 
 
 def test_show_influence_from_the_cage_paints_every_mesh_bound_to_it(bound_gargoyle):
