@@ -324,7 +324,8 @@ _FACTORISATION_END, _ADMM_END = 0.06, 0.98
 
 
 # Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (107-115; float32 loop,
-# Anderson memory 5); and domain vertices per cell of the meshes lbc makes.
+# Anderson memory 5; a whole bind's peak is 1.05 (3D) to 1.2 (2D) times the estimate, as a test checks); and domain
+# vertices per cell of the meshes lbc makes.
 BYTES_PER_STATE_ENTRY = 120
 VERTICES_PER_CELL = {2: 0.53, 3: 0.23}
 
@@ -345,7 +346,7 @@ def default_tolerance(dim, n_control_points):
     return DEFAULT_TOLERANCE[dim]
 
 
-def estimate_memory(n_control_points, n_cells, dim, n_vertices=None):
+def estimate_memory(n_control_points, n_cells, dim):
     """Peak memory of a solve, estimated before it starts.
 
     Parameters
@@ -354,16 +355,17 @@ def estimate_memory(n_control_points, n_cells, dim, n_vertices=None):
     n_cells : int
         Triangles (dim 2) or tetrahedra (dim 3).
     dim : int
-    n_vertices : int, optional
-        Domain vertices; estimated from ``n_cells`` if not given.
 
     Returns
     -------
     int, bytes
     """
-    if n_vertices is None:
-        n_vertices = VERTICES_PER_CELL[dim] * n_cells
-    return int(BYTES_PER_STATE_ENTRY * n_control_points * (dim * n_cells + n_vertices))
+    return int(BYTES_PER_STATE_ENTRY * _state_entries(n_control_points, n_cells, dim))
+
+
+def _state_entries(n_control_points, n_cells, dim):
+    """Entries of the (d F + N, n) ADMM state, the domain's N vertices estimated from its F cells."""
+    return n_control_points * (dim + VERTICES_PER_CELL[dim]) * n_cells
 
 
 # The solve's time, told before it starts: seconds per ADMM iteration and state entry at 8000 cells, iterations
@@ -400,7 +402,7 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0):
     -------
     str, e.g. "solving 106 control points on about 8000 cells: about 313 MB of memory and roughly 3 s"
     """
-    entries = n_control_points * (dim * n_cells + VERTICES_PER_CELL[dim] * n_cells)
+    entries = _state_entries(n_control_points, n_cells, dim)
     iterations = ITERATIONS_SCALE * n_control_points ** ITERATIONS_POWER
     if default_tolerance(dim, n_control_points) == LOOSE_TOLERANCE:
         iterations *= LOOSE_TOLERANCE_ITERATIONS
@@ -474,9 +476,9 @@ def _remaining(seconds):
     return f"{duration} left" if duration.startswith("under") else f"about {duration} left"
 
 
-def check_memory(n_control_points, n_cells, dim, n_vertices=None):
+def check_memory(n_control_points, n_cells, dim):
     """Raise CageError, with the estimate, if a solve would need more memory than the machine has available."""
-    needed = estimate_memory(n_control_points, n_cells, dim, n_vertices)
+    needed = estimate_memory(n_control_points, n_cells, dim)
     available = _available_memory()
     if available is not None and needed > 0.8 * available:
         raise CageError(

@@ -74,12 +74,34 @@ def test_bad_shapes_are_refused():
 
 
 def test_memory_estimate_refuses_what_the_machine_cannot_hold():
-    from lbc_core.solver import check_memory, estimate_memory
+    from lbc_core.solver import check_memory
 
-    assert estimate_memory(26, 3000, 2) == pytest.approx(120 * 26 * (2 * 3000 + 0.53 * 3000), rel=1e-6)
     check_memory(26, 3000, 2)  # the paper's 2D problems fit anywhere
     with pytest.raises(lbc_core.CageError, match="GiB"):
         check_memory(2000, 10**8, 3)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_memory_estimate_is_near_a_binds_traced_peak(dim, gargoyle):
+    """The peak of a whole bind, numpy's arrays included (tracemalloc), against the solve's estimate: 1.2 in 2D and
+    1.05 in 3D when measured, the solve's state being most of it."""
+    import tracemalloc
+
+    from lbc_core.solver import estimate_memory
+
+    if dim == 2:
+        cage, faces = np.array([[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2], [-1, 1.5], [-0.5, 0.5]]), None
+    else:
+        cage, faces = gargoyle[:2]
+    points = cage.mean(axis=0) + np.random.default_rng(0).uniform(-0.05, 0.05, (50, dim))
+    tracemalloc.start()
+    try:
+        binding = lbc_core.bind(cage, faces, points, cells=3000)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    estimate = estimate_memory(binding.cage.n_control_points, len(binding.domain.cells), dim)
+    assert 0.7 < peak / estimate < 1.4, peak / estimate
 
 
 def test_the_forecast_tells_memory_and_time_before_a_solve():
