@@ -230,7 +230,7 @@ def solve(request, progress=None, cancel=None, earlier=()):
         if cause or note:
             raise CageError(f"{cause}{error}{f' ({note})' if note else ''}") from error
         raise
-    column_vertex = column_base[binding.control_input_index]
+    column_vertex = column_base[binding.cage.first_inputs]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
     rest = binding.rest_cage_vertices
     thinning = _thinning(request.options)

@@ -74,14 +74,6 @@ class Binding:
     def outside_count(self):
         return int(np.count_nonzero(self.outside))
 
-    @property
-    def control_input_index(self):
-        """(n,) int array: an input cage vertex for each control point (welded duplicates share one)."""
-        first = np.full(self.cage.n_control_points, -1)
-        for index in range(len(self.cage.vertex_map) - 1, -1, -1):
-            first[self.cage.vertex_map[index]] = index
-        return first
-
     def influence_counts(self, threshold=None):
         """Number of control points with a weight above ``threshold`` per point; (m,) int array.
 

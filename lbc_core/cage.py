@@ -87,6 +87,11 @@ class Cage:
         return len(self.vertices)
 
     @property
+    def first_inputs(self):
+        """(n,) int array: an input vertex for each control point, the first of those welded into it."""
+        return _first_inputs(self.vertex_map)
+
+    @property
     def is_simplex(self):
         """A triangle (2D) or tetrahedron (3D): its coordinates are the barycentric ones, nothing to solve."""
         return self.n_control_points == self.dim + 1

@@ -357,6 +357,6 @@ def _near(previous, cells, what):
     """``what``, and the cage vertices nearest the offending cells, for the user."""
     centroid = previous.domain.vertices[np.unique(cells)].mean(axis=0)
     nearest = np.argsort(np.linalg.norm(previous.cage.vertices - centroid, axis=1))[:3]
-    inputs = previous.control_input_index[nearest]
+    inputs = previous.cage.first_inputs[nearest]
     count = f"{len(cells)} cell" if len(cells) == 1 else f"{len(cells)} cells"
     return f"{what} ({count}, near cage vertices {', '.join(map(str, inputs))})"

@@ -147,7 +147,7 @@ def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(
     binding = warm.binding
     rest = binding.rest_cage_vertices
     every_row = jobs.thin_weights(binding.weights, rest, binding.weights @ rest, *jobs._thinning(second.options))
-    index, weight = jobs.storage.slot_arrays(every_row, binding.control_input_index)
+    index, weight = jobs.storage.slot_arrays(every_row, binding.cage.first_inputs)
     np.testing.assert_array_equal(warm.index, index)
     np.testing.assert_allclose(warm.weight, weight, atol=1e-7)
 

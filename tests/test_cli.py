@@ -347,7 +347,7 @@ def test_a_flat_cage_with_faces_binds_in_2d_as_in_blender(tmp_path, capsys):
     blender = np.zeros((len(points), len(cage)))
     np.add.at(blender, (np.arange(len(points))[:, None], result.index), result.weight)
     command_line = np.zeros_like(blender)
-    command_line[:, flat.loop[binding.control_input_index]] = binding.weights.toarray()
+    command_line[:, flat.loop[binding.cage.first_inputs]] = binding.weights.toarray()
     np.testing.assert_allclose(blender, command_line, atol=1e-6)
 
 
