@@ -55,11 +55,6 @@ def meshes_3d():
 # ------------------------------------------------------------------------------------------------ contract checks
 
 
-def signed_measures(vertices, cells):
-    edges = vertices[cells[:, 1:]] - vertices[cells[:, :1]]
-    return np.linalg.det(edges) / (2.0 if vertices.shape[1] == 2 else 6.0)
-
-
 def facet_measures(points, facets):
     """Length (2D) or area (3D) of each facet given by point indices."""
     corners = points[facets]
