@@ -39,5 +39,12 @@ def test_write_read_remove_round_trip_leaves_the_mesh_as_it_was():
     assert mesh_state(mesh) == before
 
 
-def test_memory_is_eight_bytes_per_slot_and_twelve_for_the_rest_offset():
-    assert storage.memory_bytes(1000, 16) == 1000 * (16 * 8 + 12)
+def test_memory_counts_the_bytes_of_the_attributes_written():
+    mesh, _ = sphere_in_box_scene()
+    count = len(mesh.data.vertices)
+    before = {attribute.name for attribute in mesh.data.attributes}
+    storage.write(mesh.data, np.zeros((count, 5), np.int32), np.zeros((count, 5), np.float32), np.zeros((count, 3)))
+    item_bytes = {"INT": 4, "FLOAT": 4, "FLOAT_VECTOR": 12}
+    written = sum(len(attribute.data) * item_bytes[attribute.data_type] for attribute in mesh.data.attributes
+                  if attribute.name not in before)
+    assert storage.memory_bytes(count, 5) == written
