@@ -116,6 +116,36 @@ def render_difference(obj):
     return None
 
 
+def mirror_warning(mesh_obj):
+    """The warning for a mesh with a Mirror modifier, or None: the deformer goes above modifiers that change the
+    vertex count, so the Mirror copies the deformed half, where Mesh Deform, below it, deforms both halves."""
+    mirrors = [modifier.name for modifier in mesh_obj.modifiers
+               if modifier.type == "MIRROR" and (modifier.show_viewport or modifier.show_render)]
+    if not mirrors:
+        return None
+    return (f"'{mesh_obj.name}' has the Mirror modifier '{mirrors[0]}', which comes after the deformer: the mirrored "
+            "half copies this half's deformation instead of following its own side of the cage. Apply the Mirror "
+            "(Ctrl+A) and Rebind for each half to follow its own side")
+
+
+def posed_armature_warning(cage_obj):
+    """The warning for a cage deformed by an armature that is not in its rest pose, or None: the bind takes the cage
+    as it is as the rest, so that pose would be undone when the bones go back."""
+    for modifier in cage_obj.modifiers:
+        armature = getattr(modifier, "object", None) if modifier.type == "ARMATURE" else None
+        if (not modifier.show_viewport or armature is None or armature.type != "ARMATURE"
+                or armature.data.pose_position != "POSE"):
+            continue
+        posed = [bone.name for bone in armature.pose.bones
+                 if not np.allclose(np.array(bone.matrix_basis), np.eye(4), atol=1e-6)]
+        if posed:
+            return (f"the cage is bound as the armature '{armature.name}' poses it now (bone '{posed[0]}' "
+                    f"{'and others ' if len(posed) > 1 else ''}out of its rest pose): that pose is the rest the mesh "
+                    "follows from. If it is not, set the armature to Rest Position (Armature properties > Pose "
+                    "Position) and Rebind")
+    return None
+
+
 def render_warning(mesh_obj, cage_obj):
     """The warning for a binding whose cage has other vertices in renders (:func:`render_difference`), or None."""
     difference = render_difference(cage_obj)
@@ -262,7 +292,8 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         options=options,
         cage_topology=cage_topology,
         mesh_topology=topology_fingerprint(mesh_obj.data),
-        warnings=[warning for warning in (render_warning(mesh_obj, cage_obj),) if warning],
+        warnings=[warning for warning in (render_warning(mesh_obj, cage_obj), mirror_warning(mesh_obj),
+                                          posed_armature_warning(cage_obj)) if warning],
         cage_modifiers=_named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers))),
         cage_modifiers_off=_named_modifiers(_modifiers_off(cage_obj)),
         world=world,

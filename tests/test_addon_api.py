@@ -329,6 +329,40 @@ def test_rebind_all_after_api_bind_with_options_blender_rounds_starts_from_the_p
     assert again["rebind"].startswith("bound again from the previous binding"), again["rebind"]
 
 
+def test_a_mesh_with_a_mirror_is_warned_that_the_mirrored_half_copies_the_deformation():
+    """A new user's finding: a half character with a Mirror bound without a word, and the mirrored half then copied
+    the bound half's pose (the deformer goes above modifiers that change the vertex count)."""
+    mesh, cage = sphere_in_box_scene()
+    assert not any("Mirror" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    mesh.modifiers.new("Mirror", "MIRROR")
+    warnings = api.bind(mesh, cage, cells=1000)["warnings"]
+    assert any("the Mirror modifier 'Mirror', which comes after the deformer: the mirrored half copies this half's "
+               "deformation" in warning and "Apply the Mirror" in warning for warning in warnings), warnings
+
+
+def test_a_cage_bound_while_its_armature_is_posed_is_warned():
+    """A new user's finding: binding while the cage's armature was posed said only that vertices lie outside."""
+    mesh, cage = sphere_in_box_scene()
+    armature = bpy.data.objects.new("Rig", bpy.data.armatures.new("Rig"))
+    bpy.context.scene.collection.objects.link(armature)
+    bpy.context.view_layer.objects.active = armature
+    bpy.ops.object.mode_set(mode="EDIT")
+    bone = armature.data.edit_bones.new("Spine")
+    bone.head, bone.tail = (0.0, 0.0, -1.0), (0.0, 0.0, 1.0)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    cage.modifiers.new("Armature", "ARMATURE").object = armature
+    cage.vertex_groups.new(name="Spine").add(range(len(cage.data.vertices)), 1.0, "REPLACE")
+    assert not any("armature" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    armature.pose.bones["Spine"].location = (0.05, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    warnings = api.bind(mesh, cage, cells=1000)["warnings"]
+    assert any("as the armature 'Rig' poses it now (bone 'Spine' out of its rest pose)" in warning
+               and "Rest Position" in warning for warning in warnings), warnings
+    armature.data.pose_position = "REST"
+    bpy.context.view_layer.update()
+    assert not any("armature" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+
+
 def test_api_refuses_at_once_when_the_extension_is_not_enabled():
     import lbc_addon
     from blender_scenes import register_addon
