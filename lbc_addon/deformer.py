@@ -644,7 +644,10 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     settings = mesh_obj.lbc
     modifier = find_modifier(mesh_obj)
     if modifier is None:
-        return "modifier", "The LBC modifier was removed: Unbind to clean up, or Rebind"
+        return "modifier", (
+            "The LBC modifier was removed or applied: Unbind to remove the weights it left in the mesh (the mesh keeps "
+            "its shape), or Rebind"
+        )
     count = len(mesh_obj.data.vertices)
     # 0: bound by a version of the add-on that did not record it. Checked first: a Join changes both the vertex count
     # and the slots stored, and the vertex count is what the artist did.
