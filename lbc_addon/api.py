@@ -137,6 +137,20 @@ def set_deformer(mesh_obj, **inputs):
     mesh_obj.update_tag()
 
 
+def save_shape_key(mesh_obj, name=""):
+    """Save the deformation the cage gives ``mesh_obj`` now as a new shape key at value 0 (e.g. to sculpt a corrective
+    shape on it), named ``name`` (default "LBC <cage>"); the binding stays. Returns the shape key's name.
+
+    Raises
+    ------
+    lbc_core.CageError
+        When the mesh is not bound, its deformer does not work now (the message says why), or it is linked from a
+        library; nothing is changed then.
+    """
+    _require_enabled()
+    return writing.save_shape_key(mesh_obj, bpy.context.evaluated_depsgraph_get(), name).name
+
+
 def status(mesh_obj):
     """(ok, message): whether the deformer of a bound mesh works, and if not, why (for an unbound object: that it
     is not bound)."""

@@ -571,6 +571,20 @@ def evaluated_cage(cage_obj, depsgraph):
         cage_eval.to_mesh_clear()
 
 
+def displacement(mesh_obj, depsgraph):
+    """(m, 3) float array: what the LBC modifier adds to each vertex of a bound mesh now, in the mesh's local space:
+    its node group's Σ w_k c_k minus the rest, times Strength and the vertex group's mask, from the stored slots and
+    the cage as the depsgraph evaluates it (float64: within float32 rounding of the modifier's own sum)."""
+    values = inputs(find_modifier(mesh_obj))
+    cage = mesh_obj.lbc.cage
+    matrix = geometry.cage_to_mesh_matrix(cage.evaluated_get(depsgraph), mesh_obj.evaluated_get(depsgraph))
+    cage_local = geometry.to_local(matrix, evaluated_cage(cage, depsgraph)[1])
+    index, weight = storage.read(mesh_obj.data)
+    offsets = storage.rest_offsets(index, weight, cage_local) - storage.read_rest(mesh_obj.data)
+    mask = geometry.vertex_group_mask(mesh_obj, values["Vertex Group"], values["Invert Vertex Group"])
+    return offsets * (values["Strength"] * mask)[:, None]
+
+
 def rest_moved(mesh):
     """Whether a bound mesh's vertices were moved as a whole since binding: a sample of them (:data:`REST_SAMPLES`)
     is an affine image, other than the identity, of the rest positions the weights reproduce. Apply Transforms does

@@ -161,6 +161,21 @@ def to_local(matrix, positions):
     return positions @ matrix[:3, :3].T + matrix[:3, 3]
 
 
+def vertex_group_mask(mesh_obj, name, invert):
+    """(m,) float array: the factor the deformer's Vertex Group input gives each vertex: its weight in the group named
+    ``name`` (0 outside it), 1 minus that when ``invert``; 1 everywhere when no group has that name, as in Mesh
+    Deform."""
+    group = mesh_obj.vertex_groups.get(name) if name else None
+    if group is None:
+        return np.ones(len(mesh_obj.data.vertices))
+    weights = np.zeros(len(mesh_obj.data.vertices))
+    for vertex in mesh_obj.data.vertices:
+        for element in vertex.groups:
+            if element.group == group.index:
+                weights[vertex.index] = element.weight
+    return 1.0 - weights if invert else weights
+
+
 def cage_to_mesh_matrix(cage_obj, mesh_obj):
     """The matrix taking the cage's local coordinates to the mesh's: what Object Info (relative) applies."""
     return mesh_obj.matrix_world.inverted_safe() @ cage_obj.matrix_world

@@ -387,6 +387,30 @@ class OBJECT_OT_lbc_hide_influence(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class OBJECT_OT_lbc_save_shape_key(bpy.types.Operator):
+    """Save the deformation the cage gives the active mesh now as a new shape key at value 0, as Mesh Deform's Save
+    as Shape Key does (e.g. to sculpt a corrective shape on it); the binding stays"""
+
+    bl_idname = "object.lbc_save_shape_key"
+    bl_label = "Save as Shape Key"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return _allowed(cls, None if obj is not None and is_bound(obj) else "Make a bound mesh active")
+
+    def execute(self, context):
+        mesh_obj = context.active_object
+        try:
+            key = writing.save_shape_key(mesh_obj, context.evaluated_depsgraph_get())
+        except CageError as error:
+            self.report({"ERROR"}, f"Not saved: {error}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"{mesh_obj.name}: saved the deformation as the shape key '{key.name}' (value 0)")
+        return {"FINISHED"}
+
+
 CLASSES = (
     OBJECT_OT_lbc_bind,
     OBJECT_OT_lbc_rebind,
@@ -394,6 +418,7 @@ CLASSES = (
     OBJECT_OT_lbc_unbind,
     OBJECT_OT_lbc_show_influence,
     OBJECT_OT_lbc_hide_influence,
+    OBJECT_OT_lbc_save_shape_key,
 )
 
 

@@ -53,10 +53,11 @@ def slot_arrays(weights, column_vertex):
     return index, weight
 
 
-def rest_offsets(index, weight, cage_rest):
-    """Σ_k w_k c_k at rest, from the float32 weights and positions the deformer will multiply."""
-    rest = np.asarray(cage_rest, dtype=np.float32).astype(np.float64)
-    return np.einsum("mk,mkd->md", weight.astype(np.float64), rest[index])
+def rest_offsets(index, weight, cage_positions):
+    """Σ_k w_k c_k per vertex, (m, 3), from the float32 weights and cage positions (n, 3) the deformer multiplies:
+    at the cage's rest, the rest each vertex's weights reproduce."""
+    positions = np.asarray(cage_positions, dtype=np.float32).astype(np.float64)
+    return np.einsum("mk,mkd->md", weight.astype(np.float64), positions[index])
 
 
 def write(mesh, index, weight, rest):
@@ -117,6 +118,13 @@ def slot_count(mesh):
     while mesh.attributes.get(index_name(slots)) is not None:
         slots += 1
     return slots
+
+
+def read_rest(mesh):
+    """The rest positions the weights reproduce, stored beside the slots: (m, 3) float64."""
+    values = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.attributes[REST_NAME].data.foreach_get("vector", values)
+    return values.reshape(-1, 3).astype(np.float64)
 
 
 def read(mesh):

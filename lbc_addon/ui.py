@@ -37,6 +37,7 @@ def draw_binding(layout, obj):
     row = layout.row(align=True)
     row.operator("object.lbc_rebind", icon="FILE_REFRESH")
     row.operator("object.lbc_unbind", icon="X")
+    layout.operator("object.lbc_save_shape_key", icon="SHAPEKEY_DATA")
     draw_influence(layout, obj)
 
 

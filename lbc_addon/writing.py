@@ -149,6 +149,35 @@ def remove(mesh_obj):
     return [obj.name for obj in sharing]
 
 
+def save_shape_key(mesh_obj, depsgraph, name=""):
+    """Add a shape key holding the mesh's basis moved as the deformer moves it now (as Mesh Deform's Save as Shape
+    Key), at value 0, named ``name`` (default "LBC <cage>"); a Basis first where the mesh has no shape keys.
+
+    Raises CageError, before any change, for a mesh whose deformer does not work now (its status says why) or that
+    cannot be changed here. Returns the shape key.
+    """
+    if not is_bound(mesh_obj):
+        raise CageError(f"'{mesh_obj.name}' is not bound to a cage: bind it first")
+    linked = geometry.not_editable_here(mesh_obj)
+    if linked:
+        raise CageError(linked)
+    if mesh_obj.data.is_editmode:
+        raise CageError(f"'{mesh_obj.name}' is in Edit Mode: switch to Object Mode first")
+    ok, message = deformer.status(mesh_obj, depsgraph)
+    if not ok:
+        raise CageError(f"nothing to save: {message}")
+    offsets = deformer.displacement(mesh_obj, depsgraph)
+    if mesh_obj.data.shape_keys is None:
+        mesh_obj.shape_key_add(name="Basis", from_mix=False)
+    basis = np.empty(len(mesh_obj.data.vertices) * 3, dtype=np.float32)
+    mesh_obj.data.shape_keys.reference_key.data.foreach_get("co", basis)
+    key = mesh_obj.shape_key_add(name=name or f"LBC {mesh_obj.lbc.cage.name}", from_mix=False)
+    key.data.foreach_set("co", (basis.reshape(-1, 3) + offsets).astype(np.float32).ravel())
+    key.value = 0.0
+    mesh_obj.data.update()
+    return key
+
+
 def leftover_weights(obj):
     """The names of the LBC attributes an unbound mesh carries for no binding: a bound mesh joined into it (Ctrl+J)
     brings its weights along, but not its binding. Dead weight in the .blend, which Unbind removes. Empty for a

@@ -363,6 +363,14 @@ def test_a_cage_bound_while_its_armature_is_posed_is_warned():
     assert not any("armature" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
 
 
+def test_api_saves_the_deformation_as_a_shape_key_of_a_bound_mesh_only():
+    mesh, cage = sphere_in_box_scene()
+    with pytest.raises(lbc_core.CageError, match="'Sphere' is not bound to a cage: bind it first"):
+        api.save_shape_key(mesh)
+    api.bind(mesh, cage, cells=1000)
+    assert api.save_shape_key(mesh, name="Corrective") == "Corrective"
+
+
 def test_api_refuses_at_once_when_the_extension_is_not_enabled():
     import lbc_addon
     from blender_scenes import register_addon

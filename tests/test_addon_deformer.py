@@ -626,3 +626,25 @@ def test_shared_slot_count_keeps_every_slot_when_an_empty_slot_precedes_a_weight
     weight[10:20, 3] = 0.2  # and slot 3 used by 11 %: no split
     assert deformer.shared_slot_count(weight) == 4
     assert deformer.shared_slot_count(np.full((10, 3), 1 / 3)) == 3  # every vertex uses every slot
+
+
+def test_the_displacement_computed_from_the_slots_is_what_the_modifier_adds(bound_gargoyle):
+    """What Save as Shape Key stores: the node group's sum, its Strength and its inverted vertex-group mask, with the
+    cage object moved as well as its vertices."""
+    mesh, cage = bound_gargoyle
+    rest = positions(mesh.data)
+    posed = positions(cage.data) + np.random.default_rng(3).normal(scale=0.02 * diagonal(cage), size=(len(
+        cage.data.vertices), 3))
+    cage.data.vertices.foreach_set("co", posed.astype(np.float32).ravel())
+    cage.data.update()
+    cage.matrix_world = Matrix.Translation((0.1, 0.0, -0.2)) @ cage.matrix_world
+    group = mesh.vertex_groups.new(name="Mask")
+    for vertex in range(0, len(mesh.data.vertices), 3):
+        group.add([vertex], vertex % 7 / 7.0, "REPLACE")
+    deformer.set_inputs(deformer.find_modifier(mesh), {"Strength": 0.7, "Vertex Group": "Mask",
+                                                      "Invert Vertex Group": True})
+    mesh.update_tag()
+    moved = evaluated_positions(mesh) - rest
+    computed = deformer.displacement(mesh, bpy.context.evaluated_depsgraph_get())
+    assert np.abs(moved).max() > 0.01 * diagonal(mesh)
+    assert np.abs(computed - moved).max() < 1e-5 * diagonal(mesh)

@@ -477,3 +477,16 @@ def test_a_failed_write_is_reported_and_taken_back(monkeypatch):
     with pytest.raises(RuntimeError, match="writing the binding failed .*IndexError.* the scene was left as it was"):
         bind(mesh, cage, cells=CELLS)
     assert mesh_state(mesh) == before and not is_bound(mesh)
+
+
+def test_save_as_shape_key_needs_a_bound_mesh_and_reports_the_key(capfd):
+    mesh, cage = sphere_in_box_scene()
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert not bpy.ops.object.lbc_save_shape_key.poll()
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
+    cage.data.vertices[3].co.z += 0.2
+    cage.data.update()
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_save_shape_key() == {"FINISHED"}
+    assert "saved the deformation as the shape key 'LBC Box' (value 0)" in capfd.readouterr().out
+    assert [key.name for key in mesh.data.shape_keys.key_blocks] == ["Basis", "LBC Box"]

@@ -168,3 +168,31 @@ def test_binding_a_bound_mesh_replaces_its_binding_in_place():
 def _solved(mesh, cage, **options):
     request = _request(mesh, cage, **options)
     return request, jobs.solve(request)
+
+
+def test_save_shape_key_holds_the_deformation_at_value_0_and_keeps_the_binding():
+    """A new user's finding: Blender offers Apply as Shape Key for Mesh Deform, not for a Geometry Nodes modifier."""
+    from blender_scenes import positions
+
+    mesh, cage = sphere_in_box_scene()
+    writing.apply(_request(mesh, cage), jobs.solve(_request(mesh, cage)))
+    rest = positions(mesh.data)
+    cage.data.vertices[0].co.x -= 0.3
+    cage.data.update()
+    deformed = evaluated_positions(mesh)
+    key = writing.save_shape_key(mesh, bpy.context.evaluated_depsgraph_get())
+    assert key.name == "LBC Box" and key.value == 0.0 and mesh.data.shape_keys.reference_key.name == "Basis"
+    assert is_bound(mesh) and np.abs(evaluated_positions(mesh) - deformed).max() < 1e-6  # at 0 it adds nothing
+    deformer.find_modifier(mesh).show_viewport = False
+    key.value = 1.0
+    assert np.abs(evaluated_positions(mesh) - deformed).max() < 1e-5  # the key alone gives the deformed shape
+    assert np.abs(evaluated_positions(mesh) - rest).max() > 0.05
+
+
+def test_save_shape_key_refuses_a_stopped_deformer_and_changes_nothing():
+    mesh, cage = sphere_in_box_scene()
+    writing.apply(_request(mesh, cage), jobs.solve(_request(mesh, cage)))
+    bpy.data.objects.remove(cage)
+    with pytest.raises(CageError, match="nothing to save: The cage was deleted"):
+        writing.save_shape_key(mesh, bpy.context.evaluated_depsgraph_get())
+    assert mesh.data.shape_keys is None
