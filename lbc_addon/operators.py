@@ -258,8 +258,11 @@ class OBJECT_OT_lbc_rebind(_Binder, bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         message = _busy_message(context, cls.bl_label)
-        if message is None and not _bound_selection(context):
+        selection = _bound_selection(context)
+        if message is None and not selection:
             message = "Select a bound mesh"
+        elif message is None and all(obj.lbc.cage is None for obj in selection):
+            message = "The cage was deleted: select the mesh, then a cage (active), and Bind"
         return _allowed(cls, message)
 
     def targets(self, context):

@@ -73,6 +73,19 @@ def test_poll_explains_what_to_select():
             bpy.ops.object.lbc_bind()
 
 
+def test_rebind_is_greyed_out_with_what_to_do_once_the_cage_is_deleted():
+    """A new user's finding: Rebind stayed available and explained only when pressed."""
+    from lbc_addon import deformer
+
+    mesh, cage = sphere_in_box_scene()
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
+    delete_with_x(cage)
+    deformer.check_bindings(bpy.context.evaluated_depsgraph_get())  # what the depsgraph handler runs
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        with pytest.raises(RuntimeError, match="The cage was deleted: select the mesh, then a cage .active., and Bind"):
+            bpy.ops.object.lbc_rebind()
+
+
 def _decorate(mesh):
     """Give a mesh things of its own that binding and unbinding must leave alone."""
     mesh.data.attributes.new("temperature", "FLOAT", "POINT").data.foreach_set(
