@@ -79,7 +79,7 @@ def unbind(mesh_obj):
         they were removed with the binding.
     """
     _require_enabled()
-    leftovers = writing.leftover_weights(mesh_obj)
+    leftovers = geometry.leftover_weights(mesh_obj)
     if not is_bound(mesh_obj) and not leftovers:
         return []
     linked = geometry.not_editable_here(mesh_obj)
@@ -159,7 +159,7 @@ def status(mesh_obj):
         return False, f"{mesh_obj!r} is not an object: pass it as e.g. bpy.data.objects['Name']"
     if not is_bound(mesh_obj):
         leftover = ("; it carries LBC weights for no binding (from a bound mesh joined into it), which api.unbind "
-                    "removes" if writing.leftover_weights(mesh_obj) else "")
+                    "removes" if geometry.leftover_weights(mesh_obj) else "")
         return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}"
     return deformer.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
 

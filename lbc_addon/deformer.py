@@ -578,7 +578,7 @@ def displacement(mesh_obj, depsgraph):
     values = inputs(find_modifier(mesh_obj))
     cage = mesh_obj.lbc.cage
     matrix = geometry.cage_to_mesh_matrix(cage.evaluated_get(depsgraph), mesh_obj.evaluated_get(depsgraph))
-    cage_local = geometry.to_local(matrix, evaluated_cage(cage, depsgraph)[1])
+    cage_local = geometry.transform(matrix, evaluated_cage(cage, depsgraph)[1])
     index, weight = storage.read(mesh_obj.data)
     offsets = storage.rest_offsets(index, weight, cage_local) - storage.read_rest(mesh_obj.data)
     mask = geometry.vertex_group_mask(mesh_obj, values["Vertex Group"], values["Invert Vertex Group"])

@@ -10,6 +10,7 @@ import hashlib
 import bpy
 import numpy as np
 
+from . import storage
 from .core import CageError, flatten
 from .jobs import BindRequest, check_options, verb_for
 from .properties import DEFAULT_INFLUENCES, is_bound
@@ -155,7 +156,7 @@ def render_warning(mesh_obj, cage_obj):
             "settings the same (or apply the modifier) and Rebind")
 
 
-def to_local(matrix, positions):
+def transform(matrix, positions):
     """Apply a 4×4 ``mathutils.Matrix`` (or array) to (k, 3) positions."""
     matrix = np.array(matrix, dtype=np.float64)
     return positions @ matrix[:3, :3].T + matrix[:3, 3]
@@ -276,14 +277,14 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     try:
         matrix = cage_to_mesh_matrix(cage_eval, mesh_eval)
         cage_local = vertex_positions(cage_mesh)
-        cage_points = to_local(matrix, cage_local)
+        cage_points = transform(matrix, cage_local)
         faces = polygon_faces(cage_mesh)
         # A mirroring transform (a negative scale) turns outward faces inward; turned back, so that lbc_core does not
         # report faces the artist sees pointing outward as reversed.
         cage_faces = _outward(faces, matrix)
         # The solve's frame: world space, the same cage for every mesh bound to it (jobs.BindRequest.solve_geometry).
-        world = (to_local(cage_eval.matrix_world, cage_local), _outward(faces, cage_eval.matrix_world),
-                 to_local(mesh_eval.matrix_world, points))
+        world = (transform(cage_eval.matrix_world, cage_local), _outward(faces, cage_eval.matrix_world),
+                 transform(mesh_eval.matrix_world, points))
         cage_topology = topology_fingerprint(cage_mesh)
         flat = None if mode == "3D" else flatten(cage_points, cage_faces, points, edge_pairs(cage_mesh))
         if flat is None and not cage_faces:
@@ -329,7 +330,7 @@ def changed_since(request, mesh_obj, cage_obj, depsgraph):
         if topology_fingerprint(cage_mesh) != request.cage_topology:
             return f"the cage '{cage_obj.name}' was edited during the bind"
         matrix = cage_to_mesh_matrix(cage_eval, mesh_obj.evaluated_get(depsgraph))
-        if not np.array_equal(to_local(matrix, vertex_positions(cage_mesh)), request.cage_points):
+        if not np.array_equal(transform(matrix, vertex_positions(cage_mesh)), request.cage_points):
             return f"the cage '{cage_obj.name}' or '{mesh_obj.name}' was moved or edited during the bind"
     finally:
         cage_eval.to_mesh_clear()
@@ -402,3 +403,19 @@ def find_object(uid):
         if obj.session_uid == uid:
             return obj
     return None
+
+
+def leftover_weights(obj):
+    """The names of the LBC attributes an unbound mesh carries for no binding: a bound mesh joined into it (Ctrl+J)
+    brings its weights along, but not its binding. Dead weight in the .blend, which Unbind removes. Empty for a
+    bound mesh, and for mesh data a bound object shares (a linked duplicate's weights are in use)."""
+    if obj.type != "MESH" or is_bound(obj) or shared_with(obj):
+        return []
+    return storage.binding_names(obj.data)
+
+
+def shared_with(mesh_obj):
+    """The other bound objects using ``mesh_obj``'s mesh data (linked duplicates)."""
+    if mesh_obj.data.users < 2:
+        return []
+    return [obj for obj in bpy.data.objects if obj != mesh_obj and obj.data == mesh_obj.data and is_bound(obj)]

@@ -33,8 +33,8 @@ def _bound_selection(context):
 
 
 def _leftover_selection(context):
-    """Selected unbound meshes carrying LBC weights of no binding (:func:`writing.leftover_weights`)."""
-    return [obj for obj in _selection(context) if writing.leftover_weights(obj)]
+    """Selected unbound meshes carrying LBC weights of no binding (:func:`geometry.leftover_weights`)."""
+    return [obj for obj in _selection(context) if geometry.leftover_weights(obj)]
 
 
 def _report_result(operator, mesh_obj):

@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import deformer, storage, writing
+from . import deformer, geometry, storage
 from .properties import bound_to, is_bound
 
 
@@ -76,7 +76,7 @@ def draw(layout, context):
     if is_bound(obj):
         draw_binding(layout, obj)
         return
-    leftovers = writing.leftover_weights(obj)
+    leftovers = geometry.leftover_weights(obj)
     if leftovers:
         size = _format_bytes(storage.memory_bytes(len(obj.data.vertices), storage.slot_count(obj.data)))
         box = layout.box()

@@ -141,7 +141,7 @@ def remove(mesh_obj):
     active = mesh_obj.lbc.active_modifier
     deformer.detach(mesh_obj)
     mesh_obj.property_unset("lbc")
-    sharing = shared_with(mesh_obj)
+    sharing = geometry.shared_with(mesh_obj)
     if not sharing:
         storage.remove(mesh_obj.data)
     if active in mesh_obj.modifiers:
@@ -178,22 +178,6 @@ def save_shape_key(mesh_obj, depsgraph, name=""):
     return key
 
 
-def leftover_weights(obj):
-    """The names of the LBC attributes an unbound mesh carries for no binding: a bound mesh joined into it (Ctrl+J)
-    brings its weights along, but not its binding. Dead weight in the .blend, which Unbind removes. Empty for a
-    bound mesh, and for mesh data a bound object shares (a linked duplicate's weights are in use)."""
-    if obj.type != "MESH" or is_bound(obj) or shared_with(obj):
-        return []
-    return storage.binding_names(obj.data)
-
-
 def remove_leftovers(obj):
-    """Delete the attributes :func:`leftover_weights` names, leaving the mesh's own as they were."""
+    """Delete the attributes :func:`geometry.leftover_weights` names, leaving the mesh's own as they were."""
     storage.remove(obj.data)
-
-
-def shared_with(mesh_obj):
-    """The other bound objects using ``mesh_obj``'s mesh data (linked duplicates)."""
-    if mesh_obj.data.users < 2:
-        return []
-    return [obj for obj in bpy.data.objects if obj != mesh_obj and obj.data == mesh_obj.data and is_bound(obj)]

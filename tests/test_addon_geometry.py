@@ -74,7 +74,7 @@ def test_positions_are_read_in_mesh_space_relative_to_the_cage():
     mesh.scale = (2.0, 2.0, 2.0)
     bpy.context.view_layer.update()
     matrix = geometry.cage_to_mesh_matrix(cage, mesh)
-    local = geometry.to_local(matrix, geometry.vertex_positions(cage.data))
+    local = geometry.transform(matrix, geometry.vertex_positions(cage.data))
     assert np.allclose(local[0], [0.5, 1.0, 1.5])
 
 

@@ -120,20 +120,20 @@ def _join_into(target, bound):
 def test_weights_joined_into_an_unbound_mesh_are_removed_by_unbind(capfd):
     """A code review's finding: a bound mesh joined into an unbound one left its weights there (26 hidden attributes
     on the sphere, megabytes on a large mesh) with nothing to remove them: the mesh was not bound."""
-    from lbc_addon import api, writing
+    from lbc_addon import api, geometry
 
     mesh, cage = sphere_in_box_scene()
     target = mesh_object("Target", [(3.0, 0.0, 0.0), (4.0, 0.0, 0.0), (3.0, 1.0, 0.0)], [(0, 1, 2)])
     target.data.attributes.new("temperature", "FLOAT", "POINT")
     assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     _join_into(target, mesh)
-    assert not is_bound(target) and writing.leftover_weights(target)
+    assert not is_bound(target) and geometry.leftover_weights(target)
     assert "carries LBC weights for no binding" in api.status(target)[1]
     with bpy.context.temp_override(active_object=target, object=target, selected_objects=[target]):
         assert bpy.ops.object.lbc_unbind() == {"FINISHED"}
     assert "removed the LBC weights it carried for no binding" in capfd.readouterr().out
     assert not any(name.startswith(".lbc") for name in target.data.attributes.keys())
-    assert "temperature" in target.data.attributes and not writing.leftover_weights(target)
+    assert "temperature" in target.data.attributes and not geometry.leftover_weights(target)
     assert api.status(target)[1] == "'Target' is not bound to a cage: bind it first (api.bind)"
 
 
@@ -154,19 +154,19 @@ def test_two_bound_meshes_joined_are_told_their_vertex_count_changed():
 
 
 def test_api_unbind_removes_joined_weights_and_keeps_a_linked_duplicates():
-    from lbc_addon import api, writing
+    from lbc_addon import api, geometry
 
     mesh, cage = sphere_in_box_scene()
     assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     twin = bpy.data.objects.new("Twin", mesh.data)  # an Alt+D duplicate, not bound: the weights are the original's
     bpy.context.scene.collection.objects.link(twin)
-    assert writing.leftover_weights(twin) == [] and api.unbind(twin) == [] and is_bound(mesh)
+    assert geometry.leftover_weights(twin) == [] and api.unbind(twin) == [] and is_bound(mesh)
     target = mesh_object("Target", [(3.0, 0.0, 0.0), (4.0, 0.0, 0.0), (3.0, 1.0, 0.0)], [(0, 1, 2)])
     copy = bpy.data.objects.new("Copy", mesh.data.copy())  # weights without a binding, joined into the target
     bpy.context.scene.collection.objects.link(copy)
     _join_into(target, copy)
-    assert writing.leftover_weights(target)
-    assert api.unbind(target) == [] and not writing.leftover_weights(target)
+    assert geometry.leftover_weights(target)
+    assert api.unbind(target) == [] and not geometry.leftover_weights(target)
     assert not any(name.startswith(".lbc") for name in target.data.attributes.keys())
 
 
