@@ -124,26 +124,37 @@ def mirror_warning(mesh_obj):
                if modifier.type == "MIRROR" and (modifier.show_viewport or modifier.show_render)]
     if not mirrors:
         return None
-    return (f"'{mesh_obj.name}' has the Mirror modifier '{mirrors[0]}', which comes after the deformer: the mirrored "
-            "half copies this half's deformation instead of following its own side of the cage. Apply the Mirror "
-            "(Ctrl+A) and Rebind for each half to follow its own side")
+    # Blender applies no modifier to a mesh with shape keys.
+    shape_keys = (" (Blender applies no modifier to a mesh with shape keys: there, Mesh Deform below the Mirror "
+                  "deforms both halves)" if mesh_obj.data.shape_keys is not None else "")
+    return (f"the mesh's Mirror modifier '{mirrors[0]}' comes after the deformer: the mirrored half copies this half's "
+            f"deformation instead of following its own side of the cage. Apply the Mirror (Ctrl+A) and Rebind for "
+            f"each half to follow its own side{shape_keys}")
 
 
-def posed_armature_warning(cage_obj):
-    """The warning for a cage deformed by an armature that is not in its rest pose, or None: the bind takes the cage
-    as it is as the rest, so that pose would be undone when the bones go back."""
+def cage_pose_warning(cage_obj, depsgraph):
+    """The warning for a cage bound in a pose, or None: an armature whose bones are not at rest (by their own
+    transforms, IK or other constraints) deforming it, or a shape key of its own at a value other than 0. The bind
+    takes the cage as it is as the rest, so that pose would be undone when the bones or keys go back."""
     for modifier in cage_obj.modifiers:
         armature = getattr(modifier, "object", None) if modifier.type == "ARMATURE" else None
         if (not modifier.show_viewport or armature is None or armature.type != "ARMATURE"
                 or armature.data.pose_position != "POSE"):
             continue
-        posed = [bone.name for bone in armature.pose.bones
-                 if not np.allclose(np.array(bone.matrix_basis), np.eye(4), atol=1e-6)]
+        bones = armature.evaluated_get(depsgraph).pose.bones
+        posed = [bone.name for bone in bones
+                 if not np.allclose(np.array(bone.matrix), np.array(bone.bone.matrix_local), atol=1e-5)]
         if posed:
             return (f"the cage is bound as the armature '{armature.name}' poses it now (bone '{posed[0]}' "
                     f"{'and others ' if len(posed) > 1 else ''}out of its rest pose): that pose is the rest the mesh "
                     "follows from. If it is not, set the armature to Rest Position (Armature properties > Pose "
                     "Position) and Rebind")
+    keys = cage_obj.data.shape_keys
+    shaped = [key for key in (keys.key_blocks[1:] if keys is not None else ())
+              if not key.mute and key.value != 0 and not cage_obj.show_only_shape_key]
+    if shaped:
+        return (f"the cage is bound with its shape key '{shaped[0].name}' at {shaped[0].value:g}: that shape is the "
+                "rest the mesh follows from. If it is not, set the key to 0 and Rebind")
     return None
 
 
@@ -309,7 +320,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         cage_topology=cage_topology,
         mesh_topology=topology_fingerprint(mesh_obj.data),
         warnings=[warning for warning in (render_warning(mesh_obj, cage_obj), mirror_warning(mesh_obj),
-                                          posed_armature_warning(cage_obj)) if warning],
+                                          cage_pose_warning(cage_obj, depsgraph)) if warning],
         cage_modifiers=_named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers))),
         cage_modifiers_off=_named_modifiers(_modifiers_off(cage_obj)),
         world=world,

@@ -72,6 +72,11 @@ def _views():
     }
 
 
+def _showing(mesh_obj):
+    """The other objects showing their influence now."""
+    return [obj for obj in bpy.data.objects if obj != mesh_obj and obj.lbc.show_influence]
+
+
 def _restore_views(switched):
     """Give the 3D views :func:`show` switched (its "screen|area|color type;..." record) their color type back, where
     they still show attribute colors. A record of a color type alone (files saved before views were told apart)
@@ -101,13 +106,17 @@ def show(mesh_obj, cage_vertex):
     colors = ramp(values / peak if peak > 0 else values)
     attribute.data.foreach_set("color", colors.astype(np.float32).ravel())
     mesh.color_attributes.active_color = attribute
-    switched = [settings.previous_color_type] if settings.previous_color_type else []
+    # Every mesh showing influence keeps the whole record of the views switched, so that whichever is hidden last,
+    # or left when another is deleted, gives them back.
+    showing = _showing(mesh_obj)
+    switched = {entry for obj in [mesh_obj] + showing for entry in obj.lbc.previous_color_type.split(";") if entry}
     for (screen, index), space in _views().items():
         # "VERTEX" is Solid shading's "Attribute" color: the active color attribute.
         if space.shading.color_type != "VERTEX":
-            switched.append(f"{screen}|{index}|{space.shading.color_type}")
+            switched.add(f"{screen}|{index}|{space.shading.color_type}")
             space.shading.color_type = "VERTEX"
-    settings.previous_color_type = ";".join(switched)
+    for obj in [mesh_obj] + showing:
+        obj.lbc.previous_color_type = ";".join(sorted(switched))
     settings.show_influence = True
     settings.influence_vertex = cage_vertex
     mesh.update()
@@ -127,11 +136,7 @@ def hide(mesh_obj):
     previous = settings.previous_color
     mesh.color_attributes.active_color_name = previous if previous in mesh.color_attributes else ""
     # While another mesh shows its influence the views stay on attribute colors; the last one hidden gives them back.
-    showing = [obj for obj in bpy.data.objects if obj != mesh_obj and obj.lbc.show_influence]
-    if showing:
-        showing[0].lbc.previous_color_type = ";".join(filter(None, (showing[0].lbc.previous_color_type,
-                                                                   settings.previous_color_type)))
-    else:
+    if not _showing(mesh_obj):
         _restore_views(settings.previous_color_type)
     settings.show_influence = False
     settings.previous_color = ""

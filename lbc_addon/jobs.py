@@ -358,6 +358,10 @@ def _rebind_report(request, previous, binding):
     mesh's, what it reused, and nothing when it bound from scratch (to the user, a first bind).
     """
     report = binding.options.get("rebind", "")
+    own = _previous.get(request.mesh_uid)
+    if previous is None and own is not None and own.cage_uid == request.cage_uid:
+        changed = [key for key in _SOLVE_OPTIONS if own.options[key] != request.options[key]]
+        return f"bound from scratch: its {', '.join(changed)} changed since its last bind" if changed else report
     if previous is None or previous.mesh_uid == request.mesh_uid:
         return report
     if binding.options.get("start") != WARM:

@@ -401,7 +401,9 @@ class OBJECT_OT_lbc_save_shape_key(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         obj = context.active_object
-        return _allowed(cls, None if obj is not None and is_bound(obj) else "Make a bound mesh active")
+        if obj is None or not is_bound(obj):
+            return _allowed(cls, "Make a bound mesh active")
+        return _allowed(cls, geometry.not_editable_here(obj))
 
     def execute(self, context):
         mesh_obj = context.active_object

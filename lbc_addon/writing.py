@@ -165,7 +165,7 @@ def save_shape_key(mesh_obj, depsgraph, name=""):
         raise CageError(f"'{mesh_obj.name}' is in Edit Mode: switch to Object Mode first")
     ok, message = deformer.status(mesh_obj, depsgraph)
     if not ok:
-        raise CageError(f"nothing to save: {message}")
+        raise CageError(f"the deformer does not work now: {message}")
     offsets = deformer.displacement(mesh_obj, depsgraph)
     if mesh_obj.data.shape_keys is None:
         mesh_obj.shape_key_add(name="Basis", from_mix=False)

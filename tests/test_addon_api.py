@@ -327,6 +327,8 @@ def test_rebind_all_after_api_bind_with_options_blender_rounds_starts_from_the_p
     api.bind(mesh, cage, cells=1000, tolerance=1e-4, epsilon=0.01, thinning=0.003)
     again, = api.rebind_all(cage)
     assert again["rebind"].startswith("bound again from the previous binding"), again["rebind"]
+    other = api.bind(mesh, cage, cells=1000, tolerance=3e-4, epsilon=0.01, thinning=0.003)
+    assert other["rebind"] == "bound from scratch: its tolerance changed since its last bind"  # was "" (a tester)
 
 
 def test_a_mesh_with_a_mirror_is_warned_that_the_mirrored_half_copies_the_deformation():
@@ -336,8 +338,11 @@ def test_a_mesh_with_a_mirror_is_warned_that_the_mirrored_half_copies_the_deform
     assert not any("Mirror" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
     mesh.modifiers.new("Mirror", "MIRROR")
     warnings = api.bind(mesh, cage, cells=1000)["warnings"]
-    assert any("the Mirror modifier 'Mirror', which comes after the deformer: the mirrored half copies this half's "
+    assert any("the mesh's Mirror modifier 'Mirror' comes after the deformer: the mirrored half copies this half's "
                "deformation" in warning and "Apply the Mirror" in warning for warning in warnings), warnings
+    mesh.shape_key_add(name="Basis")  # Blender applies no modifier to a mesh with shape keys: what then
+    assert any("there, Mesh Deform below the Mirror deforms both halves" in warning
+               for warning in api.bind(mesh, cage, cells=1000)["warnings"])
 
 
 def test_a_cage_bound_while_its_armature_is_posed_is_warned():
@@ -361,6 +366,29 @@ def test_a_cage_bound_while_its_armature_is_posed_is_warned():
     armature.data.pose_position = "REST"
     bpy.context.view_layer.update()
     assert not any("armature" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    armature.data.pose_position = "POSE"
+    armature.pose.bones["Spine"].location = (0.0, 0.0, 0.0)
+    target = bpy.data.objects.new("Target", None)
+    bpy.context.scene.collection.objects.link(target)
+    target.location = (1.0, 0.0, 0.0)
+    armature.pose.bones["Spine"].constraints.new("DAMPED_TRACK").target = target  # posed by a constraint alone
+    bpy.context.view_layer.update()
+    assert any("bone 'Spine' out of its rest pose" in warning
+               for warning in api.bind(mesh, cage, cells=1000)["warnings"]), "a constraint's pose is a pose too"
+
+
+def test_a_cage_bound_with_a_shape_key_of_its_own_on_is_warned():
+    """A tester's finding: the same trap as a posed armature, a cage shape key at 0.7 taken as the rest."""
+    mesh, cage = sphere_in_box_scene()
+    cage.shape_key_add(name="Basis")
+    key = cage.shape_key_add(name="Bulge")
+    key.data[0].co.x -= 0.1
+    assert not any("shape key" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    key.value = 0.7
+    bpy.context.view_layer.update()
+    warnings = api.bind(mesh, cage, cells=1000)["warnings"]
+    assert any("the cage is bound with its shape key 'Bulge' at 0.7: that shape is the rest" in warning
+               for warning in warnings), warnings
 
 
 def test_api_saves_the_deformation_as_a_shape_key_of_a_bound_mesh_only():

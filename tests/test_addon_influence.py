@@ -58,6 +58,11 @@ def test_hiding_gives_each_view_its_own_color_type_back_once_no_mesh_shows_influ
     assert _view_shading() == ["VERTEX", "VERTEX"]  # the second mesh still shows its influence
     influence.hide(second)
     assert [first_view.shading.color_type, second_view.shading.color_type] == ["VERTEX", "OBJECT"]
+    influence.show(mesh, 3)
+    influence.show(second, 3)
+    bpy.data.objects.remove(mesh)  # the first shown deleted: its record was the views' only one (a tester)
+    influence.hide(second)
+    assert [first_view.shading.color_type, second_view.shading.color_type] == ["VERTEX", "OBJECT"]
 
 
 def test_show_influence_from_the_cage_paints_every_mesh_bound_to_it(bound_gargoyle):

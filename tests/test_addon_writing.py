@@ -193,6 +193,6 @@ def test_save_shape_key_refuses_a_stopped_deformer_and_changes_nothing():
     mesh, cage = sphere_in_box_scene()
     writing.apply(_request(mesh, cage), jobs.solve(_request(mesh, cage)))
     bpy.data.objects.remove(cage)
-    with pytest.raises(CageError, match="nothing to save: The cage was deleted"):
+    with pytest.raises(CageError, match="the deformer does not work now: The cage was deleted"):
         writing.save_shape_key(mesh, bpy.context.evaluated_depsgraph_get())
     assert mesh.data.shape_keys is None
