@@ -151,11 +151,21 @@ def cage_pose_warning(cage_obj, depsgraph):
                     "Position) and Rebind")
     keys = cage_obj.data.shape_keys
     shaped = [key for key in (keys.key_blocks[1:] if keys is not None else ())
-              if not key.mute and key.value != 0 and not cage_obj.show_only_shape_key]
+              if not key.mute and key.value != 0 and not cage_obj.show_only_shape_key and _moves(key)]
     if shaped:
         return (f"the cage is bound with its shape key '{shaped[0].name}' at {shaped[0].value:g}: that shape is the "
                 "rest the mesh follows from. If it is not, set the key to 0 and Rebind")
     return None
+
+
+def _moves(key):
+    """Whether a relative shape key moves any vertex from the key it is relative to (a new key copies it)."""
+    shapes = []
+    for block in (key, key.relative_key):
+        values = np.empty(len(block.data) * 3, dtype=np.float32)
+        block.data.foreach_get("co", values)
+        shapes.append(values)
+    return not np.array_equal(*shapes)
 
 
 def render_warning(mesh_obj, cage_obj):

@@ -381,8 +381,10 @@ def test_a_cage_bound_with_a_shape_key_of_its_own_on_is_warned():
     """A tester's finding: the same trap as a posed armature, a cage shape key at 0.7 taken as the rest."""
     mesh, cage = sphere_in_box_scene()
     cage.shape_key_add(name="Basis")
-    key = cage.shape_key_add(name="Bulge")
+    key = cage.shape_key_add(name="Bulge")  # Blender 5 makes it at value 1, 4.x at 0: a copy of the basis either way
+    assert not any("shape key" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
     key.data[0].co.x -= 0.1
+    key.value = 0.0
     assert not any("shape key" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
     key.value = 0.7
     bpy.context.view_layer.update()
