@@ -205,10 +205,10 @@ def cage_to_mesh_matrix(cage_obj, mesh_obj):
 
 def _evaluation_changes(obj):
     """What evaluating a mesh object applies that can change its vertices, for a message: "its modifiers", "its shape
-    keys", both joined by "and", or "" (a shape key at value 0, or muted, changes nothing)."""
+    keys", both joined by "and", or "" (a shape key at value 0, muted, or a copy of its basis changes nothing)."""
     keys = obj.data.shape_keys
     keyed = keys is not None and (not keys.use_relative and len(keys.key_blocks) > 1 or any(
-        block.value != 0.0 and not block.mute for block in keys.key_blocks[1:]))
+        block.value != 0.0 and not block.mute and _moves(block) for block in keys.key_blocks[1:]))
     changes = (["its modifiers"] if any(modifier.show_viewport for modifier in obj.modifiers) else []) + (
         ["its shape keys"] if keyed else [])
     return " and ".join(changes)

@@ -107,6 +107,9 @@ def test_a_cage_blender_does_not_evaluate_is_refused_when_its_modifiers_would_ch
     api.bind(mesh, cage, cells=1000)
     api.unbind(mesh)
     cage.data.shape_keys.key_blocks["Bulge"].value = 0.5
+    api.bind(mesh, cage, cells=1000)  # nor does a key that moves nothing (a copy of the basis)
+    api.unbind(mesh)
+    cage.data.shape_keys.key_blocks["Bulge"].data[0].co.x -= 0.1
     with pytest.raises(lbc_core.CageError, match=r"so its shape keys would not be applied"):
         api.bind(mesh, cage, cells=1000)
     cage.shape_key_clear()
