@@ -571,14 +571,24 @@ def evaluated_cage(cage_obj, depsgraph):
         cage_eval.to_mesh_clear()
 
 
-def displacement(mesh_obj, depsgraph):
+def _evaluated_once(cage_obj, depsgraph, cages):
+    """:func:`evaluated_cage`, kept in ``cages`` (a dict by cage name, or None to keep nothing) for the next call."""
+    if cages is None:
+        return evaluated_cage(cage_obj, depsgraph)
+    if cage_obj.name_full not in cages:
+        cages[cage_obj.name_full] = evaluated_cage(cage_obj, depsgraph)
+    return cages[cage_obj.name_full]
+
+
+def displacement(mesh_obj, depsgraph, cages=None):
     """(m, 3) float array: what the LBC modifier adds to each vertex of a bound mesh now, in the mesh's local space:
     its node group's Σ w_k c_k minus the rest, times Strength and the vertex group's mask, from the stored slots and
-    the cage as the depsgraph evaluates it (float64: within float32 rounding of the modifier's own sum)."""
+    the cage as the depsgraph evaluates it (float64: within float32 rounding of the modifier's own sum). ``cages``:
+    as for :func:`diagnose`."""
     values = inputs(find_modifier(mesh_obj))
     cage = mesh_obj.lbc.cage
     matrix = geometry.cage_to_mesh_matrix(cage.evaluated_get(depsgraph), mesh_obj.evaluated_get(depsgraph))
-    cage_local = geometry.transform(matrix, evaluated_cage(cage, depsgraph)[1])
+    cage_local = geometry.transform(matrix, _evaluated_once(cage, depsgraph, cages)[1])
     index, weight = storage.read(mesh_obj.data)
     offsets = storage.rest_offsets(index, weight, cage_local) - storage.read_rest(mesh_obj.data)
     mask = geometry.vertex_group_mask(mesh_obj, values["Vertex Group"], values["Invert Vertex Group"])
@@ -685,11 +695,7 @@ def diagnose(mesh_obj, depsgraph, cages=None):
         )
     if cage.type != "MESH":
         return "cage type", f"The cage '{cage.name}' is no longer a mesh: Rebind with a mesh cage"
-    if cages is None:
-        cages = {}
-    if cage.name_full not in cages:
-        cages[cage.name_full] = evaluated_cage(cage, depsgraph)
-    topologies, positions = cages[cage.name_full]
+    topologies, positions = _evaluated_once(cage, depsgraph, cages)
     count = len(positions)
     if count != settings.cage_vertex_count:
         modifiers = geometry.cage_modifiers_note(cage)

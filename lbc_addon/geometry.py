@@ -23,6 +23,22 @@ def vertex_positions(mesh):
     return positions.reshape(-1, 3).astype(np.float64)
 
 
+def shape_key_positions(key):
+    """The positions a shape key (``bpy.types.ShapeKey``) holds, as an (m, 3) float64 array."""
+    positions = np.empty(len(key.data) * 3, dtype=np.float32)
+    key.data.foreach_get("co", positions)
+    return positions.reshape(-1, 3).astype(np.float64)
+
+
+def shape_keys_on(obj):
+    """The relative shape keys that change ``obj``'s shape now: not muted, at a value other than 0, and moving some
+    vertex from the key they are relative to (a new key is a copy of it, at value 1 in Blender 5)."""
+    keys = obj.data.shape_keys
+    return [key for key in (keys.key_blocks[1:] if keys is not None else ())
+            if not key.mute and key.value != 0 and not np.array_equal(shape_key_positions(key),
+                                                                      shape_key_positions(key.relative_key))]
+
+
 def polygon_faces(mesh):
     """The faces of a ``bpy.types.Mesh`` as a list of vertex index arrays."""
     corners = np.empty(len(mesh.loops), dtype=np.int64)
@@ -149,23 +165,11 @@ def cage_pose_warning(cage_obj, depsgraph):
                     f"{'and others ' if len(posed) > 1 else ''}out of its rest pose): that pose is the rest the mesh "
                     "follows from. If it is not, set the armature to Rest Position (Armature properties > Pose "
                     "Position) and Rebind")
-    keys = cage_obj.data.shape_keys
-    shaped = [key for key in (keys.key_blocks[1:] if keys is not None else ())
-              if not key.mute and key.value != 0 and not cage_obj.show_only_shape_key and _moves(key)]
+    shaped = [] if cage_obj.show_only_shape_key else shape_keys_on(cage_obj)
     if shaped:
         return (f"the cage is bound with its shape key '{shaped[0].name}' at {shaped[0].value:g}: that shape is the "
                 "rest the mesh follows from. If it is not, set the key to 0 and Rebind")
     return None
-
-
-def _moves(key):
-    """Whether a relative shape key moves any vertex from the key it is relative to (a new key copies it)."""
-    shapes = []
-    for block in (key, key.relative_key):
-        values = np.empty(len(block.data) * 3, dtype=np.float32)
-        block.data.foreach_get("co", values)
-        shapes.append(values)
-    return not np.array_equal(*shapes)
 
 
 def render_warning(mesh_obj, cage_obj):
@@ -207,8 +211,7 @@ def _evaluation_changes(obj):
     """What evaluating a mesh object applies that can change its vertices, for a message: "its modifiers", "its shape
     keys", both joined by "and", or "" (a shape key at value 0, muted, or a copy of its basis changes nothing)."""
     keys = obj.data.shape_keys
-    keyed = keys is not None and (not keys.use_relative and len(keys.key_blocks) > 1 or any(
-        block.value != 0.0 and not block.mute and _moves(block) for block in keys.key_blocks[1:]))
+    keyed = keys is not None and (not keys.use_relative and len(keys.key_blocks) > 1 or bool(shape_keys_on(obj)))
     changes = (["its modifiers"] if any(modifier.show_viewport for modifier in obj.modifiers) else []) + (
         ["its shape keys"] if keyed else [])
     return " and ".join(changes)

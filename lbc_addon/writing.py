@@ -163,16 +163,16 @@ def save_shape_key(mesh_obj, depsgraph, name=""):
         raise CageError(linked)
     if mesh_obj.data.is_editmode:
         raise CageError(f"'{mesh_obj.name}' is in Edit Mode: switch to Object Mode first")
-    ok, message = deformer.status(mesh_obj, depsgraph)
-    if not ok:
+    cages = {}  # the cage evaluated once, for the check and the displacement
+    cause, message = deformer.diagnose(mesh_obj, depsgraph, cages)
+    if cause is not None:
         raise CageError(f"the deformer does not work now: {message}")
-    offsets = deformer.displacement(mesh_obj, depsgraph)
+    offsets = deformer.displacement(mesh_obj, depsgraph, cages)
     if mesh_obj.data.shape_keys is None:
         mesh_obj.shape_key_add(name="Basis", from_mix=False)
-    basis = np.empty(len(mesh_obj.data.vertices) * 3, dtype=np.float32)
-    mesh_obj.data.shape_keys.reference_key.data.foreach_get("co", basis)
+    basis = geometry.shape_key_positions(mesh_obj.data.shape_keys.reference_key)
     key = mesh_obj.shape_key_add(name=name or f"LBC {mesh_obj.lbc.cage.name}", from_mix=False)
-    key.data.foreach_set("co", (basis.reshape(-1, 3) + offsets).astype(np.float32).ravel())
+    key.data.foreach_set("co", (basis + offsets).astype(np.float32).ravel())
     key.value = 0.0
     mesh_obj.data.update()
     return key
