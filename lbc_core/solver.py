@@ -64,14 +64,16 @@ ANDERSON_PERIOD = {2: 3, 3: 5}
 # more, as many on smaller ones, at the same objectives (2D keeps the α its packs were tuned with; bench/RESULTS.md).
 RELAXATION = {2: 1.6, 3: 1.9}
 # The penalty is then balanced against the residuals (Boyd et al. 2011, §3.4.1) in the first BALANCE_UNTIL
-# iterations: at a scheduled check every BALANCE_SPACING iterations, a relative primal residual above BALANCE_HIGH times
-# the dual doubles it, one below BALANCE_LOW times the dual halves it; then it stays, as ADMM's convergence needs. The
-# band is wide and lopsided: the gargoyle's cages, whose penalty c_d / n^(1/(d-1)) was tuned on, sit at 0.13-0.24
-# throughout and are left alone, while a UV sphere of 290 control points sat at 2-9 and took 805 iterations (310-335
-# balanced), and the corpus's thin plate, torus and bent tube start below 0.05 (945, 340 and 320 iterations; 295, 190
-# and 165 balanced), at objectives within the tolerance's 0.06 % (bench/RESULTS.md).
+# iterations: at a scheduled check every BALANCE_SPACING iterations, a relative primal residual above BALANCE_HIGH[d]
+# times the dual doubles it, one below BALANCE_LOW times the dual halves it; then it stays, as ADMM's convergence
+# needs. The band is wide and lopsided: the gargoyle's cages, whose penalty c_d / n^(1/(d-1)) was tuned on, sit at
+# 0.13-0.24 throughout and are left alone, while a UV sphere of 290 control points sat at 2-9 and took 805 iterations
+# (310-335 balanced), and the corpus's thin plate, torus and bent tube start below 0.05 (945, 340 and 320 iterations;
+# 295, 190 and 165 balanced). In 3D a ratio above 0.6 already lags: the corpus's cylinders, prisms and spheres, which
+# sit at 0.6-1.5, take 10-37 % fewer iterations with it doubled (the 64-sided cylinders 245 and 255 → 175 and 160);
+# 2D keeps 2, where its packs were tuned. Objectives stay within the tolerance's 0.06 % (bench/RESULTS.md).
 BALANCE_UNTIL = 300
-BALANCE_HIGH, BALANCE_LOW = 2.0, 0.05
+BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
 BALANCE_SPACING = 30
 
 
@@ -1052,7 +1054,8 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
         if iteration >= next_balance and iteration <= BALANCE_UNTIL:
             next_balance = iteration + BALANCE_SPACING
-            factor = _balancing_factor(_residuals(step, out, previous, primal_scale, objective=False))
+            factor = _balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
+                                       BALANCE_HIGH[problem.d])
             if factor != 1.0:
                 step.rescale_penalty(value, factor)
                 history.append(dict(iteration=iteration, penalty=step.penalty))
@@ -1105,11 +1108,11 @@ def _residuals(step, out, previous, primal_scale, objective=True):
     return record
 
 
-def _balancing_factor(residuals):
+def _balancing_factor(residuals, high):
     """What to multiply the penalty by, from a check's relative residuals: 2 when the primal one lags, 1/2 when the
-    dual one does (beyond the band BALANCE_LOW-BALANCE_HIGH of their ratio), else 1."""
+    dual one does (beyond the band BALANCE_LOW-``high`` of their ratio), else 1."""
     ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
-    return 2.0 if ratio > BALANCE_HIGH else 0.5 if ratio < BALANCE_LOW else 1.0
+    return 2.0 if ratio > high else 0.5 if ratio < BALANCE_LOW else 1.0
 
 
 def _shrink_factor(values, thresholds, epsilon):

@@ -269,6 +269,24 @@ def test_the_penalty_is_balanced_against_the_residuals_early_on(monkeypatch):
     assert_quality(problem[0], balanced.weights, problem[4], problem[2], problem[3])
 
 
+def test_a_lagging_primal_residual_doubles_the_penalty_in_3d(monkeypatch):
+    """Issue 12, item 4: the corpus's 32-sided fan cylinder sits at a primal / dual ratio of 0.7-1.4, where the
+    tuned cages sit at 0.13-0.24; above 0.6 the penalty doubles, and the solve takes two thirds of the iterations at
+    the same objective."""
+    from lbc_core import solver
+
+    problem = _corpus_problem("cylinder-32-fan", cells=2000)
+    balanced = solve_on_mesh(*problem)
+    monkeypatch.setattr(solver, "BALANCE_UNTIL", 0)
+    fixed = solve_on_mesh(*problem)
+    assert balanced.converged and fixed.converged
+    assert balanced.iterations <= 0.75 * fixed.iterations
+    assert balanced.objective == pytest.approx(fixed.objective, rel=6e-4)
+    changes = [record["penalty"] for record in balanced.history if "penalty" in record]
+    assert changes == pytest.approx([2 * solver._default_penalty(3, problem[4].shape[0])])
+    assert_quality(problem[0], balanced.weights, problem[4], problem[2], problem[3])
+
+
 def test_a_change_of_penalty_keeps_the_split_variables_and_rescales_the_duals():
     from lbc_core import solver
 
