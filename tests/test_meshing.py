@@ -375,6 +375,32 @@ def test_3d_coarse_cube_and_deterministic():
     assert np.array_equal(first.vertices, second.vertices) and np.array_equal(first.cells, second.cells)
 
 
+def subdivided_cube_cage(cuts):
+    """A cube whose faces are (cuts + 1)² quads, as Blender's Subdivide makes it: its vertices on a regular grid."""
+    ticks = np.linspace(-1.0, 1.0, cuts + 2)
+    index, faces = {}, []
+    for axis in range(3):
+        u, v = [other for other in range(3) if other != axis]
+        for sign in (-1.0, 1.0):
+            for i in range(cuts + 1):
+                for j in range(cuts + 1):
+                    quad = []
+                    for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                        point = [0.0, 0.0, 0.0]
+                        point[axis], point[u], point[v] = sign, ticks[i + di], ticks[j + dj]
+                        quad.append(index.setdefault(tuple(point), len(index)))
+                    faces.append(quad if (sign > 0) == ((v - u) % 3 == 1) else quad[::-1])
+    return make_cage(np.array(list(index)), faces)
+
+
+@pytest.mark.parametrize("cuts", [6, 7])
+def test_3d_subdivided_cube_meshes_at_the_default_cells(cuts):
+    """A new user's subdivided cube (296 and 386 vertices) was refused: four grid samples of a face lie on a circle,
+    and the tetrahedra kept ended on the other diagonal of their quad than the surface's triangles."""
+    cage = subdivided_cube_cage(cuts)
+    check_contract(cage, meshing.mesh_domain(cage))
+
+
 def test_3d_overlapping_cage_is_refused():
     """Two interpenetrating cubes enclose their overlap twice. make_cage refuses such a cage (self-intersection,
     two parts); a Cage assembled by hand gets past it, and meshing names the problem instead of meshing garbage."""

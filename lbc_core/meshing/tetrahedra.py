@@ -166,7 +166,7 @@ def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     tets = delaunay.simplices[inside]
     used = np.flatnonzero(np.bincount(tets.ravel(), minlength=len(vertices)))
     if (len(used) < n_surface or used[n_surface - 1] != n_surface - 1
-            or not _conforms(tets, delaunay.neighbors[inside], inside, samples.triangles)):
+            or not _conforms(tets, delaunay.neighbors[inside], inside, samples.triangles, samples.incidence)):
         raise _NotConforming(np.arange(len(cage.facets)))
     renumber = np.full(len(vertices), -1)
     renumber[used] = np.arange(len(used))  # the surface samples keep their numbers
@@ -233,19 +233,28 @@ def _runs_away(missing, n_samples, budget):
     return n_samples + missing[-1] * (1.0 + growth) > budget
 
 
-def _conforms(tets, across, inside, triangles):
-    """Whether the tetrahedra's boundary triangles are exactly the surface triangles.
+def _conforms(tets, across, inside, triangles, incidence):
+    """Whether the tetrahedra's boundary triangles are the surface triangles, up to ties.
+
+    Four samples on one planar region that lie on a circle (a regular grid of cage vertices, as Blender's subdivided
+    cube gives, makes many) tie: the tetrahedralisation may hold both splits of their quad, around a flat cell that
+    belongs to neither side, and the kept tetrahedra then end on the other diagonal. A boundary triangle that is not a
+    surface triangle is accepted when its corners lie on one common region: it is then part of the surface as well.
 
     Parameters
     ----------
     tets, across : (T, 4) int arrays, the tetrahedra kept and their neighbours (-1: none) in the tetrahedralisation
     inside : (T_all,) bool array, which tetrahedra of the tetrahedralisation are kept
     triangles : (S, 3) int array
+    incidence : (P, R) sparse 0/1 matrix, the regions each surface sample lies on
     """
     # Face k, opposite corner k, is on the boundary when the tetrahedron across it is not kept.
     open_face = ~np.r_[inside, False][across]
     boundary = np.sort(np.concatenate([np.delete(tets[open_face[:, k]], k, axis=1) for k in range(4)]), axis=1)
-    return len(boundary) == len(triangles) and rows_in(np.sort(triangles, axis=1), boundary).all()
+    if len(boundary) != len(triangles):
+        return False
+    other = ~rows_in(boundary, np.sort(triangles, axis=1))
+    return bool(on_common(incidence, boundary[other]).all())
 
 
 def _polish(vertices, tets, n_fixed, side, rng, steps):
