@@ -877,11 +877,12 @@ SOLVE_COLUMNS = 32
 NORM_SLICE = 4_000_000
 # Newton steps of the weighted prox (a stretched frame) at most per entry; from the previous step's root most need few.
 NEWTON_STEPS = 30
-# The stretch (in the meshing frame, 0.25 / the cage's thinnest aspect) from which the solve runs stretched, and the
-# most control points it does so for: the weighted prox costs 5-10 times a plain step, so only where the cage's frame
-# takes thousands of iterations (cages 1/200 as thick as wide and thinner, with up to 18 control points measured; from
-# 24 on the cage's frame converges, less than 1 % above the optimum on most, in less time; bench/RESULTS.md).
-STRETCHED_SOLVE_FROM = 50.0
+# The stretch (in the meshing frame: frame.ASPECT_FLOOR / the cage's thinnest aspect) from which the solve runs
+# stretched, and the most control points it does so for: the weighted prox costs 5-10 times a plain step, so only where
+# the cage's frame takes thousands of iterations (cages 1/200 as thick as wide and thinner, with up to 18 control points
+# measured; from 24 on the cage's frame converges, less than 1 % above the optimum on most, in less time;
+# bench/RESULTS.md).
+STRETCHED_SOLVE_FROM = 20.0
 STRETCHED_MOST_CONTROL_POINTS = 20
 
 
