@@ -117,6 +117,8 @@ def set_deformer(mesh_obj, **inputs):
     lbc_core.CageError
         When the mesh is not bound, its modifier was removed, or the object is linked from a library (not an
         override: the change would be lost on saving).
+    TypeError, ValueError
+        For an unknown input, a value of the wrong type, or a strength outside -10 to 10 (the panel's range).
     """
     _require_enabled()
     if isinstance(mesh_obj, bpy.types.Object) and mesh_obj.library is not None:
@@ -133,6 +135,10 @@ def set_deformer(mesh_obj, **inputs):
         if not isinstance(value, types[key]) or (key == "strength" and isinstance(value, bool)):
             expected = " or ".join(kind.__name__ for kind in types[key])
             raise TypeError(f"set_deformer({key}=...) takes a {expected}, not {type(value).__name__} {value!r}")
+    low, high = deformer.STRENGTH_RANGE
+    if "strength" in inputs and not low <= inputs["strength"] <= high:
+        raise ValueError(f"set_deformer(strength={inputs['strength']!r}) is out of the Strength range {low:g} to {high:g}"
+                         " (1 follows the cage fully, 0 stays at rest)")
     deformer.set_inputs(modifier, {names[key]: value for key, value in inputs.items()})
     mesh_obj.update_tag()
 

@@ -34,6 +34,8 @@ STOPPED_HERE = ("topology", "welded apart", "rest moved")
 
 # The modifier inputs that are the artist's (kept when the mesh is bound again); the others are the add-on's.
 USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")
+# The Strength input's range, as its slider offers it.
+STRENGTH_RANGE = (-10.0, 10.0)
 
 # The slots beyond those every vertex evaluates are left to at most this share of the vertices (see
 # :func:`shared_slot_count`; bench/RESULTS.md: 5 % gave the fastest split on both benchmark scenes).
@@ -63,7 +65,7 @@ def build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots=N
     interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     interface.new_socket("Cage", in_out="INPUT", socket_type="NodeSocketObject")
     strength = _single_value(interface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat"))
-    strength.default_value, strength.min_value, strength.max_value = 1.0, -10.0, 10.0
+    strength.default_value, (strength.min_value, strength.max_value) = 1.0, STRENGTH_RANGE
     strength.description = "How far the mesh follows the cage: 0 rest, 1 the full deformation"
     vertex_group = interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
     vertex_group.description = "Only the vertices of this group follow the cage, by their weight (empty: all)"
@@ -659,7 +661,8 @@ def diagnose(mesh_obj, depsgraph, cages=None):
 
     ``cause`` is one of "modifier", "weights", "mesh vertices", "rest moved" (:func:`rest_moved`), "cage deleted",
     "cage type", "cage vertices", "topology", "welded apart", "modifier above" (one that can change the vertex
-    count), "modifier error" (an error the node group raised for what only it sees). A cage with other vertices in
+    count), "modifier error" (an error the node group raised for what only it sees), "modifier off" (switched off in
+    the viewport by the artist). A cage with other vertices in
     renders still follows (cause None), its message says so. Only the causes in :data:`STOPPED_HERE` need the add-on
     to stop the deformer; the node group itself stops for the others.
     ``cages``: a dict keeping each cage's :func:`evaluated_cage` for the next bindings checked with the same depsgraph,
@@ -728,6 +731,11 @@ def diagnose(mesh_obj, depsgraph, cages=None):
         )
     if messages:
         return "modifier error", messages[0][:1].upper() + messages[0][1:]
+    if not modifier.show_viewport:
+        return "modifier off", (
+            f"The modifier '{modifier.name}' is switched off in the viewport (its screen icon): the mesh stays at rest "
+            f"there{'' if modifier.show_render else ' and in renders'}. Switch it on to follow '{cage.name}'"
+        )
     difference = geometry.render_difference(cage)
     if difference is not None:
         return None, (f"Following '{cage.name}' in the viewport, but renders leave the mesh undeformed: the cage's "

@@ -199,6 +199,10 @@ def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work()
     assert api.status(None) == (False, "None is not an object: pass it as e.g. bpy.data.objects['Name']")
     with pytest.raises(lbc_core.CageError, match="the cage to bind is None, not an object"):
         api.bind(mesh, bpy.data.objects.get("Cgae"))
+    text = bpy.data.objects.new("Label", bpy.data.curves.new("Label", "FONT"))
+    with pytest.raises(lbc_core.CageError, match=r"the cage 'Label' \(Text\) is not a mesh, and the cage must be one: "
+                                                 r"convert it \(Object > Convert > Mesh\), or use a mesh as the cage"):
+        api.bind(mesh, text)
     bpy.context.view_layer.objects.active = mesh
     bpy.ops.object.mode_set(mode="EDIT")
     try:
@@ -214,6 +218,9 @@ def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work()
     assert mesh_state(cage) == before and not is_bound(cage) and api.status(mesh)[0]
     with pytest.raises(TypeError, match=r"set_deformer\(strength=...\) takes a float or int, not str 'x'"):
         api.set_deformer(mesh, strength="x")
+    with pytest.raises(ValueError, match=r"set_deformer\(strength=1000000000.0\) is out of the Strength range -10 "):
+        api.set_deformer(mesh, strength=1e9)  # a new user's: the mesh moved by 1.4e9 without a word
+    assert deformer.inputs(deformer.find_modifier(mesh))["Strength"] == 1.0
 
 
 def test_a_mesh_linked_from_a_library_or_overridden_is_not_rebound_or_unbound_here(bound_gargoyle_file):

@@ -456,6 +456,22 @@ def test_below_a_modifier_that_changes_the_vertex_count_the_deformer_stops_with_
     assert mesh.lbc.status == f"Following '{cage.name}'"
 
 
+def test_the_modifier_switched_off_in_the_viewport_is_said(bound_gargoyle):
+    """A new user's finding: with the LBC modifier switched off, the panel still said "Following" over a mesh at
+    rest."""
+    mesh, cage = bound_gargoyle
+    modifier = mesh.modifiers[deformer.MODIFIER_NAME]
+    modifier.show_viewport = False
+    bpy.context.evaluated_depsgraph_get()
+    assert mesh.lbc.state == "STOPPED"
+    assert mesh.lbc.status == (f"The modifier '{modifier.name}' is switched off in the viewport (its screen icon): "
+                               f"the mesh stays at rest there. Switch it on to follow '{cage.name}'")
+    modifier.show_viewport = True
+    bpy.context.evaluated_depsgraph_get()
+    assert mesh.lbc.state == "FOLLOWING" and mesh.lbc.status == f"Following '{cage.name}'"
+    assert deformer.is_enabled(modifier)
+
+
 def test_a_cage_with_other_vertices_in_renders_says_so_while_it_follows(bound_gargoyle):
     mesh, cage = bound_gargoyle
     subdivision = cage.modifiers.new("Subdivision", "SUBSURF")  # Blender's defaults: 1 level, 2 in renders
