@@ -247,6 +247,18 @@ def not_editable_here(mesh_obj):
     return None
 
 
+# Object types Object > Convert > Mesh turns into a mesh, by the names Blender's menus give them.
+CONVERTIBLE_TO_MESH = {"CURVE": "Curve", "SURFACE": "Surface", "META": "Metaball", "FONT": "Text"}
+
+
+def not_a_mesh(cage_obj, remedy):
+    """The refusal of ``cage_obj``, a non-mesh object picked as the cage: its type as Blender's menus name it, how to
+    convert it where Object > Convert > Mesh can, then ``remedy``."""
+    kind = CONVERTIBLE_TO_MESH.get(cage_obj.type, cage_obj.type.title())
+    convert = "convert it (Object > Convert > Mesh), or " if cage_obj.type in CONVERTIBLE_TO_MESH else ""
+    return f"'{cage_obj.name}' ({kind}) is not a mesh, and the cage must be one: {convert}{remedy}"
+
+
 def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
              thinning=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
     """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
@@ -262,7 +274,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     if mesh_obj.type != "MESH":
         raise CageError(f"'{mesh_obj.name}' is not a mesh: only meshes can be bound")
     if cage_obj.type != "MESH":
-        raise CageError(f"the cage '{cage_obj.name}' is not a mesh object: use a mesh as the cage")
+        raise CageError(f"the cage {not_a_mesh(cage_obj, 'use a mesh as the cage')}")
     if mesh_obj == cage_obj:
         raise CageError("a mesh cannot be its own cage: select the mesh, then the cage last (active)")
     scales = np.linalg.svd(np.array(cage_obj.matrix_world)[:3, :3], compute_uv=False)

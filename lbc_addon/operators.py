@@ -204,10 +204,6 @@ def _allowed(operator_class, message):
     return message is None
 
 
-# Object types Blender's Convert > Mesh turns into a mesh.
-CONVERTIBLE_TO_MESH = {"CURVE", "SURFACE", "META", "FONT"}
-
-
 def _bind_poll_message(context):
     """Why Bind cannot run now, or None when it can."""
     busy = _busy_message(context, "Bind")
@@ -217,9 +213,7 @@ def _bind_poll_message(context):
     if cage is None:
         return "Select the mesh(es) to bind, then the cage mesh last so it is active"
     if cage.type != "MESH":
-        convert = "convert it (Object > Convert > Mesh), or " if cage.type in CONVERTIBLE_TO_MESH else ""
-        return (f"The active object '{cage.name}' ({cage.type.title()}) is not a mesh, and the cage must be one: "
-                f"{convert}make the cage mesh active")
+        return f"The active object {geometry.not_a_mesh(cage, 'make the cage mesh active')}"
     if not any(obj.type == "MESH" and obj != cage for obj in context.selected_objects):
         return "Select the mesh(es) to bind as well as the cage (active)"
     return None

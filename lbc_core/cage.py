@@ -731,7 +731,8 @@ def _check_closed_manifold(triangles, names, defects, excused=()):
         sizes = np.bincount(label)
         defects.append(
             f"the cage has {parts} separate parts ({', '.join(str(s) for s in sizes[:_LISTED])} triangles): LBC needs "
-            "one closed surface around one region; join the parts or bind to each part with its own cage"
+            "one closed surface around one region; make the parts one surface (Bridge Edge Loops), or separate them "
+            "(Mesh > Separate > By Loose Parts) and bind each part's meshes to its own cage"
         )
     if np.any(counts != 2):
         return None
