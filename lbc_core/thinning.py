@@ -27,6 +27,13 @@ DEFAULT_FLOOR = 0.005
 # Rows thinned by one thread at a time (about 0.05 s each); cancel is polled between rounds of one chunk per thread.
 ROWS_PER_CHUNK = 8192
 
+# The most of a point's weight the floor may take away, Σ_j min(w_j, τ): where weights spread thin over many control
+# points (the C¹ relaxation ε > 0 makes nearly every weight nonzero; Blender's 32-sided cylinder cage gives 100 per
+# point) the floor 0.005 took 0.2-0.44 of it, and the restoration then moved the bent mesh by up to 5 % of the cage
+# and folded it (a new user's 140-178° folds at ε = 1-5). There τ is lowered until it takes this much: rows of the
+# gargoyle, Suzanne and the capsule, whose floor takes at most 0.09-0.12, keep theirs (bench/RESULTS.md).
+MOST_REMOVED = 0.1
+
 # Times a point's threshold is relaxed (floor / 4, cap + 1) where its kept weights cannot reproduce it, before it
 # keeps its whole row. With 6, a cap of 8 on Blender's 32-sided cylinder cage left 61 of 20k points their whole row,
 # so every vertex's deformer evaluated 53 slots; with 12, none (16 slots).
@@ -153,7 +160,8 @@ def _thin_rows(weights, controls, positions, floor, max_influences):
 
 
 def thresholds(values, floors, caps):
-    """Each row's τ: its floor, raised to its (K+1)-th largest value where it has a cap K > 0.
+    """Each row's τ: its floor, lowered where it would take more than :data:`MOST_REMOVED` of the row's weight, then
+    raised to its (K+1)-th largest value where it has a cap K > 0.
 
     Parameters
     ----------
@@ -167,7 +175,31 @@ def thresholds(values, floors, caps):
     """
     capped = (caps > 0) & (caps < values.shape[1])
     ranked = values[np.arange(len(values)), np.minimum(caps, values.shape[1] - 1)]
+    floors = np.minimum(floors, removing(values, MOST_REMOVED))
     return np.where(capped, np.maximum(floors, ranked), floors)
+
+
+def removing(values, mass):
+    """Each row's τ with Σ_j min(w_j, τ) = ``mass`` (continuous and increasing in the weights: thresholds stay smooth
+    in the point).
+
+    Parameters
+    ----------
+    values : (m, L) float array, each row sorted in decreasing order, summing to 1 or more than ``mass``
+    mass : float
+
+    Returns
+    -------
+    (m,) float array
+    """
+    ascending = values[:, ::-1]
+    count = ascending.shape[1]
+    below = np.cumsum(ascending, axis=1) - ascending  # Σ of the weights before each
+    # Σ min(w, τ) at τ = each weight in turn: increasing along the row; τ lies below the first that reaches ``mass``.
+    taken = below + ascending * (count - np.arange(count))
+    first = np.argmax(taken >= mass, axis=1)
+    rows = np.arange(len(values))
+    return (mass - below[rows, first]) / (count - first)
 
 
 def tilt(prior, controls, positions, extent, iterations=40):
