@@ -93,6 +93,12 @@ def principal_extents(vertices):
     return axes, np.ptp(centred @ axes, axis=0)
 
 
+def principal_aspect(vertices):
+    """The points' largest extent over their smallest along their principal axes (:func:`principal_extents`)."""
+    extents = principal_extents(vertices)[1]
+    return float(extents.max() / max(extents.min(), np.finfo(float).tiny))
+
+
 # A 3D cage thinner than this along a principal axis (× its largest extent) is meshed stretched to this aspect. At 0.1
 # rather than 0.25 a thin cage gets finer cells along its width for as many in all, rounder in its own frame: the
 # corpus squashed to 1/1000 converges in 0.65 of the iterations to objectives mostly lower (bench/RESULTS.md).

@@ -17,7 +17,7 @@ from .binding import Binding
 from .boundary import boundary_weights
 from .cage import make_cage, real_array
 from .errors import CageError, PointsOutside
-from .frame import UnitFrame, principal_extents
+from .frame import UnitFrame, principal_aspect
 from .geodesics import geodesic_distances, tv_weights
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain, simplex_domain
@@ -200,10 +200,8 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     if progress is not None and cage.is_simplex:
         progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve")
     elif progress is not None:
-        extents = principal_extents(cage.vertices)[1]
         progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim,
-                                     solves_stretched(cage.vertices, options.epsilon),
-                                     extents.max() / max(extents.min(), np.finfo(float).tiny)))
+                                     solves_stretched(cage.vertices, options.epsilon), principal_aspect(cage.vertices)))
     return cage, points
 
 

@@ -42,7 +42,7 @@ from .parallel import thread_map, worker_count
 from .errors import CageError
 from .progress import Progress
 from .constraints import project_onto_constraints
-from .frame import MeshingFrame
+from .frame import MeshingFrame, principal_aspect
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
@@ -300,10 +300,14 @@ def solve_on_mesh(
             # n = d + 1: a simplex cage. The constraints leave no freedom; Z = H are its barycentric coordinates.
             Z = W = problem.H.astype(np.float64)
         else:
+            # A cold solve at the default tolerance knows about how many iterations to expect, which bounds the time
+            # left it tells early on, while its residual still falls slowly.
+            expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls) if d == 3 else 1.0)
+                        if start is None and tolerance == default_tolerance(d, n) else None)
             Z, W, iterations, converged, history, state = _admm(
                 problem, tv_weights, epsilon, tolerance, max_iterations,
                 _starting_penalty(penalty, start, d, n), relaxation, check_every, anderson_memory,
-                anderson_period, progress.part(_FACTORISATION_END, _ADMM_END), start,
+                anderson_period, progress.part(_FACTORISATION_END, _ADMM_END), start, expected,
             )
             for record in history:  # objectives in the input's units
                 if "objective" in record:
@@ -382,7 +386,7 @@ ITERATIONS_SCALE, ITERATIONS_POWER = 57, 0.28
 CELLS_POWER = 0.4
 # A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
 # (bench/RESULTS.md, bench/thin_cages.py).
-STRETCHED_TIME_FACTOR = 10
+STRETCHED_ITERATIONS, STRETCHED_STEP_COST = 2, 5
 # A thin 3D cage solved in its own frame takes more iterations: about 1 + log10(aspect / THIN_FROM_ASPECT) times
 # those above, the aspect its largest extent over its smallest along its principal axes (five corpus cages of 32-66
 # control points squashed to aspects 5-1000: 1.4x at 20, 2.2-2.8x at 50-200, 3.2x at 1000, at the median).
@@ -405,20 +409,29 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0):
     str, e.g. "solving 106 control points on about 8000 cells: about 313 MB of memory and roughly 3 s"
     """
     entries = _state_entries(n_control_points, n_cells, dim)
-    iterations = ITERATIONS_SCALE * n_control_points ** ITERATIONS_POWER
-    if default_tolerance(dim, n_control_points) == LOOSE_TOLERANCE:
-        iterations *= LOOSE_TOLERANCE_ITERATIONS
+    iterations = forecast_iterations(n_control_points, dim, stretched, aspect)
     seconds = SECONDS_PER_STATE_ENTRY * entries * iterations * (n_cells / 8000) ** CELLS_POWER
     if stretched:
-        seconds *= STRETCHED_TIME_FACTOR
-    elif dim == 3 and aspect > THIN_FROM_ASPECT:
-        seconds *= 1 + np.log10(aspect / THIN_FROM_ASPECT)
+        seconds *= STRETCHED_STEP_COST
     text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
             f"{_size(estimate_memory(n_control_points, n_cells, dim))} of memory and "
             f"{'' if seconds < 1 else 'roughly '}{_duration(seconds)}")
     if seconds > 3600:
         text += " (beyond an hour on a 2-core machine: fewer cells or a coarser cage bind faster)"
     return text
+
+
+def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0):
+    """About how many iterations a solve takes at the default tolerance (see :data:`ITERATIONS_SCALE`,
+    :data:`STRETCHED_ITERATIONS`, :data:`THIN_FROM_ASPECT`); the arguments as for :func:`solve_forecast`."""
+    iterations = ITERATIONS_SCALE * n_control_points ** ITERATIONS_POWER
+    if default_tolerance(dim, n_control_points) == LOOSE_TOLERANCE:
+        iterations *= LOOSE_TOLERANCE_ITERATIONS
+    if stretched:
+        iterations *= STRETCHED_ITERATIONS
+    elif dim == 3 and aspect > THIN_FROM_ASPECT:
+        iterations *= 1 + np.log10(aspect / THIN_FROM_ASPECT)
+    return float(iterations)
 
 
 def solves_stretched(control_points, epsilon=0.0):
@@ -957,7 +970,7 @@ class _Anderson:
 
 
 def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alpha, check_every, memory, period,
-          progress, start=None):
+          progress, start=None, expected=None):
     step = _DouglasRachford(problem, tv_weights, epsilon, alpha, penalty, progress.check)
     anderson = (_Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype, progress.check)
                 if memory else None)
@@ -1051,7 +1064,12 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         # alone said "10 min" for 2 s).
         elapsed = time.perf_counter() - started
         checks.append((iteration, distance))
-        left = f", {_remaining(_seconds_left(elapsed, fraction, checks, max_iterations))}" if by_residual > 0 else ""
+        seconds_left = _seconds_left(elapsed, fraction, checks, max_iterations)
+        if expected is not None and iteration < expected:
+            # The residual's fall early on says up to 20 times the time left (a 314-vertex UV sphere: "2 min" with
+            # 8 s to go); the iterations the forecast expects say about it (bench/RESULTS.md).
+            seconds_left = min(seconds_left, (expected - iteration) * elapsed / iteration)
+        left = f", {_remaining(seconds_left)}" if by_residual > 0 else ""
         progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
         if iteration >= next_balance and iteration <= BALANCE_UNTIL:
             next_balance = iteration + BALANCE_SPACING

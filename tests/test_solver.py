@@ -143,6 +143,25 @@ def test_progress_says_the_time_left_once_the_residual_has_fallen():
     assert all("left" in message for message in admm[1:]) and len(admm) > 2
 
 
+def test_the_time_left_early_on_is_bounded_by_the_iterations_the_forecast_expects(monkeypatch):
+    """A new user's 314-vertex UV sphere cage: "about 2 min left" with 8 s to go, while the residual still fell
+    slowly. A cold solve at the default tolerance now says at most what its expected iterations take at its own pace;
+    a solve with another tolerance has no such bound."""
+    from lbc_core import solver
+
+    monkeypatch.setattr(solver, "_seconds_left", lambda *arguments: 3600.0)  # what a slow residual would say
+    problem = _corpus_problem("cube", cells=2000)
+    expected = solver.forecast_iterations(8, 3)
+    for tolerance, bounded in ((None, True), (1.5e-4, False)):
+        messages = []
+        result = solve_on_mesh(*problem, tolerance=tolerance,
+                               progress=lambda fraction, message: messages.append(message))
+        early = [message for message in messages if message.startswith("ADMM iteration") and "left" in message
+                 and int(message.split()[2].rstrip(",")) < expected]
+        assert result.converged and len(early) >= 3
+        assert all(("min left" not in message) == bounded for message in early), early
+
+
 def _corpus_problem(name, thickness=None, cells=None):
     """The solve_on_mesh arguments of a corpus cage, flattened along z to ``thickness`` × its width if given, meshed
     at ``cells`` (None: the default) and weighted as the pipeline does (unit frame)."""
