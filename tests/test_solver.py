@@ -124,13 +124,13 @@ def test_the_forecast_tells_memory_and_time_before_a_solve():
 
     small = solve_forecast(27, 8000, 3)
     assert small.startswith("solving 27 control points on about 8000 cells: about ") and small.endswith(
-        " MB of memory and under 1 s")
+        " MB of memory for the solve and under 1 s")
     # The gargoyle's L08 at 16,000 cells solved in 15-17 s here at the tolerance 2e-4 (bench/RESULTS.md); 3e-4 takes
     # 0.8 of its iterations (230 against 285).
-    assert solve_forecast(168, 16000, 3).endswith("of memory and roughly 12 s")
+    assert solve_forecast(168, 16000, 3).endswith("of memory for the solve and roughly 12 s")
     # The 1002-vertex cage: GiB, told up front.
     large = solve_forecast(1002, 8000, 3)
-    assert f"{estimate_memory(1002, 8000, 3) / 2**30:.1f} GiB of memory and roughly" in large
+    assert f"{estimate_memory(1002, 8000, 3) / 2**30:.1f} GiB of memory for the solve and roughly" in large
     assert "beyond an hour" in solve_forecast(2000, 256000, 3)
 
 
