@@ -800,7 +800,7 @@ def check_bindings(depsgraph, changed=None):
             obj.lbc.status = message
         if _last_messages.get(obj.session_uid) != message:
             _last_messages[obj.session_uid] = message
-            if cause is not None:
+            if cause not in (None, "modifier off"):  # switched off by the artist: the panel says so, enough
                 print(f"LBC: {obj.name}: {message}")
 
 
