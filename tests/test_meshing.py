@@ -401,6 +401,16 @@ def test_3d_subdivided_cube_meshes_at_the_default_cells(cuts):
     check_contract(cage, meshing.mesh_domain(cage))
 
 
+def test_3d_a_fine_cage_refused_at_few_cells_is_told_to_try_more():
+    """9 cuts (602 vertices, 13 cells per vertex at the default) still leave a flat cell where four grid samples of
+    two faces tie across their edge; the refusal says to try more cells, which mesh it."""
+    cage = subdivided_cube_cage(9)
+    with pytest.raises(CageError, match=r"This cage has 602 vertices for about 8000 cells: more cells \(16000\) may "
+                                        "mesh it"):
+        meshing.mesh_domain(cage)
+    check_contract(cage, meshing.mesh_domain(cage, cells=16000))
+
+
 def test_3d_overlapping_cage_is_refused():
     """Two interpenetrating cubes enclose their overlap twice. make_cage refuses such a cage (self-intersection,
     two parts); a Cage assembled by hand gets past it, and meshing names the problem instead of meshing garbage."""
