@@ -62,7 +62,8 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
 def _by_chunks(m, n, reduce_chunk, progress):
     """``reduce_chunk(rows)`` over consecutive equal row slices of at most ROWS_PER_CHUNK, one per thread at a time
     (:func:`~lbc_core.parallel.map_row_chunks`), stacked into an (m, n) CSR; ``progress`` is told before each round."""
-    chunks = map_row_chunks(reduce_chunk, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "reducing the weights"))
+    chunks = map_row_chunks(reduce_chunk, m, ROWS_PER_CHUNK,
+                            lambda start: progress(start / m, f"reducing the weights: {start} of {m} points done"))
     progress(1.0, "reducing the weights: done")
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix((0, n))
 
