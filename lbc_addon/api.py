@@ -163,6 +163,8 @@ def status(mesh_obj):
     _require_enabled()
     if not isinstance(mesh_obj, bpy.types.Object):
         return False, f"{mesh_obj!r} is not an object: pass it as e.g. bpy.data.objects['Name']"
+    if mesh_obj.type != "MESH":
+        return False, geometry.not_a_mesh(mesh_obj, "only meshes can be bound", "bind a mesh")
     if not is_bound(mesh_obj):
         leftover = ("; it carries LBC weights for no binding (from a bound mesh joined into it), which api.unbind "
                     "removes" if geometry.leftover_weights(mesh_obj) else "")

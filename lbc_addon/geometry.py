@@ -251,12 +251,12 @@ def not_editable_here(mesh_obj):
 CONVERTIBLE_TO_MESH = {"CURVE": "Curve", "SURFACE": "Surface", "META": "Metaball", "FONT": "Text"}
 
 
-def not_a_mesh(cage_obj, remedy):
-    """The refusal of ``cage_obj``, a non-mesh object picked as the cage: its type as Blender's menus name it, how to
-    convert it where Object > Convert > Mesh can, then ``remedy``."""
-    kind = CONVERTIBLE_TO_MESH.get(cage_obj.type, cage_obj.type.title())
-    convert = "convert it (Object > Convert > Mesh), or " if cage_obj.type in CONVERTIBLE_TO_MESH else ""
-    return f"'{cage_obj.name}' ({kind}) is not a mesh, and the cage must be one: {convert}{remedy}"
+def not_a_mesh(obj, need, remedy):
+    """Why ``obj``, not a mesh, cannot take the role it was given: "'Name' (Kind) is not a mesh, and ``need``: ",
+    how to convert it where Object > Convert > Mesh can, then ``remedy``; its type named as Blender's menus do."""
+    kind = CONVERTIBLE_TO_MESH.get(obj.type, obj.type.title())
+    convert = "convert it (Object > Convert > Mesh), or " if obj.type in CONVERTIBLE_TO_MESH else ""
+    return f"'{obj.name}' ({kind}) is not a mesh, and {need}: {convert}{remedy}"
 
 
 def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
@@ -272,9 +272,9 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
             raise CageError(f"the {role} to bind is {obj!r}, not an object: pass it as e.g. bpy.data.objects['Name'] "
                             "(.get returns None for a name that is not there)")
     if mesh_obj.type != "MESH":
-        raise CageError(f"'{mesh_obj.name}' is not a mesh: only meshes can be bound")
+        raise CageError(not_a_mesh(mesh_obj, "only meshes can be bound", "bind a mesh"))
     if cage_obj.type != "MESH":
-        raise CageError(f"the cage {not_a_mesh(cage_obj, 'use a mesh as the cage')}")
+        raise CageError(f"the cage {not_a_mesh(cage_obj, 'the cage must be one', 'use a mesh as the cage')}")
     if mesh_obj == cage_obj:
         raise CageError("a mesh cannot be its own cage: select the mesh, then the cage last (active)")
     scales = np.linalg.svd(np.array(cage_obj.matrix_world)[:3, :3], compute_uv=False)

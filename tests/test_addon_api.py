@@ -203,6 +203,11 @@ def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work()
     with pytest.raises(lbc_core.CageError, match=r"the cage 'Label' \(Text\) is not a mesh, and the cage must be one: "
                                                  r"convert it \(Object > Convert > Mesh\), or use a mesh as the cage"):
         api.bind(mesh, text)
+    with pytest.raises(lbc_core.CageError, match=r"^'Label' \(Text\) is not a mesh, and only meshes can be bound: "
+                                                 r"convert it \(Object > Convert > Mesh\), or bind a mesh$"):
+        api.bind(text, cage)  # a new user's first try: text deformed by a cage
+    assert api.status(text) == (False, "'Label' (Text) is not a mesh, and only meshes can be bound: convert it "
+                                       "(Object > Convert > Mesh), or bind a mesh")
     bpy.context.view_layer.objects.active = mesh
     bpy.ops.object.mode_set(mode="EDIT")
     try:

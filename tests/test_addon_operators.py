@@ -71,6 +71,12 @@ def test_poll_explains_what_to_select():
         with pytest.raises(RuntimeError, match=r"'Path' \(Curve\) is not a mesh, and the cage must be one: convert it "
                                                r"\(Object > Convert > Mesh\), or make the cage mesh active"):
             bpy.ops.object.lbc_bind()
+    text = bpy.data.objects.new("Label", bpy.data.curves.new("Label", "FONT"))
+    bpy.context.scene.collection.objects.link(text)
+    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[text, cage]):
+        with pytest.raises(RuntimeError, match=r"'Label' \(Text\) is not a mesh, and only meshes can be bound: "
+                                               r"convert it \(Object > Convert > Mesh\), or select a mesh to bind"):
+            bpy.ops.object.lbc_bind()
 
 
 def test_rebind_is_greyed_out_with_what_to_do_once_the_cage_is_deleted():

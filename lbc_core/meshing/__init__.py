@@ -170,8 +170,8 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
                       mesh.boundary_bary)
     except CageError as error:
         if dim == 3 and cells < FEW_CELLS_PER_CONTROL_POINT * cage.n_control_points:
-            raise CageError(f"{error}. This cage has {cage.n_control_points} vertices for about {int(cells)} cells: "
-                            f"more cells ({2 * int(cells)}) may mesh it") from None
+            raise CageError(f"this cage has {cage.n_control_points} vertices for about {int(cells)} cells, few for "
+                            f"so fine a cage: try more cells ({2 * int(cells)}). The mesher said: {error}") from None
         raise
     steps(1.0, f"meshed: {len(mesh.cells)} cells")
     return mesh
