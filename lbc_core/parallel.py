@@ -11,6 +11,16 @@ def worker_count():
     return min(os.cpu_count() or 1, 8)
 
 
+def busy_factor():
+    """How many times an idle machine's time work takes now, from the load average: the threads other jobs keep
+    runnable share the cores with ours (1 where the system has no load average)."""
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return 1.0
+    return max(1.0, (load + worker_count()) / (os.cpu_count() or 1))
+
+
 def thread_map(function, items):
     """``[function(item) for item in items]``, in the shared thread pool when there is more than one item."""
     global _POOL

@@ -22,6 +22,7 @@ from .geodesics import geodesic_distances, tv_weights
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain, simplex_domain
 from .options import DEFAULT_CELLS, BindOptions
+from .parallel import busy_factor
 from .progress import Progress
 from .reduction import interpolate_and_reduce
 from .smoothing import SmoothInterpolation
@@ -201,7 +202,8 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
         progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve")
     elif progress is not None:
         progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim,
-                                     solves_stretched(cage.vertices, options.epsilon), principal_aspect(cage.vertices)))
+                                     solves_stretched(cage.vertices, options.epsilon), principal_aspect(cage.vertices),
+                                     busy_factor()))
     return cage, points
 
 

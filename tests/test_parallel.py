@@ -32,3 +32,19 @@ def test_row_chunks_run_on_several_threads():
 
     parallel.map_row_chunks(work, 2, 1)
     assert len(seen) == min(parallel.worker_count(), 2)
+
+
+def test_the_busy_factor_counts_the_other_jobs_against_the_cores(monkeypatch):
+    monkeypatch.setattr(parallel.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(parallel.os, "getloadavg", lambda: (0.3, 0.0, 0.0))
+    assert parallel.busy_factor() == 1.15
+    monkeypatch.setattr(parallel.os, "getloadavg", lambda: (2.0, 0.0, 0.0))  # two other busy threads
+    assert parallel.busy_factor() == 2.0
+    monkeypatch.setattr(parallel.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert parallel.busy_factor() == 1.0
+
+    def unavailable():
+        raise OSError("no load average here")
+
+    monkeypatch.setattr(parallel.os, "getloadavg", unavailable)
+    assert parallel.busy_factor() == 1.0

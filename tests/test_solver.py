@@ -132,6 +132,9 @@ def test_the_forecast_tells_memory_and_time_before_a_solve():
     large = solve_forecast(1002, 8000, 3)
     assert f"{estimate_memory(1002, 8000, 3) / 2**30:.1f} GiB of memory for the solve and roughly" in large
     assert "beyond an hour" in solve_forecast(2000, 256000, 3)
+    # On a busy machine (a new user's, loaded 1.4-4: forecasts half the time taken) it says so, and takes it in.
+    busy = solve_forecast(168, 16000, 3, busy=2.0)
+    assert busy.endswith("roughly 25 s (the machine is busy: 2.0 times the time it would take idle)")
 
 
 def test_progress_says_the_time_left_once_the_residual_has_fallen():
