@@ -453,8 +453,8 @@ def solves_stretched(control_points, epsilon=0.0):
 
 
 def _size(count):
-    """'12 MB', '3.1 GiB': a byte count for messages."""
-    return f"{count / 2**20:.0f} MB" if count < 2**30 else f"{count / 2**30:.1f} GiB"
+    """'12 MB', '3.1 GB' (of 2^20 and 2^30 bytes, as the add-on's panel counts): a byte count for messages."""
+    return f"{count / 2**20:.0f} MB" if count < 2**30 else f"{count / 2**30:.1f} GB"
 
 
 def _duration(seconds):
@@ -508,8 +508,8 @@ def check_memory(n_control_points, n_cells, dim):
     available = _available_memory()
     if available is not None and needed > 0.8 * available:
         raise CageError(
-            f"binding {n_control_points} control points on {n_cells} cells would need about {needed / 2**30:.1f} GiB "
-            f"of memory and {available / 2**30:.1f} GiB are available: lower the resolution (cells) or use a "
+            f"binding {n_control_points} control points on {n_cells} cells would need about {needed / 2**30:.1f} GB "
+            f"of memory and {available / 2**30:.1f} GB are available: lower the resolution (cells) or use a "
             "cage with fewer vertices"
         )
 
