@@ -59,24 +59,25 @@ def test_poll_explains_what_to_select():
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         with pytest.raises(RuntimeError, match="Select a bound mesh"):
             bpy.ops.object.lbc_unbind()
-    empty = bpy.data.objects.new("Handle", None)
-    bpy.context.scene.collection.objects.link(empty)
-    with bpy.context.temp_override(active_object=empty, object=empty, selected_objects=[mesh, empty]):
-        with pytest.raises(RuntimeError, match=r"The active object 'Handle' \(Empty\) is not a mesh, and the cage "
-                                               "must be one: make the cage mesh active"):
-            bpy.ops.object.lbc_bind()
     curve = bpy.data.objects.new("Path", bpy.data.curves.new("Path", "CURVE"))
-    bpy.context.scene.collection.objects.link(curve)
-    with bpy.context.temp_override(active_object=curve, object=curve, selected_objects=[mesh, curve]):
-        with pytest.raises(RuntimeError, match=r"'Path' \(Curve\) is not a mesh, and the cage must be one: convert it "
-                                               r"\(Object > Convert > Mesh\), or make the cage mesh active"):
-            bpy.ops.object.lbc_bind()
     text = bpy.data.objects.new("Label", bpy.data.curves.new("Label", "FONT"))
-    bpy.context.scene.collection.objects.link(text)
-    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[text, cage]):
-        with pytest.raises(RuntimeError, match=r"'Label' \(Text\) is not a mesh, and only meshes can be bound: "
-                                               r"convert it \(Object > Convert > Mesh\), or select a mesh to bind"):
-            bpy.ops.object.lbc_bind()
+    empty = bpy.data.objects.new("Handle", None)
+    convert = r"convert it \(Object > Convert > Mesh\), or "
+    cases = (  # (selected, active, why Bind is greyed out)
+        ([mesh, empty], empty, r"The active object 'Handle' \(Empty\) is not a mesh, and the cage must be one: "
+                               "make the cage mesh active"),
+        ([mesh, curve], curve, rf"'Path' \(Curve\) is not a mesh, and the cage must be one: {convert}make the cage "
+                               "mesh active"),
+        ([text, cage], cage, rf"'Label' \(Text\) is not a mesh, and only meshes can be bound: {convert}select a mesh "
+                             "to bind"),
+    )
+    for selected, active, why in cases:
+        for obj in selected:
+            if obj.name not in bpy.context.scene.collection.all_objects:
+                bpy.context.scene.collection.objects.link(obj)
+        with bpy.context.temp_override(active_object=active, object=active, selected_objects=selected):
+            with pytest.raises(RuntimeError, match=why):
+                bpy.ops.object.lbc_bind()
 
 
 def test_rebind_is_greyed_out_with_what_to_do_once_the_cage_is_deleted():
