@@ -31,6 +31,9 @@ _COLUMN = 220  # node editor spacing, for a readable node group
 
 # Causes (see :func:`diagnose`) the node group cannot see, so the add-on clears its "Enabled" input.
 STOPPED_HERE = ("topology", "welded apart", "rest moved")
+# Causes that are the artist's own choice, not a fault: the panel says them, the console does not, and the binding
+# still gives its deformation (Save as Shape Key saves it).
+ARTISTS_CHOICE = ("modifier off",)
 
 # The modifier inputs that are the artist's (kept when the mesh is bound again); the others are the add-on's.
 USER_INPUTS = ("Strength", "Vertex Group", "Invert Vertex Group")
@@ -800,7 +803,7 @@ def check_bindings(depsgraph, changed=None):
             obj.lbc.status = message
         if _last_messages.get(obj.session_uid) != message:
             _last_messages[obj.session_uid] = message
-            if cause not in (None, "modifier off"):  # switched off by the artist: the panel says so, enough
+            if cause is not None and cause not in ARTISTS_CHOICE:
                 print(f"LBC: {obj.name}: {message}")
 
 

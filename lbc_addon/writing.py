@@ -165,7 +165,7 @@ def save_shape_key(mesh_obj, depsgraph, name=""):
         raise CageError(f"'{mesh_obj.name}' is in Edit Mode: switch to Object Mode first")
     cages = {}  # the cage evaluated once, for the check and the displacement
     cause, message = deformer.diagnose(mesh_obj, depsgraph, cages)
-    if cause is not None:
+    if cause is not None and cause not in deformer.ARTISTS_CHOICE:
         raise CageError(f"the deformer does not work now: {message}")
     offsets = deformer.displacement(mesh_obj, depsgraph, cages)
     if mesh_obj.data.shape_keys is None:

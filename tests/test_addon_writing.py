@@ -184,6 +184,9 @@ def test_save_shape_key_holds_the_deformation_at_value_0_and_keeps_the_binding()
     assert key.name == "LBC Box" and key.value == 0.0 and mesh.data.shape_keys.reference_key.name == "Basis"
     assert is_bound(mesh) and np.abs(evaluated_positions(mesh) - deformed).max() < 1e-6  # at 0 it adds nothing
     deformer.find_modifier(mesh).show_viewport = False
+    # Switched off by the artist, the binding still gives its deformation: saved again, the same shape.
+    again = writing.save_shape_key(mesh, bpy.context.evaluated_depsgraph_get(), "Again")
+    assert np.abs(geometry.shape_key_positions(again) - geometry.shape_key_positions(key)).max() < 1e-6
     key.value = 1.0
     assert np.abs(evaluated_positions(mesh) - deformed).max() < 1e-5  # the key alone gives the deformed shape
     assert np.abs(evaluated_positions(mesh) - rest).max() > 0.05
