@@ -302,7 +302,7 @@ def solve_on_mesh(
         else:
             # A cold solve at the default tolerance knows about how many iterations to expect, which bounds the time
             # left it tells early on, while its residual still falls slowly.
-            expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls) if d == 3 else 1.0)
+            expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls))
                         if start is None and tolerance == default_tolerance(d, n) else None)
             Z, W, iterations, converged, history, state = _admm(
                 problem, tv_weights, epsilon, tolerance, max_iterations,
@@ -406,7 +406,7 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     stretched : bool
         Whether the solve runs in a stretched frame (:func:`solves_stretched`).
     aspect : float
-        The cage's largest extent over its smallest along its principal axes (:func:`frame.principal_extents`).
+        The cage's largest extent over its smallest along its principal axes (:func:`frame.principal_aspect`).
     busy : float
         How many times an idle machine's time the work takes now (:func:`parallel.busy_factor`): a new user's
         forecasts on a machine loaded 1.4-4 were half the time taken.
