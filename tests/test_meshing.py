@@ -4,6 +4,7 @@ The checks here are independent of lbc_core.meshing's internals: which cage face
 found geometrically, and coverage is checked by summing areas per cage facet.
 """
 
+import types
 from pathlib import Path
 
 import numpy as np
@@ -393,22 +394,51 @@ def subdivided_cube_cage(cuts):
     return make_cage(np.array(list(index)), faces)
 
 
-@pytest.mark.parametrize("cuts", [6, 7])
+@pytest.mark.parametrize("cuts", [6, 7, 9, 12])
 def test_3d_subdivided_cube_meshes_at_the_default_cells(cuts):
-    """A new user's subdivided cube (296 and 386 vertices) was refused: four grid samples of a face lie on a circle,
-    and the tetrahedra kept ended on the other diagonal of their quad than the surface's triangles."""
+    """A new user's subdivided cubes were refused: four grid samples of a face lie on a circle, and the tetrahedra
+    kept ended on the other diagonal of their quad than the surface's triangles (6, 7 cuts); four across a cube edge
+    left a flat cell (9 cuts); refining tied quads cascaded past the sample budget (12 cuts, 16 s)."""
     cage = subdivided_cube_cage(cuts)
     check_contract(cage, meshing.mesh_domain(cage))
 
 
+def test_3d_tied_quads_take_the_tetrahedralisation_split():
+    """Two surface triangles splitting a quad along a-b, missing from a tetrahedralisation that splits it along p-q,
+    are replaced by that split, oriented alike; a missing pair whose other split is absent is kept."""
+    a, b, p, q, x, y = range(6)
+    triangles = np.array([[a, b, p], [b, a, q], [x, y, a]])
+    samples = types.SimpleNamespace(triangles=triangles, triangle_region=np.zeros(3, dtype=np.int64))
+    faces = np.sort(np.array([[a, q, p], [q, b, p], [x, y, a]]), axis=1)
+    taken = tetrahedra._take_tied_splits(samples, np.array([True, True, False]), faces)
+    assert taken.tolist() == [[a, q, p], [q, b, p], [x, y, a]]
+    kept = tetrahedra._take_tied_splits(samples, np.array([True, True, False]), faces[2:])
+    assert np.array_equal(kept, triangles)
+
+
+def test_3d_flat_cell_between_two_splits_is_flipped_away():
+    """A flat cell between a square's two splits, a pyramid over the square on one side: the pyramid is split along
+    the other diagonal, the flat cell goes, and the four cells left tile the octahedron conformingly."""
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1], [0.5, 0.5, -1]], dtype=float)
+    a, b, c, d, top, bottom = range(6)
+    tets = orient_positive(vertices, np.array([[top, a, b, c], [top, a, c, d], [bottom, a, b, d], [bottom, b, c, d],
+                                               [a, b, c, d]]))
+    flipped = tetrahedra._flip_flat(vertices, tets, n_surface=6)
+    assert len(flipped) == 4 and np.all(signed_measures(vertices, flipped) > 0)
+    assert np.isclose(signed_measures(vertices, flipped).sum(), 2.0 / 3.0)
+    faces = np.sort(np.concatenate([np.delete(flipped, k, axis=1) for k in range(4)]), axis=1)
+    _, count = np.unique(faces, axis=0, return_counts=True)
+    assert np.count_nonzero(count == 2) == 4 and np.count_nonzero(count == 1) == 8
+
+
 def test_3d_a_fine_cage_refused_at_few_cells_is_told_to_try_more():
-    """9 cuts (602 vertices, 13 cells per vertex at the default) still leave a flat cell where four grid samples of
-    two faces tie across their edge; the refusal says to try more cells, which mesh it."""
-    cage = subdivided_cube_cage(9)
-    with pytest.raises(CageError, match=r"^this cage has 602 vertices for about 8000 cells, few for so fine a cage: "
-                                        r"try more cells \(16000\)\. The mesher said: the mesh has flat"):
-        meshing.mesh_domain(cage)
-    check_contract(cage, meshing.mesh_domain(cage, cells=16000))
+    """12 cuts (1016 vertices) at 2000 cells still leave a flat cell, among surface samples alone with no pyramid on
+    either side; the refusal says to try more cells, which mesh it."""
+    cage = subdivided_cube_cage(12)
+    with pytest.raises(CageError, match=r"^this cage has 1016 vertices for about 2000 cells, few for so fine a cage: "
+                                        r"try more cells \(4000\)\. The mesher said: the mesh has flat"):
+        meshing.mesh_domain(cage, cells=2000)
+    check_contract(cage, meshing.mesh_domain(cage, cells=4000))
 
 
 def test_3d_overlapping_cage_is_refused():

@@ -49,6 +49,7 @@ _BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage s
 # 8000 cells on the cube, the gargoyle's L12 and L08 and the clothing: 1 to 6 slivers (radius ratio < 0.1), 0 to 4
 # with a corner off the cage; ratio 0.25, 4 rounds of 16 left 0 to 3, for 2 to 4 times the time.
 _POLISH_RATIO = 0.2
+_FLAT = 1e-9  # a tetrahedron of at most this share of the median volume is flat (see _flip_flat)
 _POLISH_ROUNDS = 3
 _POLISH_TRIES = 8
 _POLISH_STEP = 0.3
@@ -172,6 +173,7 @@ def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     renumber[used] = np.arange(len(used))  # the surface samples keep their numbers
     surface.last = samples
     vertices, tets = vertices[used], orient_positive(vertices[used], renumber[tets])
+    tets = _flip_flat(vertices, tets, n_surface)
     steps(0.9, "improving the tetrahedra")
     return surface, _polish(vertices, tets, n_surface, side, rng, steps), tets
 
@@ -203,7 +205,11 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
             delaunay = Delaunay(np.concatenate([samples.points, lattice, far]), qhull_options=_QHULL_OPTIONS)
             # Only the tetrahedra with three corners or more on the surface have faces with all three there.
             touching = delaunay.simplices[np.count_nonzero(delaunay.simplices < len(samples.points), axis=1) >= 3]
-            is_face = rows_in(np.sort(samples.triangles, axis=1), _cell_faces(touching))
+            faces = _cell_faces(touching)
+            is_face = rows_in(np.sort(samples.triangles, axis=1), faces)
+            if not is_face.all():
+                samples = samples._replace(triangles=_take_tied_splits(samples, ~is_face, faces))
+                is_face = rows_in(np.sort(samples.triangles, axis=1), faces)
             if is_face.all():
                 return samples, lattice, delaunay
             missing.append(np.count_nonzero(~is_face))
@@ -214,6 +220,48 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
     except OutOfBudget:
         pass
     raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble)))
+
+
+def _take_tied_splits(samples, missing, faces):
+    """The surface triangles with each pair of missing ones that splits a quad replaced by the quad's other split
+    where the tetrahedralisation has that one.
+
+    Four samples of one planar region on a circle (a regular grid of cage vertices, as Blender's subdivided cube gives
+    many) tie: the region's 2D triangulation and the tetrahedralisation may split their quad along different
+    diagonals. Either split is the same piece of surface; refining it instead puts circumcentres on the same circle
+    and cascades (the cube subdivided 12 times ran out of its sample budget twice).
+
+    Parameters
+    ----------
+    samples : surface.Samples
+    missing : (S,) bool array, which of ``samples.triangles`` are no face of the tetrahedralisation
+    faces : (K, 3) int array, sorted rows: the tetrahedralisation's faces with their three corners on the surface
+
+    Returns
+    -------
+    (S, 3) int array, oriented as the surface triangles
+    """
+    triangles = samples.triangles.copy()
+    lost = np.flatnonzero(missing)
+    # Each directed edge (a, b) of a missing triangle; its twin (b, a) in another missing one of the same region.
+    edges = np.concatenate([triangles[lost][:, [k, (k + 1) % 3]] for k in range(3)])
+    owner = np.tile(lost, 3)
+    apex = np.concatenate([triangles[lost][:, (k + 2) % 3] for k in range(3)])
+    index = {(a, b): i for i, (a, b) in enumerate(edges.tolist())}
+    used = set()
+    for i, (a, b) in enumerate(edges.tolist()):
+        j = index.get((b, a))
+        first, second = owner[i], owner[j] if j is not None else -1
+        if (j is None or first in used or second in used
+                or samples.triangle_region[first] != samples.triangle_region[second]):
+            continue
+        # The quad a, q, b, p (p = this triangle's apex, q = the twin's): split along p-q instead of a-b.
+        p, q = apex[i], apex[j]
+        split = np.array([[a, q, p], [q, b, p]])
+        if rows_in(np.sort(split, axis=1), faces).all():
+            triangles[[first, second]] = split
+            used.update((first, second))
+    return triangles
 
 
 def _runs_away(missing, n_samples, budget):
@@ -255,6 +303,63 @@ def _conforms(tets, across, inside, triangles, incidence):
         return False
     other = ~rows_in(boundary, np.sort(triangles, axis=1))
     return bool(on_common(incidence, boundary[other]).all())
+
+
+def _flip_flat(vertices, tets, n_surface):
+    """The tetrahedra with their flat cells among surface samples flipped away.
+
+    Four surface samples on one plane and one circle tie in a Delaunay tetrahedralisation: grid cage vertices on two
+    faces either side of a cube's edge make such rectangles (Blender's cube subdivided 9 times: 1 at 8000 cells, 20
+    with 11 cuts). The tetrahedralisation may then keep a flat cell between the quad's two splits, one on each side.
+    Where the two cells on one side of it share their apex (a pyramid over the quad), that pyramid is split along the
+    other diagonal, and the flat cell goes: the same region, tiled conformingly. Flat cells with a lattice corner
+    (:func:`_polish` moves those) or with no such side are left to the final check.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array
+    tets : (T, 4) int array, positively oriented but for flat cells
+    n_surface : int, the surface samples are the first vertices
+
+    Returns
+    -------
+    (T', 4) int array, T' <= T
+    """
+    volume = signed_measures(vertices, tets)
+    flat = np.flatnonzero(np.all(tets < n_surface, axis=1) & (volume <= _FLAT * np.median(volume)))
+    if len(flat) == 0:
+        return tets
+    tets = tets.copy()
+    face_keys = _face_keys(tets, len(vertices))
+    flipped = []
+    for cell in flat:
+        corners = vertices[tets[cell]]
+        # The quad's diagonals: of the three ways to pair its corners, the one of longest total length (convex quad).
+        pairings = [((0, 1), (2, 3)), ((0, 2), (1, 3)), ((0, 3), (1, 2))]
+        diagonals = max(pairings, key=lambda pair: sum(np.linalg.norm(np.subtract(*corners[list(p)])) for p in pair))
+        for ends, other in (diagonals, diagonals[::-1]):
+            # The side split along `other` holds the faces opposite the ends of `ends`.
+            side = [np.flatnonzero(np.any(face_keys == face_keys[cell, k], axis=1)) for k in ends]
+            side = [held[held != cell] for held in side]
+            if not all(len(held) == 1 for held in side):
+                continue  # the quad's side is on the cage surface
+            (first,), (second,) = side
+            apexes = [np.setdiff1d(tets[t], tets[cell]) for t in (first, second)]
+            if len(apexes[0]) != 1 or apexes[0][0] != apexes[1][0]:
+                continue
+            apex, (i, j), (k, l) = apexes[0][0], tets[cell][list(ends)], tets[cell][list(other)]
+            tets[[first, second]] = orient_positive(vertices, np.array([[apex, i, j, k], [apex, i, j, l]]))
+            face_keys[[first, second]] = _face_keys(tets[[first, second]], len(vertices))
+            face_keys[cell] = -1
+            flipped.append(cell)
+            break
+    return np.delete(tets, flipped, axis=0)
+
+
+def _face_keys(tets, n_vertices):
+    """A number for each face of each tetrahedron (T, 4), face k opposite corner k; equal faces get equal numbers."""
+    faces = np.sort(np.stack([np.delete(tets, k, axis=1) for k in range(4)], axis=1), axis=2)
+    return (faces[..., 0] * n_vertices + faces[..., 1]) * n_vertices + faces[..., 2]
 
 
 def _polish(vertices, tets, n_fixed, side, rng, steps):
