@@ -407,13 +407,17 @@ def test_3d_tied_quads_take_the_tetrahedralisation_split():
     """Two surface triangles splitting a quad along a-b, missing from a tetrahedralisation that splits it along p-q,
     are replaced by that split, oriented alike; a missing pair whose other split is absent is kept."""
     a, b, p, q, x, y = range(6)
+    points = np.array([[0, 0, 0], [1, 1, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [-1, -1, 0]], dtype=float)
     triangles = np.array([[a, b, p], [b, a, q], [x, y, a]])
-    samples = types.SimpleNamespace(triangles=triangles, triangle_region=np.zeros(3, dtype=np.int64))
+    samples = types.SimpleNamespace(points=points, triangles=triangles, triangle_region=np.zeros(3, dtype=np.int64))
     faces = np.sort(np.array([[a, q, p], [q, b, p], [x, y, a]]), axis=1)
     taken = tetrahedra._take_tied_splits(samples, np.array([True, True, False]), faces)
     assert taken.tolist() == [[a, q, p], [q, b, p], [x, y, a]]
     kept = tetrahedra._take_tied_splits(samples, np.array([True, True, False]), faces[2:])
     assert np.array_equal(kept, triangles)
+    # A quad that is not convex: its other split would fold over the surface.
+    samples.points = points + np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0], [2, 1.5, 0], [0, 0, 0], [0, 0, 0]])
+    assert np.array_equal(tetrahedra._take_tied_splits(samples, np.array([True, True, False]), faces), triangles)
 
 
 def test_3d_flat_cell_between_two_splits_is_flipped_away():

@@ -258,7 +258,9 @@ def _take_tied_splits(samples, missing, faces):
         # The quad a, q, b, p (p = this triangle's apex, q = the twin's): split along p-q instead of a-b.
         p, q = apex[i], apex[j]
         split = np.array([[a, q, p], [q, b, p]])
-        if rows_in(np.sort(split, axis=1), faces).all():
+        normal = triangle_normals(samples.points[triangles[first]])
+        if (np.all(triangle_normals(samples.points[split]) @ normal > 0)  # a convex quad: neither folds over
+                and rows_in(np.sort(split, axis=1), faces).all()):
             triangles[[first, second]] = split
             used.update((first, second))
     return triangles
