@@ -1,5 +1,5 @@
-"""Random cages for property-based tests: star-shaped polygons, radial surfaces over a sphere triangulation, and
-the 8-pointed star with a grid around it; an even-odd point-in-polygon test (no matplotlib, which the add-on test
+"""Cages for tests: random star-shaped polygons, radial surfaces over a sphere triangulation, the 8-pointed star with
+a grid around it, and Blender's subdivided cube; an even-odd point-in-polygon test (no matplotlib, which the add-on test
 environments of the other Blender lines do not install)."""
 
 import numpy as np
@@ -63,3 +63,22 @@ def draw_dented_sphere(data, n_points, min_radius, max_push, shrink):
 
 STAR = star_polygon([1.0] * 8, [1.0, 0.5] * 4)[0]  # an 8-pointed concave star
 GRID = np.stack(np.meshgrid(np.linspace(-1.2, 1.2, 13), np.linspace(-1.2, 1.2, 13)), axis=-1).reshape(-1, 2)
+
+
+def subdivided_cube(cuts):
+    """Blender's Cube (side 2) subdivided ``cuts`` times: each side a grid of (cuts + 1)² quads, vertices on a regular
+    grid. Returns vertices (V, 3) float array and faces, a list of outward-oriented quads (vertex index lists)."""
+    ticks = np.linspace(-1.0, 1.0, cuts + 2)
+    index, faces = {}, []
+    for axis in range(3):
+        u, v = [other for other in range(3) if other != axis]
+        for sign in (-1.0, 1.0):
+            for i in range(cuts + 1):
+                for j in range(cuts + 1):
+                    quad = []
+                    for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                        point = [0.0, 0.0, 0.0]
+                        point[axis], point[u], point[v] = sign, ticks[i + di], ticks[j + dj]
+                        quad.append(index.setdefault(tuple(point), len(index)))
+                    faces.append(quad if (sign > 0) == ((v - u) % 3 == 1) else quad[::-1])
+    return np.array(list(index)), faces

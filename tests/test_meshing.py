@@ -21,6 +21,8 @@ from lbc_core.errors import CageError, Cancelled
 from lbc_core.fem import boundary_facets
 from lbc_core.io import read_cage
 
+import random_cages
+
 DATA = Path(__file__).parent / "data"
 CAGES_2D = sorted(DATA.glob("*-control-edgeset.obj"))
 CAGES_3D = {
@@ -377,21 +379,8 @@ def test_3d_coarse_cube_and_deterministic():
 
 
 def subdivided_cube_cage(cuts):
-    """A cube whose faces are (cuts + 1)² quads, as Blender's Subdivide makes it: its vertices on a regular grid."""
-    ticks = np.linspace(-1.0, 1.0, cuts + 2)
-    index, faces = {}, []
-    for axis in range(3):
-        u, v = [other for other in range(3) if other != axis]
-        for sign in (-1.0, 1.0):
-            for i in range(cuts + 1):
-                for j in range(cuts + 1):
-                    quad = []
-                    for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1)):
-                        point = [0.0, 0.0, 0.0]
-                        point[axis], point[u], point[v] = sign, ticks[i + di], ticks[j + dj]
-                        quad.append(index.setdefault(tuple(point), len(index)))
-                    faces.append(quad if (sign > 0) == ((v - u) % 3 == 1) else quad[::-1])
-    return make_cage(np.array(list(index)), faces)
+    """Blender's Cube subdivided ``cuts`` times, as a Cage."""
+    return make_cage(*random_cages.subdivided_cube(cuts))
 
 
 @pytest.mark.parametrize("cuts", [6, 7, 9, 12])
