@@ -39,8 +39,11 @@ DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
 # Blender keeps positions in float32, off by up to 6e-8 of the coordinates' size: the triangles of a subdivided cube
 # rotated and applied leave its faces' planes by that much. Two triangles meeting at a vertex count as coplanar within
-# this share of the largest coordinate (a generous multiple of that rounding), and are then judged in their plane.
+# this share of the largest coordinate (a generous multiple of that rounding) if also within NEARLY_FLAT (radians) of
+# each other's plane (far from the origin the share alone would flatten real corners), and are then judged in their
+# plane.
 FLOAT32_ROUNDING = 1e-6
+NEARLY_FLAT = 1e-3
 # The solve's memory grows as control points × cells (measured: about 0.3 kB per control point and cell in 2D and
 # 0.4 kB in 3D with single-precision iterations, 0.9 and 1.2 kB in double precision) and its time per iteration as mesh
 # vertices × control points². At 2000 control points the 3D default resolution (8000 tetrahedra) needs 6 to 19 GB
@@ -979,8 +982,12 @@ def _vertex_neighbours_meet(vertices, first, second, equal, zero):
     normal_1, normal_2 = unit(np.cross(a, b)), unit(np.cross(c, d))
     ha, hb = (_zeroed(np.einsum("pj,pj->p", x, normal_2), zero) for x in (a, b))
     hc, hd = (_zeroed(np.einsum("pj,pj->p", x, normal_1), zero) for x in (c, d))
-    flat = max(zero, FLOAT32_ROUNDING * float(np.abs(vertices).max(initial=0.0)))
-    coplanar = (np.maximum(np.abs(ha), np.abs(hb)) <= flat) | (np.maximum(np.abs(hc), np.abs(hd)) <= flat)
+    rounding = FLOAT32_ROUNDING * float(np.abs(vertices).max(initial=0.0))
+
+    def flat(height, corner):
+        return np.abs(height) <= np.maximum(zero, np.minimum(rounding, NEARLY_FLAT * np.linalg.norm(corner, axis=1)))
+
+    coplanar = (flat(ha, a) & flat(hb, b)) | (flat(hc, c) & flat(hd, d))
     # Not coplanar: each triangle meets the other's plane in a segment from v (or only in v); both segments lie on the
     # planes' common line, and the triangles meet beyond v when the segments leave v in the same direction.
     reach_1 = _segment_on_plane(a, b, ha, hb)
