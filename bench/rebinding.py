@@ -1,6 +1,6 @@
 """Warm re-bind (issue 12, item 5) against a cold bind of the same edited cage, side by side in one process.
 
-    .venv/bin/python bench/rebinding.py [--skip-64k] [--addon]
+    .venv/bin/python bench/rebinding.py [--skip-64k] [--addon [--cage L10]]
 
 For each scene: bind the gargoyle to its cage, move 1, 3 or 5 cage vertices (seeded random directions) by 1-10 % of
 the cage's diagonal, then bind the edited cage cold (lbc_core.bind) and warm (lbc_core.rebind from the first
@@ -13,7 +13,7 @@ same comparison between two cold binds at 8000 and 9000 cells: what remeshing al
          slots; no bpy): a cold bind of the edited cage against the warm re-bind, which thins again only the rows the
          re-bind changed, and the same warm re-bind thinning every row (the path before); CPU seconds of every
          thread (wall seconds in brackets), the best of two interleaved runs; the warm re-bind's stages in wall
-         seconds.
+         seconds. ``--cage`` names the gargoyle cage (L08 to L16; default L10, the demo's).
 """
 
 import argparse
@@ -145,7 +145,7 @@ def gargoyle_64k():
     return vertices_of(obj)
 
 
-def addon_scene(cage, faces, points, edits):
+def addon_scene(cage, faces, points, edits, level="L10"):
     """The add-on's warm re-bind against its cold bind, and against the warm re-bind thinning every row."""
     from lbc_addon import jobs
 
@@ -163,7 +163,7 @@ def addon_scene(cage, faces, points, edits):
     first = request(cage)
     first_result = jobs.solve(first)
     jobs.remember(first, first_result)
-    print(f"\nadd-on bind (lbc_addon.jobs.solve), demo gargoyle: {len(points)} points, cage L10; load average "
+    print(f"\nadd-on bind (lbc_addon.jobs.solve), demo gargoyle: {len(points)} points, cage {level}; load average "
           f"{os.getloadavg()[0]:.1f}")
     print("| edit | cold s | warm s | speed-up | warm s, every row thinned (before) | speed-up | rows thinned again | "
           "warm stages (s) | the same slots |")
@@ -215,10 +215,11 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--skip-64k", action="store_true")
     parser.add_argument("--addon", action="store_true")
+    parser.add_argument("--cage", default="L10", help="--addon: the gargoyle's cage, L08 to L16")
     arguments = parser.parse_args(argv)
     if arguments.addon:
-        cage, faces = read_cage(GARGOYLE / "cage_L10.obj")
-        addon_scene(cage, [list(face) for face in faces], gargoyle_64k(), [(1, 0.02), (3, 0.01)])
+        cage, faces = read_cage(GARGOYLE / f"cage_{arguments.cage}.obj")
+        addon_scene(cage, [list(face) for face in faces], gargoyle_64k(), [(1, 0.02), (3, 0.01)], arguments.cage)
         return
     points, _ = read_mesh(GARGOYLE / "mesh.off")
     for level in ("L10", "L09"):

@@ -45,6 +45,8 @@ from .solver import SolveResult, solve_on_mesh
 
 # A carried cell must keep at least this share of its shape quality (radius ratio in 3D, the same ratio of in- to
 # circumradius in 2D): a cell squashed further would make the solve on the carried mesh coarser than a fresh mesh.
+# Cells with every corner on the cage are exempt: their values are the cage's boundary values, fixed, so their shape
+# never enters the solve (only folding them is refused).
 QUALITY_KEPT = 0.25
 # Share of the progress bar each stage gets.
 _STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 0.9), "reduction": (0.9, 1.0)}
@@ -258,7 +260,7 @@ def carry_domain(previous, unit_cage):
     folded = signed_measures(vertices, old.cells) <= 0
     if folded.any():
         return None, _near(previous, old.cells[folded], "the previous mesh would fold")
-    squashed = _quality(vertices, old.cells) < QUALITY_KEPT * _quality(old.vertices, old.cells)
+    squashed = _squashed(old, vertices)
     if squashed.any():
         return None, _near(previous, old.cells[squashed],
                            f"cells of the previous mesh would lose more than {1 - QUALITY_KEPT:.0%} of their shape")
@@ -315,6 +317,15 @@ def _split_as_before(old, new):
         if np.any(facing <= ZERO_LENGTH * new.bbox_diagonal ** 2 * face_sizes):
             return new, "a cage face bent so far that its previous split into triangles folds"
     return Cage(new.vertices, old.facets, old.facet_face, new.vertex_map, new.warnings), None
+
+
+def _squashed(mesh, vertices):
+    """(F,) bool array: the cells of ``mesh`` that, at the carried ``vertices`` (N, d), keep less than QUALITY_KEPT
+    of their shape quality and have a corner off the cage."""
+    on_cage = np.zeros(len(vertices), dtype=bool)
+    on_cage[mesh.boundary_vertices] = True
+    kept = _quality(vertices, mesh.cells) >= QUALITY_KEPT * _quality(mesh.vertices, mesh.cells)
+    return ~kept & ~np.all(on_cage[mesh.cells], axis=1)
 
 
 def _quality(vertices, cells):
