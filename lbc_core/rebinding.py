@@ -35,6 +35,7 @@ from .geodesics import tv_weights as make_tv_weights
 from .geometry import bary_positions, radius_ratios, signed_measures, triangle_normals, unit
 from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
+from .meshing.tetrahedra import polish
 from .objective import tv_objective
 from .options import WEIGHTINGS, BindOptions
 from .pipeline import REPRODUCTION_TOLERANCE, bind, check_inside, check_points, lbc_binding
@@ -185,6 +186,9 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
     tv_weights = make_tv_weights(carried.cells, distances, options["weighting"])
     geodesics_seconds = time.perf_counter() - clock
     free = np.any(previous.domain_weights[:, moved] > 0, axis=1)
+    # Vertices the carry polished away from where the previous weights put them (see _polished) must be solved again.
+    carried_to = previous.domain_weights @ unit_cage.vertices
+    free |= np.linalg.norm(carried.vertices - carried_to, axis=1) > REPRODUCTION_TOLERANCE
     free = _grown(free, carried.cells, FREE_RINGS)
     free[carried.boundary_vertices] = False
     cells = np.any(free[carried.cells], axis=1)
@@ -261,6 +265,9 @@ def carry_domain(previous, unit_cage):
     if folded.any():
         return None, _near(previous, old.cells[folded], "the previous mesh would fold")
     squashed = _squashed(old, vertices)
+    if squashed.any() and vertices.shape[1] == 3:
+        vertices = _polished(old, vertices, squashed)
+        squashed = _squashed(old, vertices)
     if squashed.any():
         return None, _near(previous, old.cells[squashed],
                            f"cells of the previous mesh would lose more than {1 - QUALITY_KEPT:.0%} of their shape")
@@ -317,6 +324,17 @@ def _split_as_before(old, new):
         if np.any(facing <= ZERO_LENGTH * new.bbox_diagonal ** 2 * face_sizes):
             return new, "a cage face bent so far that its previous split into triangles folds"
     return Cage(new.vertices, old.facets, old.facet_face, new.vertex_map, new.warnings), None
+
+
+def _polished(mesh, vertices, squashed):
+    """The carried ``vertices`` (N, 3) with the free corners of the ``squashed`` cells (F,) moved, as the mesher
+    polishes its own, where that raises the least quality around them; :func:`_solve_near` solves them again."""
+    movable = np.zeros(len(vertices), dtype=bool)
+    movable[mesh.cells[squashed].ravel()] = True
+    movable[mesh.boundary_vertices] = False
+    poor_below = np.where(squashed, QUALITY_KEPT * _quality(mesh.vertices, mesh.cells), -np.inf)
+    return polish(vertices, mesh.cells, movable, median_edge(vertices, mesh.cells), np.random.default_rng(0),
+                  Progress.of(None, None), poor_below)
 
 
 def _squashed(mesh, vertices):

@@ -318,7 +318,8 @@ def test_polish_raises_the_worst_tetrahedra_and_keeps_the_surface():
     fixed = np.array(np.meshgrid([0.0, 1.0], [0.0, 1.0], [0.0, 1.0])).reshape(3, -1).T
     points = np.concatenate([fixed, rng.uniform(0.1, 0.9, (300, 3))])
     tets = orient_positive(points, Delaunay(points).simplices)
-    polished = tetrahedra._polish(points, tets, len(fixed), 0.15, rng, Progress.of(None, None))
+    polished = tetrahedra.polish(points, tets, np.arange(len(points)) >= len(fixed), 0.15, rng,
+                                 Progress.of(None, None))
     assert np.array_equal(polished[:len(fixed)], fixed)
     assert np.all(signed_measures(polished, tets) > 0)
     before, after = radius_ratios(points, tets), radius_ratios(polished, tets)

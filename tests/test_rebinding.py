@@ -153,6 +153,24 @@ def test_an_edit_that_would_fold_the_mesh_falls_back_to_a_cold_bind(gargoyle):
     assert warm.solver_state is not None  # and the next re-bind can be warm again
 
 
+def test_an_edit_that_squashes_a_cell_rebinds_warm_once_its_free_corners_are_polished(gargoyle):
+    """Cage vertex 0 moved by 8 % squashes a carried cell (the previous weights put it below a quarter of its shape);
+    its free corners are moved as the mesher polishes, those vertices are solved again, and the re-bind stays warm:
+    every guarantee, and the optimum of a cold solve on the same mesh."""
+    cage, faces, points, first = gargoyle
+    edited = moved(cage, [0], 0.08)
+    edited_cage = lbc_core.make_cage(edited, faces)
+    carried_to = first.domain_weights @ UnitFrame.of(edited_cage).cage_to_unit(edited_cage).vertices
+    assert _squashed(first.domain, carried_to).any()
+    warm = rebind(first, edited, faces)
+    assert warm.options["start"] == "previous solution"
+    assert_guarantees(warm, points)
+    polished = np.linalg.norm(warm.domain.vertices - first.domain_weights @ warm.cage.vertices, axis=1)
+    assert np.any(polished > 1e-9 * warm.cage.bbox_diagonal)
+    cold, frame = cold_on_carried_mesh(first, edited, faces)
+    assert abs(warm.objective / (cold.objective * frame.scale ** 2) - 1) < 1e-3
+
+
 def test_a_squashed_cell_counts_only_with_a_corner_off_the_cage():
     """A cell carried to a sliver refuses the carried mesh when a corner of it is free; with every corner on the cage
     its values are fixed boundary values, its shape never enters the solve, and it does not (the gargoyle's L09 cage

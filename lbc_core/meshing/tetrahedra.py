@@ -7,7 +7,7 @@ triangle is a face of the 3D Delaunay tetrahedralisation). Surface triangles mis
 refined (circumcentre insertion, or the split of the feature-edge piece it encroaches, as in Ruppert's algorithm)
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
 the cage's winding number around it is 1. The lattice corners of poor tetrahedra are then moved, the tetrahedra
-kept, where that raises the least radius ratio around them (:func:`_polish`): one tetrahedralisation in all, where
+kept, where that raises the least radius ratio around them (:func:`polish`): one tetrahedralisation in all, where
 smoothing and sliver perturbation by new tetrahedralisations took four. When the cell count misses the target by
 more than 15 % (thin or small cages), everything is done once more with a corrected size.
 
@@ -175,7 +175,7 @@ def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     vertices, tets = vertices[used], orient_positive(vertices[used], renumber[tets])
     tets = _flip_flat(vertices, tets, n_surface)
     steps(0.9, "improving the tetrahedra")
-    return surface, _polish(vertices, tets, n_surface, side, rng, steps), tets
+    return surface, polish(vertices, tets, np.arange(len(vertices)) >= n_surface, side, rng, steps), tets
 
 
 def _initial_count(cage, spacing):
@@ -315,7 +315,7 @@ def _flip_flat(vertices, tets, n_surface):
     with 11 cuts). The tetrahedralisation may then keep a flat cell between the quad's two splits, one on each side.
     Where the two cells on one side of it share their apex (a pyramid over the quad), that pyramid is split along the
     other diagonal, and the flat cell goes: the same region, tiled conformingly. Flat cells with a lattice corner
-    (:func:`_polish` moves those) or with no such side are left to the final check.
+    (:func:`polish` moves those) or with no such side are left to the final check.
 
     Parameters
     ----------
@@ -364,20 +364,22 @@ def _face_keys(tets, n_vertices):
     return (faces[..., 0] * n_vertices + faces[..., 1]) * n_vertices + faces[..., 2]
 
 
-def _polish(vertices, tets, n_fixed, side, rng, steps):
-    """Move the free corners of poor tetrahedra where that raises the least radius ratio around them.
+def polish(vertices, tets, movable, side, rng, steps, poor_below=_POLISH_RATIO):
+    """Move the movable corners of poor tetrahedra where that raises the least radius ratio around them.
 
     The tetrahedra stay as they are and the surface samples do not move, so the mesh still follows the surface; a
     move is kept only when every tetrahedron around the vertex stays positively oriented (with the boundary fixed,
     the mesh then stays a valid filling of the cage) and their least radius ratio rises. This does what a round of
-    sliver perturbation followed by a new Delaunay tetrahedralisation did, for a fraction of its cost.
+    sliver perturbation followed by a new Delaunay tetrahedralisation did, for a fraction of its cost. The warm
+    re-bind uses it too, on the cells an edit of the cage squashed (:mod:`lbc_core.rebinding`).
 
     Parameters
     ----------
     vertices : (N, 3) float array
     tets : (T, 4) int array, positively oriented
-    n_fixed : int, the first vertices (the surface samples) never move
-    side : float, the lattice cube side (length)
+    movable : (N,) bool array, the vertices that may move (never the surface samples)
+    side : float, the lattice cube side (length): the scale of the moves tried
+    poor_below : float or (T,) float array, the radius ratio below which a tetrahedron is poor
 
     Returns
     -------
@@ -390,10 +392,10 @@ def _polish(vertices, tets, n_fixed, side, rng, steps):
     ratio = radius_ratios(vertices, tets)
     for _ in range(_POLISH_ROUNDS):
         steps.check()
-        poor = np.flatnonzero(ratio < _POLISH_RATIO)
+        poor = np.flatnonzero(ratio < poor_below)
         # Worst first; no two vertices moved together share a tetrahedron, so each move is judged on its own.
         corners = tets[poor[np.argsort(ratio[poor])]].ravel()
-        candidates = corners[corners >= n_fixed]
+        candidates = corners[movable[corners]]
         candidates = candidates[np.sort(np.unique(candidates, return_index=True)[1])]
         taken = np.zeros(len(tets), dtype=bool)
         chosen = []
