@@ -263,20 +263,24 @@ def carry_domain(previous, unit_cage):
     vertices[old.control_vertices] = unit_cage.vertices
     folded = signed_measures(vertices, old.cells) <= 0
     if folded.any():
-        return None, _near(previous, old.cells[folded], "the previous mesh would fold")
+        return None, _near(previous, old.cells[folded],
+                           "the edit would turn inside out some of the cells the last bind filled the cage with")
     squashed = _squashed(old, vertices)
     if squashed.any() and vertices.shape[1] == 3:
         vertices = _polished(old, vertices, squashed)
         squashed = _squashed(old, vertices)
     if squashed.any():
         return None, _near(previous, old.cells[squashed],
-                           f"cells of the previous mesh would lose more than {1 - QUALITY_KEPT:.0%} of their shape")
+                           "the edit would squash some of the cells the last bind filled the cage with, to less "
+                           f"than {QUALITY_KEPT:.0%} of their shape")
     bent = _faces_off_cage(old, previous.cage, unit_cage)
     if len(bent):
         faces = ", ".join(map(str, bent[:5]))
         if len(bent) == 1:
-            return None, f"cage face {faces} is no longer flat, and the previous mesh has faces across it"
-        return None, f"cage faces {faces} are no longer flat, and the previous mesh has faces across them"
+            return None, (f"cage face {faces} is no longer flat, and the cells the last bind filled the cage with "
+                          "have faces across it")
+        return None, (f"cage faces {faces} are no longer flat, and the cells the last bind filled the cage with "
+                      "have faces across them")
     return replace(old, vertices=vertices), None
 
 

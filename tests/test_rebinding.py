@@ -147,7 +147,8 @@ def test_an_edit_that_would_fold_the_mesh_falls_back_to_a_cold_bind(gargoyle):
     warm = rebind(first, edited, faces, progress=lambda fraction, message: messages.append(message))
     assert warm.options["start"] == "harmonic"
     reason = warm.options["rebind"]
-    assert reason.startswith("bound from scratch: the previous mesh would fold (") and "near cage vertices 0" in reason
+    assert reason.startswith("bound from scratch: the edit would turn inside out some of the cells the last "
+                              "bind filled the cage with (") and "near cage vertices 0" in reason
     assert any(message.startswith("binding from scratch") for message in messages)
     assert_guarantees(warm, points)
     assert warm.solver_state is not None  # and the next re-bind can be warm again
@@ -216,8 +217,8 @@ def test_a_quad_bent_out_of_its_plane_falls_back_to_a_cold_bind():
     edited = cube.copy()
     edited[7] -= 0.01  # towards the centre: each quad at vertex 7 keeps its split, but bends
     again = rebind(first, edited, quads)
-    assert again.options["rebind"] == ("bound from scratch: cage faces 1, 3, 5 are no longer flat, and the previous "
-                                       "mesh has faces across them")
+    assert again.options["rebind"] == ("bound from scratch: cage faces 1, 3, 5 are no longer flat, and the cells the "
+                                       "last bind filled the cage with have faces across them")
     assert_guarantees(again, points)
 
 
