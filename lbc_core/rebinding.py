@@ -32,9 +32,10 @@ from .fem import boundary_facets
 from .frame import UnitFrame
 from .geodesics import geodesic_distances
 from .geodesics import tv_weights as make_tv_weights
-from .geometry import bary_positions, radius_ratios, signed_measures, triangle_normals, unit
+from .geometry import bary_positions, orient_positive, radius_ratios, signed_measures, triangle_normals, unit
 from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
+from .meshing.common import rows_in
 from .meshing.tetrahedra import polish
 from .objective import tv_objective
 from .options import WEIGHTINGS, BindOptions
@@ -186,14 +187,20 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
     tv_weights = make_tv_weights(carried.cells, distances, options["weighting"])
     geodesics_seconds = time.perf_counter() - clock
     free = np.any(previous.domain_weights[:, moved] > 0, axis=1)
-    # Vertices the carry polished away from where the previous weights put them (see _polished) must be solved again.
+    # Vertices the carry polished away from where the previous weights put them (see _polished), and those of cells
+    # a flip made (see _flipped_slivers), must be solved again.
     carried_to = previous.domain_weights @ unit_cage.vertices
     free |= np.linalg.norm(carried.vertices - carried_to, axis=1) > REPRODUCTION_TOLERANCE
+    source = _cell_sources(previous.domain.cells, carried.cells)
+    free[carried.cells[source < 0].ravel()] = True
     free = _grown(free, carried.cells, FREE_RINGS)
     free[carried.boundary_vertices] = False
     cells = np.any(free[carried.cells], axis=1)
     fixed = np.flatnonzero(~free)
     state = previous.solver_state
+    if (source < 0).any():  # a new cell starts from the state of an old cell around it
+        source[source < 0] = _nearest_cells(previous.domain.cells, carried.cells[source < 0])
+        state = state.for_cells(source)
     if not free.any():  # nothing moved, or only where no coordinate reaches the interior
         result = SolveResult(previous.domain_weights, 0, True, float("nan"), tv_weights)
         return result, tv_objective(carried.vertices, carried.cells, result.weights, tv_weights), state, 0, free
@@ -262,15 +269,21 @@ def carry_domain(previous, unit_cage):
     vertices[old.boundary_vertices] = bary_positions(unit_cage, old.boundary_facet, old.boundary_bary)
     vertices[old.control_vertices] = unit_cage.vertices
     folded = signed_measures(vertices, old.cells) <= 0
+    cells = old.cells
+    if folded.any() and vertices.shape[1] == 3:
+        cells = _flipped_slivers(vertices, old.cells, old.boundary_vertices, folded)
+        folded = signed_measures(vertices, cells) <= 0
     if folded.any():
-        return None, _near(previous, old.cells[folded],
+        return None, _near(previous, cells[folded],
                            "the edit would turn inside out some of the cells the last bind filled the cage with")
-    squashed = _squashed(old, vertices)
+    kept = rows_in(np.sort(cells, axis=1), np.sort(old.cells, axis=1))  # the cells no flip replaced
+    squashed = np.zeros(len(cells), dtype=bool)
+    squashed[kept] = _squashed(replace(old, cells=cells[kept]), vertices)
     if squashed.any() and vertices.shape[1] == 3:
-        vertices = _polished(old, vertices, squashed)
-        squashed = _squashed(old, vertices)
+        vertices = _polished(replace(old, cells=cells), vertices, squashed)  # every cell kept positive
+        squashed[kept] = _squashed(replace(old, cells=cells[kept]), vertices)
     if squashed.any():
-        return None, _near(previous, old.cells[squashed],
+        return None, _near(previous, cells[squashed],
                            "the edit would squash some of the cells the last bind filled the cage with, to less "
                            f"than {QUALITY_KEPT:.0%} of their shape")
     bent = _faces_off_cage(old, previous.cage, unit_cage)
@@ -281,7 +294,69 @@ def carry_domain(previous, unit_cage):
                           "have faces across it")
         return None, (f"cage faces {faces} are no longer flat, and the cells the last bind filled the cage with "
                       "have faces across them")
-    return replace(old, vertices=vertices), None
+    return replace(old, vertices=vertices, cells=cells), None
+
+
+def _flipped_slivers(vertices, cells, boundary_vertices, folded):
+    """The cells with folded slivers on the cage mended by a 3-2 flip where one applies.
+
+    A sliver with every corner on the cage, two of its faces on the cage either side of a cage edge (e1, e2), is
+    turned inside out when an edit turns that edge past flat. When its two other faces (sharing the edge a-b) lead to
+    two cells with one apex p, and these three cells are all that surround a-b, the three are replaced by the two
+    cells (e1, e2, p, a) and (e1, e2, p, b): the same faces bound the same region, and the cage faces stay faces.
+    Applied only where both new cells are positively oriented at ``vertices``.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array, the carried positions
+    cells : (F, 4) int array
+    boundary_vertices : (B,) int array
+    folded : (F,) bool array
+
+    Returns
+    -------
+    (F', 4) int array, F' <= F: cells whose rows a flip replaced come last
+    """
+    on_cage = np.zeros(len(vertices), dtype=bool)
+    on_cage[boundary_vertices] = True
+    cells = cells.copy()
+    removed, added = [], []
+    for sliver in np.flatnonzero(folded & np.all(on_cage[cells], axis=1)):
+        corners = cells[sliver]
+        # Cells sharing a face with the sliver: three of its corners each.
+        sharing = np.count_nonzero(np.isin(cells, corners), axis=1) == 3
+        sharing[sliver] = False
+        neighbours = np.flatnonzero(sharing)
+        if len(neighbours) != 2 or np.isin(neighbours, removed).any():
+            continue
+        apexes = [np.setdiff1d(cells[n], corners) for n in neighbours]
+        inner = np.intersect1d(*[np.intersect1d(cells[n], corners) for n in neighbours])  # the edge a-b
+        if apexes[0][0] != apexes[1][0] or len(inner) != 2:
+            continue
+        around = np.flatnonzero(np.count_nonzero(np.isin(cells, inner), axis=1) == 2)
+        if len(around) != 3:  # a-b has more cells around it than the sliver and its two neighbours
+            continue
+        apex, (e1, e2) = apexes[0][0], np.setdiff1d(corners, inner)
+        flipped = orient_positive(vertices, np.array([[e1, e2, apex, inner[0]], [e1, e2, apex, inner[1]]]))
+        if np.any(signed_measures(vertices, flipped) <= 0):
+            continue
+        removed += [sliver, *neighbours]
+        added.append(flipped)
+    if not removed:
+        return cells
+    return np.concatenate([np.delete(cells, removed, axis=0), *added])
+
+
+def _cell_sources(old_cells, new_cells):
+    """(F_new,) int array: the index of each new cell among the old ones, -1 for a cell no old one matches."""
+    order = np.sort(old_cells, axis=1)
+    keys = {tuple(row): i for i, row in enumerate(order.tolist())}
+    return np.array([keys.get(tuple(row), -1) for row in np.sort(new_cells, axis=1).tolist()], dtype=np.int64)
+
+
+def _nearest_cells(old_cells, new_cells):
+    """(K,) int array: for each new cell, an old cell with the most corners in common."""
+    return np.array([int(np.argmax(np.count_nonzero(np.isin(old_cells, cell), axis=1))) for cell in new_cells])
 
 
 def _grown(mask, cells, rings):

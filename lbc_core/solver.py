@@ -163,6 +163,13 @@ class SolverState:
         return SolverState(np.concatenate([v_x.ravel(), v_w.ravel()]), thresholds, sqrt_cell, sqrt_mass,
                            self.interior, sub.penalty)
 
+    def for_cells(self, source):
+        """This state on another list of cells, cell i taking cell ``source[i]``'s part (a warm start's guess where
+        a re-bind replaced cells)."""
+        v_x, v_w = self._parts()
+        return SolverState(np.concatenate([v_x[:, source].ravel(), v_w.ravel()]), self.thresholds[source],
+                           self.sqrt_cell[source], self.sqrt_mass, self.interior, self.penalty)
+
     def _parts(self):
         """Views of the state as v_X (d, F, n) and v_W (N_in, n)."""
         F, n = self.thresholds.shape

@@ -11,7 +11,8 @@ from lbc_core.boundary import boundary_weights
 from lbc_core.frame import UnitFrame
 from lbc_core.geodesics import geodesic_distances, tv_weights
 from lbc_core.io import read_cage, read_mesh
-from lbc_core.rebinding import _squashed, carry_domain, rebind
+from lbc_core.geometry import orient_positive, signed_measures
+from lbc_core.rebinding import _flipped_slivers, _squashed, carry_domain, rebind
 from lbc_core.solver import solve_on_mesh
 
 DATA = Path(__file__).parent / "data"
@@ -168,6 +169,47 @@ def test_an_edit_that_squashes_a_cell_rebinds_warm_once_its_free_corners_are_pol
     assert_guarantees(warm, points)
     polished = np.linalg.norm(warm.domain.vertices - first.domain_weights @ warm.cage.vertices, axis=1)
     assert np.any(polished > 1e-9 * warm.cage.bbox_diagonal)
+    cold, frame = cold_on_carried_mesh(first, edited, faces)
+    assert abs(warm.objective / (cold.objective * frame.scale ** 2) - 1) < 1e-3
+
+
+def test_a_sliver_on_the_cage_turned_inside_out_is_mended_by_a_3_2_flip():
+    """A sliver with every corner on the cage between two cells of one apex p, the three all around its inner edge
+    a-b: an edit raising a-b above the cage edge e1-e2 turns the sliver inside out, and the three cells become the two
+    across e1-e2-p, positively oriented; with a fourth cell around a-b there is no 3-2 flip."""
+    e1, e2, a, b, p, q = range(6)
+    rest = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, -0.1], [0.5, -1, -0.1], [0.5, 0, 1], [0.5, 0, -1]], dtype=float)
+    cells = orient_positive(rest, np.array([[e1, e2, a, b], [e2, a, b, p], [e1, a, b, p]]))
+    edited = rest + [[0, 0, 0], [0, 0, 0], [0, 0, 0.2], [0, 0, 0.2], [0, 0, 0], [0, 0, 0]]
+    folded = signed_measures(edited, cells) <= 0
+    assert folded.tolist() == [True, False, False]
+    mended = _flipped_slivers(edited, cells, np.array([e1, e2, a, b]), folded)
+    assert sorted(map(sorted, mended.tolist())) == [[e1, e2, a, p], [e1, e2, b, p]]
+    assert np.all(signed_measures(edited, mended) > 0)
+    crowded = np.concatenate([cells, [[a, b, q, e1]]])
+    assert np.array_equal(_flipped_slivers(edited, crowded, np.array([e1, e2, a, b]), np.r_[folded, False]), crowded)
+
+
+def test_an_edit_that_turns_a_sliver_on_the_cage_inside_out_rebinds_warm():
+    """A colleague's edit in Blender (cage L09, vertex 56 moved outward by 2 % of the diagonal) bound from scratch:
+    it turns inside out a sliver on the cage. Mended by a 3-2 flip, the re-bind stays warm, meets every guarantee and
+    reaches the optimum of a cold solve on the same cells."""
+    cage, faces = read_cage(GARGOYLE / "cage_L09.obj")
+    points, _ = read_mesh(GARGOYLE / "mesh.off")
+    first = lbc_core.bind(cage, faces, points)
+    corners = cage[np.array(faces)]
+    normals = np.zeros_like(cage)
+    for k in range(3):
+        np.add.at(normals, np.array(faces)[:, k], np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+    edited = cage.copy()
+    edited[56] += 0.02 * np.linalg.norm(np.ptp(cage, axis=0)) * normals[56] / np.linalg.norm(normals[56])
+    edited_cage = lbc_core.make_cage(edited, faces)
+    carried_to = first.domain_weights @ UnitFrame.of(edited_cage).cage_to_unit(edited_cage).vertices
+    assert np.any(signed_measures(carried_to, first.domain.cells) <= 0)  # the edit folds the carried mesh
+    warm = rebind(first, edited, faces)
+    assert warm.options["start"] == "previous solution"
+    assert len(warm.domain.cells) == len(first.domain.cells) - 1
+    assert_guarantees(warm, points)
     cold, frame = cold_on_carried_mesh(first, edited, faces)
     assert abs(warm.objective / (cold.objective * frame.scale ** 2) - 1) < 1e-3
 
