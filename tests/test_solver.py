@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import lbc_core
-from lbc_core.solver import solve_on_mesh
+from lbc_core.solver import SolverState, solve_on_mesh
 
 DATA = Path(__file__).parent / "data"
 PACKS = ["LBClogo", "woody", "cactus", "Gil_Gecko"]
@@ -338,3 +338,29 @@ def test_the_iteration_limit_is_kept(limit):
     extrapolation could run a period past the limit."""
     result = solve_pack(load_pack("LBClogo"), max_iterations=limit)
     assert result.iterations == limit and not result.converged
+
+
+def test_a_state_follows_its_cells_restricted_updated_and_replaced():
+    """SolverState's parts per cell (v_X, thresholds, √|c|) follow the cells they are taken for; the parts per interior
+    vertex follow the vertices: a sub-problem's state written back lands where it came from, and a state for another
+    list of cells takes each one's part from its source cell."""
+    d, cells, n, interior = 3, 4, 2, np.array([5, 7, 9])
+    v_x = np.arange(d * cells * n, dtype=float).reshape(d, cells, n)
+    v_w = 100.0 + np.arange(len(interior) * n, dtype=float).reshape(-1, n)
+    state = SolverState(np.concatenate([v_x.ravel(), v_w.ravel()]), np.arange(cells * n, dtype=float).reshape(cells, n),
+                        np.arange(cells, dtype=float)[:, None], np.arange(3, dtype=float)[:, None], interior, 2.0)
+    chosen = np.array([False, True, False, True])
+    sub = state.restricted(chosen, np.array([7, 9]))
+    sub_x, sub_w = sub._parts()
+    np.testing.assert_array_equal(sub_x, v_x[:, chosen])
+    np.testing.assert_array_equal(sub_w, v_w[1:])
+    back = state.updated(SolverState(sub.state + 0.5, sub.thresholds, sub.sqrt_cell, sub.sqrt_mass, sub.interior), chosen)
+    back_x, back_w = back._parts()
+    np.testing.assert_array_equal(back_x[:, chosen], v_x[:, chosen] + 0.5)
+    np.testing.assert_array_equal(back_x[:, ~chosen], v_x[:, ~chosen])
+    np.testing.assert_array_equal(back_w, np.r_[v_w[:1], v_w[1:] + 0.5])
+    source = np.array([3, 3, 0])  # three cells where there were four: the first two from cell 3
+    moved_x, moved_w = state.for_cells(source)._parts()
+    np.testing.assert_array_equal(moved_x, v_x[:, source])
+    np.testing.assert_array_equal(moved_w, v_w)
+    np.testing.assert_array_equal(state.for_cells(source).thresholds, state.thresholds[source])
