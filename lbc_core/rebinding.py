@@ -35,7 +35,7 @@ from .geodesics import tv_weights as make_tv_weights
 from .geometry import bary_positions, orient_positive, radius_ratios, signed_measures, triangle_normals, unit
 from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
-from .meshing.common import rows_in
+from .meshing.common import row_keys
 from .meshing.tetrahedra import polish
 from .objective import tv_objective
 from .options import WEIGHTINGS, BindOptions
@@ -191,16 +191,15 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
     # a flip made (see _flipped_slivers), must be solved again.
     carried_to = previous.domain_weights @ unit_cage.vertices
     free |= np.linalg.norm(carried.vertices - carried_to, axis=1) > REPRODUCTION_TOLERANCE
-    source = _cell_sources(previous.domain.cells, carried.cells)
-    free[carried.cells[source < 0].ravel()] = True
+    state = previous.solver_state
+    if len(carried.cells) != len(previous.domain.cells):  # flips replaced cells: the state follows the cells
+        source, new = _cell_sources(previous.domain.cells, carried.cells)
+        free[carried.cells[new].ravel()] = True
+        state = state.for_cells(source)
     free = _grown(free, carried.cells, FREE_RINGS)
     free[carried.boundary_vertices] = False
     cells = np.any(free[carried.cells], axis=1)
     fixed = np.flatnonzero(~free)
-    state = previous.solver_state
-    if (source < 0).any():  # a new cell starts from the state of an old cell around it
-        source[source < 0] = _nearest_cells(previous.domain.cells, carried.cells[source < 0])
-        state = state.for_cells(source)
     if not free.any():  # nothing moved, or only where no coordinate reaches the interior
         result = SolveResult(previous.domain_weights, 0, True, float("nan"), tv_weights)
         return result, tv_objective(carried.vertices, carried.cells, result.weights, tv_weights), state, 0, free
@@ -276,12 +275,14 @@ def carry_domain(previous, unit_cage):
     if folded.any():
         return None, _near(previous, cells[folded],
                            "the edit would turn inside out some of the cells the last bind filled the cage with")
-    kept = rows_in(np.sort(cells, axis=1), np.sort(old.cells, axis=1))  # the cells no flip replaced
+    # Each flip trades three cells for two, put last: the cells before them are old ones, with an old shape to keep.
+    kept = np.arange(len(cells)) < len(cells) - 2 * (len(old.cells) - len(cells))
+    kept_mesh = replace(old, cells=cells[kept])
     squashed = np.zeros(len(cells), dtype=bool)
-    squashed[kept] = _squashed(replace(old, cells=cells[kept]), vertices)
+    squashed[kept] = _squashed(kept_mesh, vertices)
     if squashed.any() and vertices.shape[1] == 3:
         vertices = _polished(replace(old, cells=cells), vertices, squashed)  # every cell kept positive
-        squashed[kept] = _squashed(replace(old, cells=cells[kept]), vertices)
+        squashed[kept] = _squashed(kept_mesh, vertices)
     if squashed.any():
         return None, _near(previous, cells[squashed],
                            "the edit would squash some of the cells the last bind filled the cage with, to less "
@@ -348,15 +349,23 @@ def _flipped_slivers(vertices, cells, boundary_vertices, folded):
 
 
 def _cell_sources(old_cells, new_cells):
-    """(F_new,) int array: the index of each new cell among the old ones, -1 for a cell no old one matches."""
-    order = np.sort(old_cells, axis=1)
-    keys = {tuple(row): i for i, row in enumerate(order.tolist())}
-    return np.array([keys.get(tuple(row), -1) for row in np.sort(new_cells, axis=1).tolist()], dtype=np.int64)
+    """Where each of ``new_cells`` (F_new, k) takes its warm state from among ``old_cells`` (F, k).
 
-
-def _nearest_cells(old_cells, new_cells):
-    """(K,) int array: for each new cell, an old cell with the most corners in common."""
-    return np.array([int(np.argmax(np.count_nonzero(np.isin(old_cells, cell), axis=1))) for cell in new_cells])
+    Returns
+    -------
+    source : (F_new,) int array
+        The old cell with the same corners, or for a cell no old one matches, an old cell with the most corners in
+        common.
+    new : (F_new,) bool array
+        The cells no old one matches.
+    """
+    base = int(max(old_cells.max(), new_cells.max())) + 1
+    old_keys, new_keys = (row_keys(np.sort(c, axis=1), base) for c in (old_cells, new_cells))
+    order = np.argsort(old_keys)
+    at = order[np.minimum(np.searchsorted(old_keys, new_keys, sorter=order), len(order) - 1)]
+    new = old_keys[at] != new_keys
+    at[new] = [np.argmax(np.count_nonzero(np.isin(old_cells, cell), axis=1)) for cell in new_cells[new]]
+    return at, new
 
 
 def _grown(mask, cells, rings):

@@ -64,6 +64,15 @@ def cell_edges(cells):
     return np.unique(np.sort(edges, axis=1), axis=0)
 
 
+def row_keys(rows, base):
+    """One number per row of a non-negative int array (..., k) whose entries are below ``base``: the row read as a
+    base-``base`` number, so equal rows get equal numbers (exact below 2^63). Returns a (...) int64 array."""
+    key = rows[..., 0].astype(np.int64)
+    for k in range(1, rows.shape[-1]):
+        key = key * base + rows[..., k]
+    return key
+
+
 def rows_in(rows, table):
     """Whether each row of ``rows`` occurs in ``table`` (non-negative int arrays with the same number of columns).
 
@@ -73,15 +82,8 @@ def rows_in(rows, table):
     """
     if len(table) == 0 or len(rows) == 0:
         return np.zeros(len(rows), dtype=bool)
-    base = int(max(rows.max(), table.max())) + 1  # rows become base-`base` numbers: exact below 2^63
-
-    def keys(a):
-        key = a[:, 0].astype(np.int64)
-        for k in range(1, a.shape[1]):
-            key = key * base + a[:, k]
-        return key
-
-    return np.isin(keys(rows), keys(table))
+    base = int(max(rows.max(), table.max())) + 1
+    return np.isin(row_keys(rows, base), row_keys(table, base))
 
 
 def on_common(incidence, rows):

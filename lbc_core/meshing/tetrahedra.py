@@ -30,7 +30,7 @@ from scipy.spatial import Delaunay, cKDTree
 from ..errors import CageError
 from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, signed_measures
 from ..geometry import signed_radius_ratios_by_coordinate, triangle_normals, unit, winding_numbers
-from .common import far_points, on_common, raw_mesh, rows_in
+from .common import far_points, on_common, raw_mesh, row_keys, rows_in
 from .surface import JITTER, OutOfBudget, Surface
 
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
@@ -360,8 +360,7 @@ def _flip_flat(vertices, tets, n_surface):
 
 def _face_keys(tets, n_vertices):
     """A number for each face of each tetrahedron (T, 4), face k opposite corner k; equal faces get equal numbers."""
-    faces = np.sort(np.stack([np.delete(tets, k, axis=1) for k in range(4)], axis=1), axis=2)
-    return (faces[..., 0] * n_vertices + faces[..., 1]) * n_vertices + faces[..., 2]
+    return row_keys(np.sort(np.stack([np.delete(tets, k, axis=1) for k in range(4)], axis=1), axis=2), n_vertices)
 
 
 def polish(vertices, tets, movable, side, rng, steps, poor_below=_POLISH_RATIO):
