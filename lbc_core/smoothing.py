@@ -61,9 +61,11 @@ class SmoothInterpolation:
         self.fade = fade_edges * edge
         self.tree = cKDTree(self.vertices)
         # The fade follows the P1 interpolation of the vertices' distances to the cage: exactly 0 on it, and found
-        # for N vertices instead of m points.
+        # for the corners of the points' cells (at most N) instead of m points.
+        corners = np.unique(self.located.indices)
         boundary = _FacetSearch(self.vertices, np.asarray(cells))
-        self.cage_distance = np.sqrt(boundary.closest(self.vertices, self.progress.check).squared)
+        self.cage_distance = np.zeros(len(self.vertices))
+        self.cage_distance[corners] = np.sqrt(boundary.closest(self.vertices[corners], self.progress.check).squared)
 
     def __getitem__(self, rows):
         """Rows ``rows`` (a slice) of the matrix, as CSR."""
