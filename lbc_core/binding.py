@@ -53,6 +53,10 @@ class Binding:
         The weighted total variation of ``domain_weights`` (NaN for baselines).
     solver_state : lbc_core.solver.SolverState or None
         The solver's final state, kept in memory (not saved) for a warm re-bind (:func:`lbc_core.rebind`).
+    stale : (N,) float array or None
+        Per domain vertex, how much its coordinates (the largest change of one) and position (in median cell edges)
+        have changed since the points near it were last evaluated (None: not at all); kept in memory for a warm
+        re-bind, which evaluates the points near a vertex again once this passes :data:`lbc_core.rebinding.STALE`.
     """
 
     cage: Cage
@@ -69,6 +73,7 @@ class Binding:
     converged: bool = True
     objective: float = float("nan")
     solver_state: object = field(default=None, repr=False)
+    stale: np.ndarray = field(default=None, repr=False)
 
     @property
     def outside_count(self):

@@ -135,7 +135,7 @@ def bind(
                        _options_record(request, len(domain.cells), threshold), timings)
 
 
-def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, options, timings):
+def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, options, timings, stale=None):
     """The :class:`Binding` of an LBC solve made in the unit ``frame``: the domain and objective in the cage's units.
 
     Parameters
@@ -151,6 +151,8 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, op
     outside : (m,) bool array
     points : (m, d) float array
     options, timings : dict
+    stale : (N,) float array, optional
+        :attr:`Binding.stale`.
     """
     return Binding(
         cage=cage,
@@ -167,6 +169,7 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, op
         converged=solution.converged,
         objective=solution.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
         solver_state=solution.state,
+        stale=stale,
     )
 
 

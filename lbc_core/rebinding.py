@@ -56,6 +56,11 @@ _STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 
 WARM, COLD = "previous solution", "harmonic"
 # Rings of mesh vertices around the moved control points' supports that are solved again: room for a support to grow.
 FREE_RINGS = 2
+# Points near domain vertices whose coordinates and position changed less than this (Binding.stale) since they were
+# evaluated keep their rows: those rows still meet every constraint exactly (the points that have weight on a moved
+# control point are always evaluated again), and they differ from evaluating again by at most about a fifth of this,
+# which is below the solver's own error at its tolerance (bench/RESULTS.md, "Points near small changes").
+STALE = 1e-2
 
 
 def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=None, cancel=None):
@@ -120,11 +125,14 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
                                                          progress.part(*_STAGES["solve"]))
     timings.update(result.seconds)
 
-    # Points whose evaluation can see no vertex that moved or was solved again keep their previous weights.
+    # Points whose evaluation can see no vertex that changed by STALE since they were evaluated keep their weights.
     old_vertices = frame.to_unit(previous.domain.vertices)
-    changed = free | (np.linalg.norm(carried.vertices - old_vertices, axis=1) > REPRODUCTION_TOLERANCE)
+    stale = _staleness(previous, carried, old_vertices, result.weights)
     unit_points = frame.to_unit(points)
-    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, changed, moved)
+    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, stale > STALE, moved)
+    stale[stale > STALE] = 0.0  # every point within reach of these is evaluated again
+    if len(again) == len(points):
+        stale[:] = 0.0
     clock = time.perf_counter()
     located, outside_again, _ = interpolation_matrix(carried.vertices, carried.cells, unit_points[again],
                                                      progress=progress.part(*_STAGES["interpolation"]))
@@ -152,7 +160,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     options = dict(previous.options, start=WARM, solved_again=counts,
                    rebind=f"bound again from the previous binding: {solved_again_text(counts)}")
     return lbc_binding(frame, cage, carried, replace(result, objective=objective, state=state), weights, outside,
-                       points, options, timings)
+                       points, options, timings, stale)
 
 
 def solved_again_text(counts):
@@ -212,6 +220,19 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
     objective = tv_objective(carried.vertices, carried.cells, result.weights, tv_weights)
     state = state if result.state is None else state.updated(result.state, cells)
     return result, objective, state, int(cells.sum()), free
+
+
+def _staleness(previous, carried, old_vertices, domain_weights):
+    """(N,) float array: :attr:`Binding.stale` of ``previous`` (0 where None) plus each domain vertex's change from
+    ``previous`` to the ``carried`` mesh (unit frame; ``old_vertices`` the previous vertices in it) with
+    ``domain_weights``: its largest coordinate change plus its move in median cell edges.
+
+    A sum of changes bounds the change since the points near a vertex were last evaluated, however many re-binds
+    kept their rows.
+    """
+    change = np.abs(domain_weights - previous.domain_weights).max(axis=1)
+    change += np.linalg.norm(carried.vertices - old_vertices, axis=1) / median_edge(carried.vertices, carried.cells)
+    return change if previous.stale is None else previous.stale + change
 
 
 def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, changed, moved):

@@ -12,7 +12,8 @@ from lbc_core.frame import UnitFrame
 from lbc_core.geodesics import geodesic_distances, tv_weights
 from lbc_core.io import read_cage, read_mesh
 from lbc_core.geometry import orient_positive, signed_measures
-from lbc_core.rebinding import _flipped_slivers, _squashed, carry_domain, rebind
+from lbc_core.rebinding import STALE, _flipped_slivers, _squashed, carry_domain, rebind
+from lbc_core.smoothing import median_edge
 from lbc_core.solver import solve_on_mesh
 
 DATA = Path(__file__).parent / "data"
@@ -114,11 +115,32 @@ def test_points_out_of_reach_of_the_edit_keep_their_weights_and_the_rest_match_a
     assert warm.options["rebind"].endswith(f"{evaluated} of {len(points)} points evaluated")
     kept = np.flatnonzero(np.asarray(abs(warm.weights - first.weights).sum(axis=1)).ravel() == 0)
     assert len(kept) >= len(points) - evaluated
+    assert_guarantees(warm, points)
     # One point more: every point is evaluated again on the same solve.
     extra = np.r_[points, points[:1]]
     full = rebind(first, edited, faces, points=extra)
     np.testing.assert_array_equal(full.domain_weights, warm.domain_weights)
-    assert abs(full.weights[:len(points)] - warm.weights).max() < 1e-9
+    difference = np.asarray(abs(full.weights[:len(points)] - warm.weights).max(axis=1).todense()).ravel()
+    assert difference[np.setdiff1d(np.arange(len(points)), kept)].max() < 1e-9
+    # The rows kept near vertices that changed by less than STALE are within a fifth of it of their evaluation.
+    assert 0 < difference[kept].max() <= STALE / 5
+    assert np.all(full.stale == 0) and warm.stale.max() <= STALE
+
+
+def test_staleness_adds_up_over_warm_rebinds_until_the_points_are_evaluated_again(gargoyle_l10):
+    cage, faces, points, first = gargoyle_l10
+    assert first.stale is None
+    once = rebind(first, moved(cage, [4], 0.003), faces)
+    twice = rebind(once, moved(cage, [4], 0.006), faces)
+    frame = UnitFrame.of(twice.cage)
+    old, new = (frame.to_unit(binding.domain.vertices) for binding in (once, twice))
+    change = (np.abs(twice.domain_weights - once.domain_weights).max(axis=1)
+              + np.linalg.norm(new - old, axis=1) / median_edge(new, twice.domain.cells))
+    total = once.stale + change
+    over = total > STALE
+    assert np.all(twice.stale[over] == 0)  # the points near them were evaluated again
+    np.testing.assert_allclose(twice.stale[~over], total[~over], atol=1e-12)
+    assert np.any(over & (once.stale > 0) & (change < STALE))  # over only with the first edit's change counted
 
 
 def test_a_second_warm_rebind_starts_from_the_first(gargoyle):
