@@ -72,6 +72,14 @@ def topology_fingerprint(mesh):
     return _fingerprint(len(mesh.vertices), edge_pairs(mesh), _face_sizes(mesh))
 
 
+def shape_fingerprint(mesh):
+    """16 hex digits of a hash of a mesh's own vertex positions (its data, before modifiers), or "" for a mesh in
+    Edit Mode, whose data lags its edits: what tells that a cage was edited at rest since a bind."""
+    if mesh.is_editmode:
+        return ""
+    return hashlib.sha256(np.float32(vertex_positions(mesh)).tobytes()).hexdigest()[:16]
+
+
 def topology_fingerprints(mesh):
     """The mesh's :func:`topology_fingerprint` and the one the version before made (which hashed the faces' corners
     as well), for bindings stored by it: a set of two strings."""
@@ -343,6 +351,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         flat=flat,
         options=options,
         cage_topology=cage_topology,
+        cage_shape=shape_fingerprint(cage_obj.data),
         mesh_topology=topology_fingerprint(mesh_obj.data),
         warnings=[warning for warning in (render_warning(mesh_obj, cage_obj), mirror_warning(mesh_obj),
                                           cage_pose_warning(cage_obj, depsgraph)) if warning],

@@ -70,6 +70,7 @@ class BindRequest:
     options: dict  # the bind options by their Object.lbc property names (0: lbc_core's default)
     cage_topology: str
     mesh_topology: str
+    cage_shape: str = ""  # geometry.shape_fingerprint of the cage's own data: an edit at rest since changes it
     warnings: list = field(default_factory=list)  # what the snapshot noticed (a cage with other vertices in renders)
     cage_modifiers: str = ""  # the cage's modifiers that can change its vertices, e.g. "modifier 'Mirror'"
     cage_modifiers_off: str = ""  # those of them off in viewports (the bind, as the deformer, sees the cage without)

@@ -23,6 +23,10 @@ def draw_binding(layout, obj):
         box.operator("object.lbc_bind", icon="MOD_MESHDEFORM")
     elif not ok:
         box.operator("object.lbc_rebind", icon="FILE_REFRESH")
+    elif edited_since_bind(settings):
+        box.label(text="The cage was edited since the bind,", icon="INFO")
+        box.label(text="and the mesh follows the edit: Rebind to make it the rest shape")
+        box.operator("object.lbc_rebind", icon="FILE_REFRESH")
     draw_modifier_inputs(layout, obj)
     column = layout.column(align=True)
     column.label(text=f"Cage: {settings.cage.name if settings.cage else '(deleted)'}", icon="MESH_CUBE")
@@ -39,6 +43,17 @@ def draw_binding(layout, obj):
     row.operator("object.lbc_unbind", icon="X")
     layout.operator("object.lbc_save_shape_key", icon="SHAPEKEY_DATA")
     draw_influence(layout, obj)
+
+
+def edited_since_bind(settings):
+    """Whether the cage's own vertex positions changed since the bind (``settings``: a bound mesh's ``Object.lbc``):
+    an edit at rest, which the mesh follows as a pose until a Rebind makes it the rest (posing with bones, shape keys
+    or the object's transform leaves them as they were)."""
+    cage = settings.cage
+    if cage is None or cage.type != "MESH" or not settings.cage_shape:  # bound before the shape was recorded
+        return False
+    shape = geometry.shape_fingerprint(cage.data)
+    return bool(shape) and shape != settings.cage_shape
 
 
 def draw_modifier_inputs(layout, obj):
@@ -87,6 +102,9 @@ def draw(layout, context):
         layout.label(text=f"Cage of {len(meshes)} mesh(es):", icon="MOD_MESHDEFORM")
         for mesh_obj in meshes:
             layout.label(text=f"{mesh_obj.name}: {mesh_obj.lbc.status}")
+        if any(edited_since_bind(mesh_obj.lbc) for mesh_obj in meshes):
+            layout.label(text="Edited since the bind: the meshes follow the edit.", icon="INFO")
+            layout.label(text="Rebind All makes it their rest shape")
         layout.operator("object.lbc_rebind_all", icon="FILE_REFRESH")
         if obj.mode == "EDIT":
             layout.label(text="Select a cage vertex, then:")

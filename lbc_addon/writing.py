@@ -66,6 +66,7 @@ def _store_settings(settings, request, result, cage_obj, group):
     settings.cage_vertex_count = len(request.cage_points)
     settings.mesh_vertex_count = len(request.points)
     settings.cage_topology = request.cage_topology
+    settings.cage_shape = request.cage_shape
     settings.core_fingerprint = result.core_fingerprint
     settings.welded = result.welded
     settings.control_points = result.control_points

@@ -92,6 +92,27 @@ def test_cage_lists_its_meshes_and_a_selection_offers_bind(bound_gargoyle):
     assert layout.operators() == ["object.lbc_bind"]
 
 
+def test_a_cage_edited_at_rest_says_a_rebind_makes_the_edit_the_rest(bound_gargoyle):
+    mesh, cage = bound_gargoyle
+    hint, cage_hint = "Rebind to make it the rest shape", "Rebind All makes it their rest shape"
+    assert hint not in _draw(mesh, [mesh]).labels() and cage_hint not in _draw(cage, [cage]).labels()
+    cage.location.x += 0.2  # a pose, not an edit at rest
+    cage.rotation_euler.z += 0.3
+    assert hint not in _draw(mesh, [mesh]).labels()
+    cage.data.vertices[5].co.z += 0.01  # an edit of the cage's own vertices
+    cage.data.update()
+    layout = _draw(mesh, [mesh])
+    assert "The cage was edited since the bind," in layout.labels() and hint in layout.labels()
+    assert layout.operators().count("object.lbc_rebind") == 2  # in the state's box as well as below
+    assert cage_hint in _draw(cage, [cage]).labels()
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
+    assert hint not in _draw(mesh, [mesh]).labels() and cage_hint not in _draw(cage, [cage]).labels()
+    mesh.lbc.cage_shape = ""  # bound by a version that did not record the shape: no hint either way
+    cage.data.vertices[5].co.z -= 0.01
+    assert hint not in _draw(mesh, [mesh]).labels()
+
+
 def test_a_mesh_carrying_weights_of_no_binding_offers_to_remove_them():
     mesh, _ = sphere_in_box_scene()
     carrier = bpy.data.objects.new("Carrier", mesh.data.copy())
