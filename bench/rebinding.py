@@ -1,6 +1,6 @@
 """Warm re-bind (issue 12, item 5) against a cold bind of the same edited cage, side by side in one process.
 
-    .venv/bin/python bench/rebinding.py [--skip-64k] [--addon [--cage L10]]
+    .venv/bin/python bench/rebinding.py [--skip-64k] [--addon [--cage L10] [--vertex V ...]]
 
 For each scene: bind the gargoyle to its cage, move 1, 3 or 5 cage vertices (seeded random directions) by 1-10 % of
 the cage's diagonal, then bind the edited cage cold (lbc_core.bind) and warm (lbc_core.rebind from the first
@@ -13,7 +13,8 @@ same comparison between two cold binds at 8000 and 9000 cells: what remeshing al
          slots; no bpy): a cold bind of the edited cage against the warm re-bind, which thins again only the rows the
          re-bind changed, and the same warm re-bind thinning every row (the path before); CPU seconds of every
          thread (wall seconds in brackets), the best of two interleaved runs; the warm re-bind's stages in wall
-         seconds. ``--cage`` names the gargoyle cage (L08 to L16; default L10, the demo's).
+         seconds. ``--cage`` names the gargoyle cage (L08 to L16; default L10, the demo's); ``--vertex V`` adds an
+         edit moving cage vertex V outward from the centroid by 2 % (37, L10's top, grows the cage's extent).
 """
 
 import argparse
@@ -57,6 +58,15 @@ def edited(cage, faces, count, share, seed=1):
                 continue
             moved = trial
             break
+    return moved
+
+
+def outward(cage, vertex, share):
+    """``cage`` with ``vertex`` moved away from the cage's centroid by ``share`` of its diagonal (an artist's edit of
+    one vertex; an extreme vertex moved so changes the cage's extent)."""
+    moved = cage.copy()
+    direction = cage[vertex] - cage.mean(axis=0)
+    moved[vertex] += share * np.linalg.norm(np.ptp(cage, axis=0)) * direction / np.linalg.norm(direction)
     return moved
 
 
@@ -169,7 +179,7 @@ def addon_scene(cage, faces, points, edits, level="L10"):
           "warm stages (s) | the same slots |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for count, share in edits:
-        target = request(edited(cage, faces, count, share))
+        target = request(edited(cage, faces, count, share) if count > 0 else outward(cage, -count, share))
         counts = []
 
         def counted(*arguments, **keywords):
@@ -203,7 +213,8 @@ def addon_scene(cage, faces, points, edits, level="L10"):
                                                                                                     "before"))
         same = (f"indices equal, weights within {np.abs(warm.weight - before.weight).max():.1e}"
                 if np.array_equal(warm.index, before.index) else "indices differ")
-        print(f"| {count} × {share:.0%} | {cold:.2f} ({cold_wall:.2f}) | {fast:.2f} ({fast_wall:.2f}) | "
+        label = f"{count} × {share:.0%}" if count > 0 else f"vertex {-count} outward by {share:.0%}"
+        print(f"| {label} | {cold:.2f} ({cold_wall:.2f}) | {fast:.2f} ({fast_wall:.2f}) | "
               f"{cold / fast:.1f}× ({cold_wall / fast_wall:.1f}×) | {slow:.2f} ({slow_wall:.2f}) | {cold / slow:.1f}× "
               f"({cold_wall / slow_wall:.1f}×) "
               f"| {counts[0]} of {len(points)} | " + ", ".join(f"{k} {v:.2f}" for k, v in warm.stages.items())
@@ -216,10 +227,13 @@ def main(argv=None):
     parser.add_argument("--skip-64k", action="store_true")
     parser.add_argument("--addon", action="store_true")
     parser.add_argument("--cage", default="L10", help="--addon: the gargoyle's cage, L08 to L16")
+    parser.add_argument("--vertex", type=int, action="append", default=[],
+                        help="--addon: also move this cage vertex outward from the centroid by 2 %% (repeatable)")
     arguments = parser.parse_args(argv)
     if arguments.addon:
         cage, faces = read_cage(GARGOYLE / f"cage_{arguments.cage}.obj")
-        addon_scene(cage, [list(face) for face in faces], gargoyle_64k(), [(1, 0.02), (3, 0.01)], arguments.cage)
+        edits = [(1, 0.02), (3, 0.01)] + [(-vertex, 0.02) for vertex in arguments.vertex]
+        addon_scene(cage, [list(face) for face in faces], gargoyle_64k(), edits, arguments.cage)
         return
     points, _ = read_mesh(GARGOYLE / "mesh.off")
     for level in ("L10", "L09"):

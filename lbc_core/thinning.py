@@ -24,6 +24,9 @@ from .progress import Progress
 # Default floor: the largest that keeps issue 12's capsule no more creased than Mesh Deform (bench/RESULTS.md).
 DEFAULT_FLOOR = 0.005
 
+# The tilt's tolerance: rows sum to 1 within it and reproduce their point within it times the controls' extent.
+TOLERANCE = 1e-9
+
 # Rows thinned by one thread at a time (about 0.05 s each); cancel is polled between rounds of one chunk per thread.
 ROWS_PER_CHUNK = 8192
 
@@ -85,10 +88,11 @@ def thin_changed_rows(thinned, before, weights, controls_before, controls, floor
     """:func:`thin_weights` of ``weights`` when ``thinned`` is that of ``before``: only the rows that can differ are
     thinned again (a warm re-bind keeps the rows its edit cannot reach).
 
-    A row is thinned again when its weights differ from ``before``'s or it has weight on a control point that moved;
-    every row is when the controls' extent changed (it scales every row's floor and tolerance). Each row's thinning
-    depends on that row alone, so the result is :func:`thin_weights`'s (to rounding: a chunk pads its rows to its
-    longest).
+    A row is thinned again when its weights differ from ``before``'s or it has weight on a control point that moved,
+    or, when the controls' extent changed (it scales the tilt's tolerance, not the floor), when its thinned row no
+    longer reproduces its point within :data:`TOLERANCE` of the new extent. Each row's thinning depends on that row
+    alone, so the result is :func:`thin_weights`'s (to rounding: a chunk pads its rows to its longest; where the
+    extent changed, to the tilt's convergence in the rows kept).
 
     Parameters
     ----------
@@ -109,14 +113,17 @@ def thin_changed_rows(thinned, before, weights, controls_before, controls, floor
     """
     weights, before = sp.csr_matrix(weights, dtype=float), sp.csr_matrix(before, dtype=float)
     controls, controls_before = np.asarray(controls, dtype=float), np.asarray(controls_before, dtype=float)
-    if (before.shape != weights.shape or controls_before.shape != controls.shape
-            or controls_extent(controls_before) != controls_extent(controls)):
+    if before.shape != weights.shape or controls_before.shape != controls.shape:
         return (thin_weights(weights, controls, weights @ controls, floor, max_influences, progress, cancel),
                 weights.shape[0])
     difference = weights - before
     difference.eliminate_zeros()
     moved = np.flatnonzero(np.any(controls != controls_before, axis=1))
     changed = (np.diff(difference.indptr) > 0) | (weights[:, moved].getnnz(axis=1) > 0)
+    extent = controls_extent(controls)
+    if extent != controls_extent(controls_before):
+        off = np.linalg.norm(sp.csr_matrix(thinned) @ controls - weights @ controls, axis=1)
+        changed |= off > TOLERANCE * extent
     again = np.flatnonzero(changed)
     if not len(again):
         return sp.csr_matrix(thinned), 0
@@ -271,5 +278,5 @@ def tilt(prior, controls, positions, extent, iterations=40):
     weights = tilted(prior, affine, multipliers)
     unity = np.abs(weights.sum(axis=1) - 1.0)
     reproduction = np.linalg.norm(np.einsum("mk,mkd->md", weights, controls) - positions, axis=1)
-    done = (total[:, 0] > 0) & (unity <= 1e-9) & (reproduction <= 1e-9 * extent)
+    done = (total[:, 0] > 0) & (unity <= TOLERANCE) & (reproduction <= TOLERANCE * extent)
     return weights, done

@@ -184,13 +184,24 @@ def test_thinning_the_changed_rows_only_gives_what_thinning_every_row_gives(monk
     assert (again[:3] != thinned[:3]).nnz == 0  # the other rows are the previous ones, untouched
 
 
-def test_thinning_the_changed_rows_thins_every_row_when_the_extent_changes():
+def test_thinning_the_changed_rows_keeps_the_rows_an_extent_change_leaves_within_tolerance():
     from lbc_core.thinning import thin_changed_rows
 
-    controls, weights, positions = random_weights(5, 20)
+    controls, weights, _ = random_weights(5, 20)
+    weights[10:, 0] = 0.0  # rows 10-19 have no weight on corner 0, the origin
+    weights /= weights.sum(axis=1, keepdims=True)
     before = sp.csr_matrix(weights)
-    grown = controls.copy()
-    grown[0] -= 0.1  # a cube corner: the extent grows, and with it every row's floor and tolerance
-    thinned, count = thin_changed_rows(thin_weights(before, controls, positions), before, before, controls, grown)
-    assert count == 20
-    assert abs(thinned - thin_weights(before, grown, before @ grown)).max() <= 1e-15
+    outward = controls.copy()
+    outward[0] -= 0.1  # the extent grows
+    for start, end in ((controls, outward), (outward, controls)):  # grows, then shrinks: it scales the tolerance
+        thinned = thin_weights(before, start, before @ start)
+        again, count = thin_changed_rows(thinned, before, before, start, end)
+        assert count == 10  # the rows with weight on corner 0
+        assert (again[10:] != thinned[10:]).nnz == 0
+        assert abs(again - thin_weights(before, end, before @ end)).max() <= 1e-12
+    # A kept row that no longer reproduces its point within the tolerance at the new extent is thinned again.
+    off = thin_weights(before, controls, before @ controls).tolil()
+    off[15, 3] += 1e-8
+    off[15, 4] -= 1e-8
+    _, count = thin_changed_rows(off.tocsr(), before, before, controls, outward)
+    assert count == 11
