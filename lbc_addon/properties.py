@@ -118,6 +118,8 @@ class LBC_PG_binding(BindOptionProperties, bpy.types.PropertyGroup):
     cage_vertex_count: IntProperty(name="Cage Vertices")
     mesh_vertex_count: IntProperty(name="Mesh Vertices", description="The mesh's vertex count at bind time")
     cage_topology: StringProperty(name="Cage Topology", description="Fingerprint of the cage's topology at bind time")
+    bind_report: StringProperty(name="Bind Report", description="How the last bind went when it started from a "
+                                "previous binding: what was solved again, or why it bound from scratch")
     cage_shape: StringProperty(name="Cage Shape", description="Fingerprint of the cage's own vertex positions (before "
                                "modifiers) at bind time: an edit at rest changes it, a pose does not")
     core_fingerprint: StringProperty(name="Core Fingerprint", description="lbc_core's fingerprint of the welded cage")

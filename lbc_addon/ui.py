@@ -36,6 +36,8 @@ def draw_binding(layout, obj):
     memory = storage.memory_bytes(len(obj.data.vertices), settings.slots)
     column.label(text=f"Cache in the .blend: {_format_bytes(memory)}")
     column.label(text=f"Bind time: {settings.bind_seconds:.1f} s")
+    if settings.bind_report:  # warm (what was solved again) or from scratch (why)
+        column.label(text=settings.bind_report[:1].upper() + settings.bind_report[1:])
     if settings.warnings:
         layout.label(text=settings.warnings, icon="INFO")
     row = layout.row(align=True)

@@ -108,8 +108,17 @@ def test_a_cage_edited_at_rest_says_a_rebind_makes_the_edit_the_rest(bound_gargo
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
     assert hint not in _draw(mesh, [mesh]).labels() and cage_hint not in _draw(cage, [cage]).labels()
+    # How a Rebind from a binding this session made went stays in the panel (warm, or from scratch and why).
+    assert mesh.lbc.bind_report == ""  # that one started from a binding read from the file: a first bind
+    cage.data.vertices[5].co.z += 0.002
+    cage.data.update()
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
+    report = mesh.lbc.bind_report
+    assert report.startswith(("bound again from the previous binding: ", "bound from scratch: "))
+    assert report[:1].upper() + report[1:] in _draw(mesh, [mesh]).labels()
     mesh.lbc.cage_shape = ""  # bound by a version that did not record the shape: no hint either way
-    cage.data.vertices[5].co.z -= 0.01
+    cage.data.vertices[5].co.z -= 0.012
     assert hint not in _draw(mesh, [mesh]).labels()
 
 
