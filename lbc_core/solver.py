@@ -389,6 +389,10 @@ def _state_entries(n_control_points, n_cells, dim):
 # cage's shape moves the iterations too (a UV sphere's 290 control points took 830), so this stays
 # rough; the solve itself then reports its time left from its own iterations.
 SECONDS_PER_STATE_ENTRY = 5.5e-9
+# The work at the points after the solve (their location, smooth evaluation and reduction, and in the add-on their
+# thinning), told with the solve's: about 10 µs a point on a 2-core x86_64 (64k gargoyle points 0.69 s, 48k Suzanne
+# points 0.61 s; bench/RESULTS.md, "The bind outside the solve"); a new user was told "roughly 2 s" for a 3.7 s bind.
+SECONDS_PER_POINT = 1e-5
 ITERATIONS_SCALE, ITERATIONS_POWER = 57, 0.28
 CELLS_POWER = 0.4
 # A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
@@ -404,7 +408,7 @@ THIN_FROM_ASPECT = 5
 BUSY_TOLD_FROM = 1.5
 
 
-def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0):
+def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0):
     """What a solve will take, told before it starts: its memory and roughly its time.
 
     Parameters
@@ -417,6 +421,8 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     busy : float
         How many times an idle machine's time the work takes now (:func:`parallel.busy_factor`): a new user's
         forecasts on a machine loaded 1.4-4 were half the time taken.
+    n_points : int
+        The points the bind evaluates after the solve (0: the solve alone is told).
 
     Returns
     -------
@@ -432,6 +438,9 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
             f"{_size(estimate_memory(n_control_points, n_cells, dim))} of memory for the solve and "
             f"{'' if seconds < 1 else 'roughly '}{_duration(seconds)}")
+    if n_points:
+        points_seconds = SECONDS_PER_POINT * n_points * busy
+        text += f", then {'' if points_seconds < 1 else 'about '}{_duration(points_seconds)} for the {n_points} points"
     if busy >= BUSY_TOLD_FROM:
         text += f" (the machine is busy: {busy:.1f} times the time it would take idle)"
     if seconds > 3600:
