@@ -1,4 +1,4 @@
-"""Issue 12, items 2 and 3: what a compiled per-cell pass would gain in the 3D solver's step (a measurement, not shipped).
+"""Issue 12, items 2 and 3: what a compiled per-cell pass gains in the 3D solver's step (measured, not shipped).
 
     pip install numba   # into any environment with lbc_core's requirements; the extension does not use it
     python bench/compiled_step.py [--cage L10] [--cells 8000] [--steps 20]
