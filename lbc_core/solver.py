@@ -389,12 +389,12 @@ def _state_entries(n_control_points, n_cells, dim):
 # cage's shape moves the iterations too (a UV sphere's 290 control points took 830), so this stays
 # rough; the solve itself then reports its time left from its own iterations.
 SECONDS_PER_STATE_ENTRY = 5.5e-9
+ITERATIONS_SCALE, ITERATIONS_POWER = 57, 0.28
+CELLS_POWER = 0.4
 # The work at the points after the solve (their location, smooth evaluation and reduction, and in the add-on their
 # thinning), told with the solve's: about 10 µs a point on a 2-core x86_64 (64k gargoyle points 0.69 s, 48k Suzanne
 # points 0.61 s; bench/RESULTS.md, "The bind outside the solve"); a new user was told "roughly 2 s" for a 3.7 s bind.
 SECONDS_PER_POINT = 1e-5
-ITERATIONS_SCALE, ITERATIONS_POWER = 57, 0.28
-CELLS_POWER = 0.4
 # A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
 # (bench/RESULTS.md, bench/thin_cages.py).
 STRETCHED_ITERATIONS, STRETCHED_STEP_COST = 2, 5
