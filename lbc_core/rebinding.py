@@ -157,8 +157,10 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     progress(1.0, "bound again from the previous solution")
     counts = {"cells solved": int(solved), "cells": len(carried.cells), "points evaluated": len(again),
               "points": len(points)}
+    done = (solved_again_text(counts) if moved.any() or len(again)
+            else "the cage has not moved since, so nothing was solved or evaluated again")
     options = dict(previous.options, start=WARM, solved_again=counts,
-                   rebind=f"bound again from the previous binding: {solved_again_text(counts)}")
+                   rebind=f"bound again from the previous binding: {done}")
     return lbc_binding(frame, cage, carried, replace(result, objective=objective, state=state), weights, outside,
                        points, options, timings, stale)
 
