@@ -127,10 +127,13 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
 
     # Points whose evaluation can see no vertex that changed by STALE since they were evaluated keep their weights.
     old_vertices = frame.to_unit(previous.domain.vertices)
-    stale = _staleness(previous, carried, old_vertices, result.weights)
+    # The median cell edge before and after the carry: the unit of a vertex's move, and of the evaluation's reach.
+    old_edge, edge = (median_edge(at, carried.cells) for at in (old_vertices, carried.vertices))
+    stale = _staleness(previous, carried, old_vertices, result.weights, edge)
+    changed = stale > STALE
     unit_points = frame.to_unit(points)
-    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, stale > STALE, moved)
-    stale[stale > STALE] = 0.0  # every point within reach of these is evaluated again
+    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, moved)
+    stale[changed] = 0.0  # every point within reach of these is evaluated again
     if len(again) == len(points):
         stale[:] = 0.0
     clock = time.perf_counter()
@@ -142,7 +145,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     clock = time.perf_counter()
     reduction = progress.part(*_STAGES["reduction"])
     # The previous evaluation's radius and fade, in this mesh's median edges: kept and new rows fit alike.
-    ratio = median_edge(old_vertices, carried.cells) / median_edge(carried.vertices, carried.cells)
+    ratio = old_edge / edge
     smooth = SmoothInterpolation(carried.vertices, carried.cells, located, radius_edges=RADIUS_EDGES * ratio,
                                  fade_edges=FADE_EDGES * ratio, progress=reduction)
     weights_again = interpolate_and_reduce(smooth, result.weights, unit_cage.vertices, carried.vertices,
@@ -224,24 +227,25 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
     return result, objective, state, int(cells.sum()), free
 
 
-def _staleness(previous, carried, old_vertices, domain_weights):
+def _staleness(previous, carried, old_vertices, domain_weights, edge):
     """(N,) float array: :attr:`Binding.stale` of ``previous`` (0 where None) plus each domain vertex's change from
     ``previous`` to the ``carried`` mesh (unit frame; ``old_vertices`` the previous vertices in it) with
-    ``domain_weights``: its largest coordinate change plus its move in median cell edges.
+    ``domain_weights``: its largest coordinate change plus its move in median cell edges (``edge``, the carried
+    mesh's).
 
     A sum of changes bounds the change since the points near a vertex were last evaluated, however many re-binds
     kept their rows.
     """
     change = np.abs(domain_weights - previous.domain_weights).max(axis=1)
-    change += np.linalg.norm(carried.vertices - old_vertices, axis=1) / median_edge(carried.vertices, carried.cells)
+    change += np.linalg.norm(carried.vertices - old_vertices, axis=1) / edge
     return change if previous.stale is None else previous.stale + change
 
 
-def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, changed, moved):
+def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, moved):
     """Indices of the points to evaluate again: all of them if the points changed, else those outside the cage (their
     closest domain point may have moved), with weight on a moved control point, or within reach of a changed vertex
-    (the fit's radius, or a cell's longest edge for the piecewise-linear part and the fade near the cage, both read
-    at the corners of the point's cell)."""
+    (the fit's radius, ``RADIUS_EDGES`` times the previous median edge ``old_edge``, or a cell's longest edge for the
+    piecewise-linear part and the fade near the cage, both read at the corners of the point's cell)."""
     if len(points) != len(previous.points) or not np.array_equal(points, previous.points):
         return np.arange(len(points))
     on_moved = np.asarray(previous.weights[:, np.flatnonzero(moved)].sum(axis=1)).ravel() > 0
@@ -252,7 +256,7 @@ def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, ch
     corners = old_vertices[carried.cells]
     longest = max(float(np.linalg.norm(corners[:, a] - corners[:, b], axis=1).max())
                   for a in range(corners.shape[1]) for b in range(a))
-    reach = max(RADIUS_EDGES * median_edge(old_vertices, carried.cells), longest)
+    reach = max(RADIUS_EDGES * old_edge, longest)
     distance, _ = cKDTree(old_vertices[changed]).query(unit_points, distance_upper_bound=reach)
     return np.flatnonzero(on_moved | np.isfinite(distance))
 
