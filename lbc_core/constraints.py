@@ -37,8 +37,8 @@ def project_onto_constraints(clamped, unclamped, controls, positions, check=None
     unity, reproduction = constraint_residuals(on_support, controls, positions)
     failed = (unity > 1e-12) | (reproduction > 1e-12) | (on_support < 0).any(axis=1)
     if failed.any():
-        grown = grow_support(sp.csr_matrix(np.maximum(unclamped[failed], 0.0)), controls, positions[failed],
-                             np.count_nonzero(clamped[failed] > 0, axis=1), tolerance=1e-12, check=check)
+        grown, _ = grow_support(sp.csr_matrix(np.maximum(unclamped[failed], 0.0)), controls, positions[failed],
+                                np.count_nonzero(clamped[failed] > 0, axis=1), tolerance=1e-12, check=check)
         on_support[failed] = grown.toarray()
     return on_support
 
@@ -162,7 +162,9 @@ def grow_support(full, controls, positions, keep, tolerance, check=None):
 
     Returns
     -------
-    (m, n) scipy.sparse.csr_matrix
+    reduced : (m, n) scipy.sparse.csr_matrix
+    met : (m,) bool array
+        Rows that meet the constraints; the others got as close as their whole support allows.
     """
     n = controls.shape[0]
     values, columns = padded_rows(full)
@@ -170,17 +172,19 @@ def grow_support(full, controls, positions, keep, tolerance, check=None):
     values = np.take_along_axis(values, order, axis=1)
     columns = np.take_along_axis(columns, order, axis=1)
     reduced = sp.csr_matrix(full.shape)
+    met = np.zeros(full.shape[0], dtype=bool)
     pending = np.arange(full.shape[0])
     extra = 1
     while len(pending):
         size = np.minimum(keep[pending] + extra, values.shape[1])
         slots = np.where(np.arange(values.shape[1]) < size[:, None], values[pending], 0.0)
         corrected, done = restore_and_check(slots, columns[pending], controls, positions[pending], tolerance, check)
+        met[pending[done]] = True
         done |= size >= values.shape[1]  # the full support: nothing more to add
         reduced = scatter_rows(reduced, pending[done], csr_from_padded(corrected[done], columns[pending][done], n))
         pending = pending[~done]
         extra *= 2
-    return reduced
+    return reduced, met
 
 
 def scatter_rows(matrix, rows, values):

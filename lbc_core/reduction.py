@@ -2,7 +2,8 @@
 
 Dropping small weights (the paper's reduction) breaks Σ w = 1 and Σ w c = x. Here each point's remaining weights get
 the least-norm correction that restores both on its support; weights the correction pushes below zero are removed
-and the correction repeated. Where a support is too small to reproduce the point, the point keeps its full support.
+and the correction repeated. Where a support is too small to reproduce the point, the point keeps its full support;
+where even that cannot (a smooth fit that overshoots, below), the point is reduced from its piecewise-linear row.
 """
 
 import numpy as np
@@ -27,7 +28,8 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     ----------
     located : (m, N) scipy.sparse.csr_matrix, or any object with ``shape`` whose row slices are one
         Interpolation from the domain's N vertices to the points (barycentric, or
-        :class:`lbc_core.smoothing.SmoothInterpolation`).
+        :class:`lbc_core.smoothing.SmoothInterpolation`, whose ``linear`` barycentric rows are the fallback of a
+        point its fit leaves with no non-negative weights that meet the constraints).
     domain_weights : (N, n) float array
         Coordinates at the domain's vertices.
     controls : (n, d) float array
@@ -49,12 +51,25 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     # A weight below threshold / 10 at every corner of a cell cannot reach the threshold inside it; drop those
     # entries (the solver's faint tails) before the product, keeping what a support may need to grow into.
     sparse_domain = sp.csr_matrix(np.where(domain_weights >= threshold / 10, domain_weights, 0.0))
+    linear = getattr(located, "linear", located)
     progress = Progress.of(progress, cancel)
 
     def reduce_chunk(rows):
         block = located[rows]  # once: a smooth interpolation computes its rows on demand
-        return _reduce_rows(block @ sparse_domain, controls, block @ domain_vertices, threshold, tolerance,
-                            progress.check)
+        positions = block @ domain_vertices
+        reduced, met = _reduce_rows(block @ sparse_domain, controls, positions, threshold, tolerance, progress.check)
+        if met.all():
+            return reduced
+        # A smooth fit from few, one-sided vertices (coarse cells beside a fine cage) can overshoot so far that no
+        # non-negative weights on its support meet the constraints; the barycentric row, a convex combination of the
+        # vertices' coordinates, always does.
+        failed = np.flatnonzero(~met)
+        fallback = linear[rows][failed]
+        again, _ = _reduce_rows(fallback @ sp.csr_matrix(domain_weights), controls, positions[failed], threshold,
+                                tolerance, progress.check)
+        kept = sp.diags(met.astype(float)) @ reduced
+        kept.eliminate_zeros()
+        return scatter_rows(kept, failed, again)
 
     return _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
 
@@ -70,7 +85,7 @@ def _by_chunks(m, n, reduce_chunk, progress):
 
 def _reduce_rows(full, controls, positions, threshold, tolerance, check):
     """The reduction of :func:`interpolate_and_reduce` on one chunk of rows; ``check`` is called between rounds of
-    corrections."""
+    corrections. Returns the (m, n) CSR rows and which of them meet the constraints ((m,) bool array)."""
     n = controls.shape[0]
     kept = full.copy()
     kept.data[kept.data < threshold] = 0.0
@@ -79,12 +94,10 @@ def _reduce_rows(full, controls, positions, threshold, tolerance, check):
     values, columns = padded_rows(kept)
     corrected, done = restore_and_check(values, columns, controls, positions, tolerance, check)
     if done.all():
-        return csr_from_padded(corrected, columns, n)
+        return csr_from_padded(corrected, columns, n), done
     reduced = scatter_rows(sp.csr_matrix(full.shape), np.flatnonzero(done),
                            csr_from_padded(corrected[done], columns[done], n))
     pending = np.flatnonzero(~done)
-    if len(pending):
-        kept_counts = np.diff(kept.indptr)[pending]
-        reduced = scatter_rows(reduced, pending, grow_support(full[pending], controls, positions[pending],
-                                                              kept_counts, tolerance, check))
-    return reduced
+    grown, done[pending] = grow_support(full[pending], controls, positions[pending], np.diff(kept.indptr)[pending],
+                                        tolerance, check)
+    return scatter_rows(reduced, pending, grown), done

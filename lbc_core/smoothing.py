@@ -67,6 +67,12 @@ class SmoothInterpolation:
         self.cage_distance = np.zeros(len(self.vertices))
         self.cage_distance[corners] = np.sqrt(boundary.closest(self.vertices[corners], self.progress.check).squared)
 
+    @property
+    def linear(self):
+        """(m, N) CSR: the points' P1 barycentric rows, which meet every constraint wherever the vertices' coordinates
+        do (the reduction's fallback where the fit overshoots)."""
+        return self.located
+
     def __getitem__(self, rows):
         """Rows ``rows`` (a slice) of the matrix, as CSR."""
         linear = self.located[rows]

@@ -53,6 +53,35 @@ def test_reduce_keeps_more_support_where_the_reduced_one_cannot_reproduce():
     assert values.min() >= 0 and abs(values.sum() - 1) < 1e-12
 
 
+class Overshooting:
+    """A stand-in for a smooth interpolation: its rows, which may overshoot, and the barycentric ``linear`` rows of
+    the same points."""
+
+    def __init__(self, rows, linear):
+        self.rows, self.linear, self.shape = sp.csr_matrix(rows), sp.csr_matrix(linear), rows.shape
+
+    def __getitem__(self, rows):
+        return self.rows[rows]
+
+
+def test_a_point_whose_smooth_row_cannot_meet_the_constraints_is_reduced_from_its_linear_row():
+    # Domain vertices at the square's corners, each holding its own control point's coordinate 1.
+    points = np.array([[0.25, 0.75], [0.5, 0.5]])
+    linear = bilinear_weights(points)
+    # Row 0 overshoots along the square's mode (1, -1, 1, -1), which sums to 0 and moves no point: it still sums to 1
+    # and reproduces (0.25, 0.75), but its positive weights (corners (0, 0) and (1, 1)) cannot reproduce a point off
+    # their diagonal. Row 1 is the barycentric one.
+    smooth = linear.copy()
+    smooth[0] += 1.5 * np.array([1.0, -1.0, 1.0, -1.0])
+    assert np.abs(smooth @ SQUARE - points).max() < 1e-12 and smooth[0].min() < -1
+    located = Overshooting(smooth, linear)
+    reduced = interpolate_and_reduce(located, np.eye(4), SQUARE, SQUARE, threshold=1e-3, tolerance=1e-12).toarray()
+    assert reduced.min() >= 0
+    assert np.abs(reduced.sum(axis=1) - 1).max() < 1e-12
+    assert np.abs(reduced @ SQUARE - points).max() < 1e-12
+    np.testing.assert_allclose(reduced, linear, atol=1e-12)  # row 0 from its barycentric row
+
+
 def test_reduce_reports_each_round_of_chunks_of_rows_and_stops_on_cancel(monkeypatch):
     import pytest
 
