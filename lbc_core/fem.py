@@ -8,6 +8,8 @@ component of the gradient on cell c, so a (d F, n) array reshapes to (F, d, n).
 import numpy as np
 import scipy.sparse as sp
 
+from .geometry import row_keys
+
 
 def cell_gradients(vertices, cells):
     """Gradients of the d+1 barycentric basis functions on every cell, and the cells' measures.
@@ -121,5 +123,7 @@ def boundary_facets(cells):
     corners = cells.shape[1]
     facets = np.concatenate([np.delete(cells, k, axis=1) for k in range(corners)])
     facets = np.sort(facets, axis=1)
-    unique, counts = np.unique(facets, axis=0, return_counts=True)
-    return unique[counts == 1]
+    # Each facet as one number: sorting those is several times faster than np.unique over rows, in the same order.
+    keys = row_keys(facets, int(cells.max()) + 1 if cells.size else 1)
+    _, first, counts = np.unique(keys, return_index=True, return_counts=True)
+    return facets[first[counts == 1]]

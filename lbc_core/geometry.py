@@ -8,6 +8,15 @@ caller's units.
 import numpy as np
 
 
+def row_keys(rows, base):
+    """One number per row of a non-negative int array (..., k) whose entries are below ``base``: the row read as a
+    base-``base`` number, so equal rows get equal numbers (exact below 2^63). Returns a (...) int64 array."""
+    key = rows[..., 0].astype(np.int64)
+    for k in range(1, rows.shape[-1]):
+        key = key * base + rows[..., k]
+    return key
+
+
 def cross2(u, v):
     """z component of the cross product of 2D vectors (..., 2): twice the signed area they span."""
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]

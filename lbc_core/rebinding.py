@@ -32,10 +32,10 @@ from .fem import boundary_facets
 from .frame import UnitFrame
 from .geodesics import geodesic_distances
 from .geodesics import tv_weights as make_tv_weights
-from .geometry import bary_positions, orient_positive, radius_ratios, signed_measures, triangle_normals, unit
+from .geometry import (bary_positions, orient_positive, radius_ratios, row_keys, signed_measures, triangle_normals,
+                       unit)
 from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
-from .meshing.common import row_keys
 from .meshing.tetrahedra import polish
 from .objective import tv_objective
 from .options import WEIGHTINGS, BindOptions

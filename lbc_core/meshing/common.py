@@ -5,7 +5,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import CageError
-from ..geometry import bary_positions, signed_measures
+from ..geometry import bary_positions, row_keys, signed_measures
 from . import DomainMesh
 
 
@@ -62,15 +62,6 @@ def cell_edges(cells):
     k = cells.shape[1]
     edges = np.concatenate([cells[:, [i, j]] for i in range(k) for j in range(i + 1, k)])
     return np.unique(np.sort(edges, axis=1), axis=0)
-
-
-def row_keys(rows, base):
-    """One number per row of a non-negative int array (..., k) whose entries are below ``base``: the row read as a
-    base-``base`` number, so equal rows get equal numbers (exact below 2^63). Returns a (...) int64 array."""
-    key = rows[..., 0].astype(np.int64)
-    for k in range(1, rows.shape[-1]):
-        key = key * base + rows[..., k]
-    return key
 
 
 def rows_in(rows, table):

@@ -28,9 +28,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import CageError
-from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, signed_measures
+from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, row_keys, signed_measures
 from ..geometry import signed_radius_ratios_by_coordinate, triangle_normals, unit, winding_numbers
-from .common import far_points, on_common, raw_mesh, row_keys, rows_in
+from .common import far_points, on_common, raw_mesh, rows_in
 from .surface import JITTER, OutOfBudget, Surface
 
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
