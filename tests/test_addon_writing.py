@@ -165,6 +165,32 @@ def test_binding_a_bound_mesh_replaces_its_binding_in_place():
     assert len(storage.binding_names(mesh.data)) == 2 * mesh.lbc.slots + 1
 
 
+def test_binding_again_with_the_same_counts_keeps_the_node_group_and_another_version_s_is_rebuilt():
+    mesh, cage = sphere_in_box_scene()
+    writing.apply(*_solved(mesh, cage))
+    group = mesh.lbc.node_group
+
+    def posed():
+        cage.data.vertices[5].co.z += 0.3
+        cage.data.update()
+        positions = evaluated_positions(mesh)
+        cage.data.vertices[5].co.z -= 0.3
+        cage.data.update()
+        return positions
+
+    deformed = posed()
+    writing.apply(*_solved(mesh, cage))  # bound again (Rebind): the same slots, the same counts
+    assert mesh.lbc.node_group == group and deformer.find_modifier(mesh).node_group == group
+    assert [g.name for g in bpy.data.node_groups] == [deformer.GROUP_NAME]
+    assert np.array_equal(posed(), deformed)
+
+    group[deformer.LAYOUT_KEY] = group[deformer.LAYOUT_KEY].replace(" slots", "-older slots")
+    writing.apply(*_solved(mesh, cage))  # a group another version of the add-on built is built again
+    assert mesh.lbc.node_group != group and deformer.find_modifier(mesh).node_group == mesh.lbc.node_group
+    assert [g.name for g in bpy.data.node_groups] == [deformer.GROUP_NAME]
+    assert np.array_equal(posed(), deformed)
+
+
 def _solved(mesh, cage, **options):
     request = _request(mesh, cage, **options)
     return request, jobs.solve(request)
