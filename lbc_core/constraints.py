@@ -10,13 +10,17 @@ slots. Rows travel as padded (m, K) arrays of values and column indices (:func:`
 import numpy as np
 import scipy.sparse as sp
 
+# The starting weight of the control points a vertex's support takes in when none of its candidates can reproduce it.
+OTHER_CONTROLS_WEIGHT = 1e-9
+
 
 def project_onto_constraints(clamped, unclamped, controls, positions, check=None):
     """The solver's output: ``clamped``'s exact zeros kept, partition of unity and reproduction restored on its
     support.
 
     A vertex whose support is too small to reproduce it (three control points for a point off their plane) gets
-    ``unclamped``'s next largest weights added, largest first, until it is.
+    ``unclamped``'s next largest weights added, largest first, until it is; where even all of ``unclamped``'s positive
+    weights cannot, the other control points too (a point inside their hull always has such weights on all of them).
 
     Parameters
     ----------
@@ -37,9 +41,18 @@ def project_onto_constraints(clamped, unclamped, controls, positions, check=None
     unity, reproduction = constraint_residuals(on_support, controls, positions)
     failed = (unity > 1e-12) | (reproduction > 1e-12) | (on_support < 0).any(axis=1)
     if failed.any():
-        grown, _ = grow_support(sp.csr_matrix(np.maximum(unclamped[failed], 0.0)), controls, positions[failed],
-                                np.count_nonzero(clamped[failed] > 0, axis=1), tolerance=1e-12, check=check)
-        on_support[failed] = grown.toarray()
+        candidates = np.maximum(unclamped[failed], 0.0)
+        keep = np.count_nonzero(clamped[failed] > 0, axis=1)
+        grown, met = grow_support(sp.csr_matrix(candidates), controls, positions[failed], keep, tolerance=1e-12,
+                                  check=check)
+        grown = grown.toarray()
+        if not met.all():
+            # Every control point a candidate: the others after unclamped's own, with a weight too small to matter.
+            candidates, keep = candidates[~met], keep[~met]
+            candidates[candidates == 0] = OTHER_CONTROLS_WEIGHT
+            grown[~met] = grow_support(sp.csr_matrix(candidates), controls, positions[failed][~met], keep,
+                                       tolerance=1e-12, check=check)[0].toarray()
+        on_support[failed] = grown
     return on_support
 
 

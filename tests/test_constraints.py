@@ -55,3 +55,13 @@ def test_the_solver_projection_keeps_zeros_and_grows_a_support_that_cannot_repro
     assert unity.max() < 1e-12 and reproduction.max() < 1e-12 and projected.min() >= 0
     assert projected[0, 1] == 0.0
     assert np.count_nonzero(projected[1]) > 2
+
+
+def test_projection_takes_in_other_control_points_where_the_candidates_cannot_reproduce_the_point():
+    # The iterate is positive on two opposite corners only: no weights on them reproduce a point off their diagonal.
+    points = np.array([[0.3, 0.6]])
+    clamped = np.array([[0.5, 0.0, 0.5, 0.0]])
+    unclamped = np.array([[0.5, -0.1, 0.5, -0.2]])
+    projected = project_onto_constraints(clamped, unclamped, SQUARE, points)
+    unity, reproduction = constraint_residuals(projected, SQUARE, points)
+    assert unity.max() < 1e-12 and reproduction.max() < 1e-12 and projected.min() >= 0
