@@ -1,6 +1,7 @@
 """Warm re-bind (issue 12, item 5) against a cold bind of the same edited cage, side by side in one process.
 
-    .venv/bin/python bench/rebinding.py [--skip-64k] [--addon [--cage L10] [--vertex V ...]]
+    .venv/bin/python bench/rebinding.py [--skip-64k] [--addon [--cage L10] [--vertex V ...] [--face F ...]]
+    .venv/bin/python bench/rebinding.py --rings [--cage L10]
 
 For each scene: bind the gargoyle to its cage, move 1, 3 or 5 cage vertices (seeded random directions) by 1-10 % of
 the cage's diagonal, then bind the edited cage cold (lbc_core.bind) and warm (lbc_core.rebind from the first
@@ -9,12 +10,16 @@ cold solve's: the same problem, so any difference is the solver's tolerance), th
 points, and the largest difference of the points deformed by one pose, over the cage's diagonal. "mesh noise" is the
 same comparison between two cold binds at 8000 and 9000 cells: what remeshing alone changes.
 
+--rings  the rings of vertices solved again around the moved coordinates' supports (2, 1 and 0) on the gargoyle
+         mesh (2674 points) in the cage ``--cage`` names: each warm re-bind against a tight solve on its mesh.
 --addon  only the demo gargoyle (64k points), through the add-on's bind (lbc_addon.jobs.solve: lbc_core, thinning,
          slots; no bpy): a cold bind of the edited cage against the warm re-bind, which thins again only the rows the
          re-bind changed, and the same warm re-bind thinning every row (the path before); CPU seconds of every
          thread (wall seconds in brackets), the best of two interleaved runs; the warm re-bind's stages in wall
          seconds. ``--cage`` names the gargoyle cage (L08 to L16; default L10, the demo's); ``--vertex V`` adds an
-         edit moving cage vertex V outward from the centroid by 2 % (37, L10's top, grows the cage's extent).
+         edit moving cage vertex V outward from the centroid by 2 % (37, L10's top, grows the cage's extent);
+         ``--face F`` one pulling the vertices of cage face F out along its normal by 2 % (a few neighbouring
+         vertices moved together, as an artist edits a region).
 """
 
 import argparse
@@ -32,6 +37,7 @@ import lbc_core  # noqa: E402
 from lbc_core.boundary import boundary_weights  # noqa: E402
 from lbc_core.frame import UnitFrame  # noqa: E402
 from lbc_core.io import read_cage, read_mesh  # noqa: E402
+from lbc_core import rebinding  # noqa: E402
 from lbc_core.rebinding import carry_domain, rebind  # noqa: E402
 from lbc_core.geodesics import geodesic_distances, tv_weights  # noqa: E402
 from lbc_core.solver import solve_on_mesh  # noqa: E402
@@ -70,6 +76,16 @@ def outward(cage, vertex, share):
     return moved
 
 
+def face_pulled(cage, faces, face, share):
+    """``cage`` with the vertices of ``face`` moved together along its normal (outward for a cage whose faces turn
+    counter-clockwise seen from outside) by ``share`` of its diagonal: an artist pulling out one face."""
+    corners = cage[faces[face]]
+    normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+    moved = cage.copy()
+    moved[faces[face]] += share * np.linalg.norm(np.ptp(cage, axis=0)) * normal / np.linalg.norm(normal)
+    return moved
+
+
 def pose(cage):
     """A smooth pose of the cage: a twist about its vertical axis growing with height, 40° at the top."""
     low, high = cage.min(axis=0), cage.max(axis=0)
@@ -90,19 +106,28 @@ def differences(a, b, cage):
     return weights, np.linalg.norm(a.deform(posed) - b.deform(posed), axis=1).max() / diagonal
 
 
-def same_mesh_objective(previous, edited_cage, faces):
-    """A cold solve's objective on the mesh the warm re-bind carries (in the cage's units)."""
+def on_carried_mesh(previous, edited_cage, faces, tolerance=None):
+    """A cold solve (SolveResult, unit frame) on the mesh the warm re-bind carries, at ``tolerance`` (None: the
+    default); None where the carried mesh is not valid."""
     cage = lbc_core.make_cage(edited_cage, faces)
-    frame = UnitFrame.of(cage)
-    unit_cage = frame.cage_to_unit(cage)
+    unit_cage = UnitFrame.of(cage).cage_to_unit(cage)
     mesh, _ = carry_domain(previous, unit_cage)
     if mesh is None:
-        return float("nan"), 0
+        return None
     weights = tv_weights(mesh.cells, geodesic_distances(mesh.vertices, mesh.cells, mesh.control_vertices),
                          previous.options["weighting"])
-    result = solve_on_mesh(mesh.vertices, mesh.cells, mesh.boundary_vertices, boundary_weights(mesh, unit_cage),
-                           unit_cage.vertices, weights)
-    return result.objective * frame.scale ** (cage.dim - 1), result.iterations
+    return solve_on_mesh(mesh.vertices, mesh.cells, mesh.boundary_vertices, boundary_weights(mesh, unit_cage),
+                         unit_cage.vertices, weights, max_iterations=20000,
+                         **({} if tolerance is None else {"tolerance": tolerance}))
+
+
+def same_mesh_objective(previous, edited_cage, faces):
+    """A cold solve's objective on the mesh the warm re-bind carries (in the cage's units)."""
+    result = on_carried_mesh(previous, edited_cage, faces)
+    if result is None:
+        return float("nan"), 0
+    cage = lbc_core.make_cage(edited_cage, faces)
+    return result.objective * UnitFrame.of(cage).scale ** (cage.dim - 1), result.iterations
 
 
 def timed(function, *args, **keywords):
@@ -178,8 +203,8 @@ def addon_scene(cage, faces, points, edits, level="L10"):
     print("| edit | cold s | warm s | speed-up | warm s, every row thinned (before) | speed-up | rows thinned again | "
           "warm stages (s) | the same slots |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
-    for count, share in edits:
-        target = request(edited(cage, faces, count, share) if count > 0 else outward(cage, -count, share))
+    for label, edited_cage in edits:
+        target = request(edited_cage)
         counts = []
 
         def counted(*arguments, **keywords):
@@ -213,13 +238,46 @@ def addon_scene(cage, faces, points, edits, level="L10"):
                                                                                                     "before"))
         same = (f"indices equal, weights within {np.abs(warm.weight - before.weight).max():.1e}"
                 if np.array_equal(warm.index, before.index) else "indices differ")
-        label = f"{count} × {share:.0%}" if count > 0 else f"vertex {-count} outward by {share:.0%}"
         print(f"| {label} | {cold:.2f} ({cold_wall:.2f}) | {fast:.2f} ({fast_wall:.2f}) | "
               f"{cold / fast:.1f}× ({cold_wall / fast_wall:.1f}×) | {slow:.2f} ({slow_wall:.2f}) | {cold / slow:.1f}× "
               f"({cold_wall / slow_wall:.1f}×) "
               f"| {counts[0]} of {len(points)} | " + ", ".join(f"{k} {v:.2f}" for k, v in warm.stages.items())
               + f" | {same} |", flush=True)
     print(f"({warm.rebind}; load average {os.getloadavg()[0]:.1f})")
+
+
+def rings_scene(level):
+    """The rings of vertices solved again around the moved coordinates' supports (rebinding.FREE_RINGS 2, 1, 0):
+    each warm re-bind's domain weights against a tight solve (1e-5) on the same carried mesh, beside a cold solve's."""
+    points, _ = read_mesh(GARGOYLE / "mesh.off")
+    cage, faces = read_cage(GARGOYLE / f"cage_{level}.obj")
+    faces = [list(face) for face in faces]
+    first = lbc_core.bind(cage, faces, points)
+    centroids = cage[np.array(faces)].mean(axis=1)
+    picks = [int(np.argmax(centroids[:, 2])), int(np.argmax(centroids[:, 0])), len(faces) // 8]
+    edits = [(f"face {face} pulled out by {share:.0%}", face_pulled(cage, faces, face, share))
+             for face in picks for share in (0.02, 0.04)]
+    edits += [(f"{count} × {share:.0%}", edited(cage, faces, count, share)) for count, share in ((3, 0.01), (1, 0.02),
+                                                                                                 (5, 0.01))]
+    print(f"\ngargoyle mesh ({len(points)} points), cage {level}; load average {os.getloadavg()[0]:.1f}")
+    print("| edit | cold on the carried mesh: from tight (iterations) | rings | s | iterations | cells solved | points "
+          "evaluated | from tight: max, p99 of the vertices' largest |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    kept = rebinding.FREE_RINGS
+    for label, target in edits:
+        tight, cold = (on_carried_mesh(first, target, faces, tolerance) for tolerance in (1e-5, None))
+        cold_text = f"{np.abs(cold.weights - tight.weights).max():.4f} ({cold.iterations})"
+        for rings in (2, 1, 0):
+            rebinding.FREE_RINGS = rings
+            warm, seconds = timed(rebind, first, target, faces)
+            if warm.options["start"] != rebinding.WARM:
+                print(f"| {label} | {cold_text} | — | {warm.options['rebind']} | | | | |")
+                break
+            counts = warm.options["solved_again"]
+            largest = np.abs(warm.domain_weights - tight.weights).max(axis=1)
+            print(f"| {label} | {cold_text} | {rings} | {seconds:.2f} | {warm.iterations} | {counts['cells solved']} | "
+                  f"{counts['points evaluated']} | {largest.max():.4f}, {np.quantile(largest, 0.99):.4f} |", flush=True)
+        rebinding.FREE_RINGS = kept
 
 
 def main(argv=None):
@@ -229,11 +287,24 @@ def main(argv=None):
     parser.add_argument("--cage", default="L10", help="--addon: the gargoyle's cage, L08 to L16")
     parser.add_argument("--vertex", type=int, action="append", default=[],
                         help="--addon: also move this cage vertex outward from the centroid by 2 %% (repeatable)")
+    parser.add_argument("--face", type=int, action="append", default=[],
+                        help="--addon: also pull the vertices of this cage face out along its normal by 2 %% "
+                             "(repeatable)")
+    parser.add_argument("--rings", action="store_true",
+                        help="the rings solved again around the supports (2, 1, 0) on the cage --cage names")
     arguments = parser.parse_args(argv)
+    if arguments.rings:
+        rings_scene(arguments.cage)
+        return
     if arguments.addon:
         cage, faces = read_cage(GARGOYLE / f"cage_{arguments.cage}.obj")
-        edits = [(1, 0.02), (3, 0.01)] + [(-vertex, 0.02) for vertex in arguments.vertex]
-        addon_scene(cage, [list(face) for face in faces], gargoyle_64k(), edits, arguments.cage)
+        faces = [list(face) for face in faces]
+        edits = [(f"{count} × {share:.0%}", edited(cage, faces, count, share)) for count, share in ((1, 0.02),
+                                                                                                  (3, 0.01))]
+        edits += [(f"vertex {vertex} outward by 2%", outward(cage, vertex, 0.02)) for vertex in arguments.vertex]
+        edits += [(f"face {face} ({len(faces[face])} vertices) pulled out by 2%",
+                   face_pulled(cage, faces, face, 0.02)) for face in arguments.face]
+        addon_scene(cage, faces, gargoyle_64k(), edits, arguments.cage)
         return
     points, _ = read_mesh(GARGOYLE / "mesh.off")
     for level in ("L10", "L09"):
