@@ -1,9 +1,19 @@
 """One shared thread pool for the work that numpy and scipy run without the GIL (ufuncs, sparse products)."""
 
+import functools
+import math
 import os
+import threading
+import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 
 _POOL = None
+# The one-minute load average's time constant, in seconds (an exponential average of the runnable threads).
+LOAD_TIME_CONSTANT = 60.0
+# This process's recent binds, which the load average still holds: (end, wall seconds, CPU seconds) of each.
+_OWN_WORK = deque(maxlen=16)
+_COUNTING = threading.local()
 
 
 def worker_count():
@@ -13,12 +23,47 @@ def worker_count():
 
 def busy_factor():
     """How many times an idle machine's time work takes now, from the load average: the threads other jobs keep
-    runnable share the cores with ours (1 where the system has no load average)."""
+    runnable share the cores with ours (1 where the system has no load average). The part of the load this
+    process's own finished binds left (:func:`own_load`) is not counted: they no longer compete."""
     try:
         load = os.getloadavg()[0]
     except (AttributeError, OSError):
         return 1.0
-    return max(1.0, (load + worker_count()) / (os.cpu_count() or 1))
+    return max(1.0, (max(0.0, load - own_load()) + worker_count()) / (os.cpu_count() or 1))
+
+
+def own_load(now=None):
+    """The part of the one-minute load average that this process's recent binds (:func:`counted_in_load`) still make,
+    in threads: each kept its CPU rate (CPU seconds per second) of threads runnable while it ran, which the average
+    took in as 1 - exp(-duration / τ) of it and has decayed by exp(-elapsed / τ) since (τ = LOAD_TIME_CONSTANT).
+    ``now``: a time.monotonic() reading (default: now)."""
+    now = time.monotonic() if now is None else now
+    total = 0.0
+    for end, seconds, cpu in _OWN_WORK:
+        if seconds > 0:
+            taken_in = -math.expm1(-seconds / LOAD_TIME_CONSTANT)
+            total += cpu / seconds * taken_in * math.exp(-max(0.0, now - end) / LOAD_TIME_CONSTANT)
+    return total
+
+
+def counted_in_load(function):
+    """``function`` with its wall and CPU time recorded for :func:`own_load` (once, however deeply such functions
+    call one another)."""
+
+    @functools.wraps(function)
+    def counted(*args, **kwargs):
+        if getattr(_COUNTING, "active", False):
+            return function(*args, **kwargs)
+        _COUNTING.active = True
+        wall, cpu = time.monotonic(), time.process_time()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            end = time.monotonic()
+            _OWN_WORK.append((end, end - wall, time.process_time() - cpu))
+            _COUNTING.active = False
+
+    return counted
 
 
 def thread_map(function, items):

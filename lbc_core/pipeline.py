@@ -22,7 +22,7 @@ from .geodesics import geodesic_distances, tv_weights
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain, simplex_domain
 from .options import DEFAULT_CELLS, BindOptions
-from .parallel import busy_factor
+from .parallel import busy_factor, counted_in_load
 from .progress import Progress
 from .reduction import interpolate_and_reduce
 from .smoothing import SmoothInterpolation
@@ -35,6 +35,7 @@ STAGES = {"meshing": (0.0, 0.08), "interpolation": (0.08, 0.13), "geodesics": (0
           "solve": (0.214, 0.97), "reduction": (0.97, 1.0)}
 
 
+@counted_in_load
 def bind(
     cage_vertices,
     cage_faces,

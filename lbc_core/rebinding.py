@@ -39,6 +39,7 @@ from .meshing import COPLANAR_ANGLE
 from .meshing.tetrahedra import polish
 from .objective import tv_objective
 from .options import WEIGHTINGS, BindOptions
+from .parallel import counted_in_load
 from .pipeline import REPRODUCTION_TOLERANCE, bind, check_inside, check_points, lbc_binding
 from .progress import Progress
 from .reduction import interpolate_and_reduce
@@ -65,6 +66,7 @@ FREE_RINGS = 1
 STALE = 1e-2
 
 
+@counted_in_load
 def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=None, cancel=None):
     """Bind again to an edited cage, starting from a previous binding's mesh and solution.
 

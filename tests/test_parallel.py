@@ -2,6 +2,7 @@
 
 import threading
 
+import numpy as np
 import pytest
 
 from lbc_core import parallel
@@ -35,6 +36,7 @@ def test_row_chunks_run_on_several_threads():
 
 
 def test_the_busy_factor_counts_the_other_jobs_against_the_cores(monkeypatch):
+    monkeypatch.setattr(parallel, "_OWN_WORK", parallel.deque())  # no bind of this process before
     monkeypatch.setattr(parallel.os, "cpu_count", lambda: 2)
     monkeypatch.setattr(parallel.os, "getloadavg", lambda: (0.3, 0.0, 0.0))
     assert parallel.busy_factor() == 1.15
@@ -48,3 +50,35 @@ def test_the_busy_factor_counts_the_other_jobs_against_the_cores(monkeypatch):
 
     monkeypatch.setattr(parallel.os, "getloadavg", unavailable)
     assert parallel.busy_factor() == 1.0
+
+
+def test_the_busy_factor_leaves_out_the_load_this_process_s_own_finished_binds_left(monkeypatch):
+    """A new user's finding: right after a long bind, the next one's forecast said the machine was busy."""
+    monkeypatch.setattr(parallel.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(parallel.os, "getloadavg", lambda: (1.3, 0.0, 0.0))
+    monkeypatch.setattr(parallel, "_OWN_WORK", parallel.deque())
+    assert parallel.busy_factor() == 1.65
+    now = parallel.time.monotonic()
+    parallel._OWN_WORK.append((now, 60.0, 120.0))  # a one-minute bind on two threads, just ended
+    assert parallel.own_load(now) == pytest.approx(2 * (1 - np.exp(-1)))  # 1.26 of the load is its own
+    assert parallel.busy_factor() == pytest.approx(1 + (1.3 - 2 * (1 - np.exp(-1))) / 2, abs=1e-3)
+    assert parallel.own_load(now + 60) == pytest.approx(2 * (1 - np.exp(-1)) * np.exp(-1))  # decayed a minute on
+
+
+def test_a_counted_function_records_its_work_once_however_nested(monkeypatch):
+    monkeypatch.setattr(parallel, "_OWN_WORK", parallel.deque())
+
+    @parallel.counted_in_load
+    def inner():
+        end = parallel.time.process_time() + 0.05
+        while parallel.time.process_time() < end:
+            pass
+
+    @parallel.counted_in_load
+    def outer():
+        inner()
+
+    outer()
+    inner()
+    assert len(parallel._OWN_WORK) == 2
+    assert all(cpu >= 0.05 for _, _, cpu in parallel._OWN_WORK)
