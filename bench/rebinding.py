@@ -11,7 +11,8 @@ points, and the largest difference of the points deformed by one pose, over the 
 same comparison between two cold binds at 8000 and 9000 cells: what remeshing alone changes.
 
 --rings  the rings of vertices solved again around the moved coordinates' supports (2, 1 and 0) on the gargoyle
-         mesh (2674 points) in the cage ``--cage`` names: each warm re-bind against a tight solve on its mesh.
+         mesh (2674 points) in the cage ``--cage`` names, or on one of the paper's 2D cages (``--cage woody``,
+         ``cactus``, ``Gil_Gecko``): each warm re-bind against a tight solve on its mesh.
 --addon  only the demo gargoyle (64k points), through the add-on's bind (lbc_addon.jobs.solve: lbc_core, thinning,
          slots; no bpy): a cold bind of the edited cage against the warm re-bind, which thins again only the rows the
          re-bind changed, and the same warm re-bind thinning every row (the path before); CPU seconds of every
@@ -248,18 +249,29 @@ def addon_scene(cage, faces, points, edits, level="L10"):
 
 def rings_scene(level):
     """The rings of vertices solved again around the moved coordinates' supports (rebinding.FREE_RINGS 2, 1, 0):
-    each warm re-bind's domain weights against a tight solve (1e-5) on the same carried mesh, beside a cold solve's."""
-    points, _ = read_mesh(GARGOYLE / "mesh.off")
-    cage, faces = read_cage(GARGOYLE / f"cage_{level}.obj")
-    faces = [list(face) for face in faces]
+    each warm re-bind's domain weights against a tight solve (1e-5) on the same carried mesh, beside a cold solve's.
+    ``level``: a gargoyle cage (L08-L16; the gargoyle mesh bound) or one of the paper's 2D cages (woody, cactus,
+    Gil_Gecko; 4000 random points in its box, those inside bound)."""
+    edits = [(f"{count} × {share:.0%}", count, share) for count, share in ((3, 0.01), (1, 0.02), (5, 0.01))]
+    if level.startswith("L"):
+        points, _ = read_mesh(GARGOYLE / "mesh.off")
+        cage, faces = read_cage(GARGOYLE / f"cage_{level}.obj")
+        faces = [list(face) for face in faces]
+        centroids = cage[np.array(faces)].mean(axis=1)
+        picks = [int(np.argmax(centroids[:, 2])), int(np.argmax(centroids[:, 0])), len(faces) // 8]
+        edits = [(f"face {face} pulled out by {share:.0%}", face_pulled(cage, faces, face, share))
+                 for face in picks for share in (0.02, 0.04)] + [
+                     (label, edited(cage, faces, count, share)) for label, count, share in edits]
+        scene_name = f"gargoyle mesh, cage {level}"
+    else:
+        cage, faces = read_cage(ROOT / "tests" / "data" / f"{level}-control-edgeset.obj")
+        cage, faces = cage[:, :2], None
+        points = cage.min(axis=0) + np.ptp(cage, axis=0) * np.random.default_rng(0).random((4000, 2))
+        points = points[~lbc_core.bind(cage, None, points).outside]
+        edits = [(label, edited(cage, None, count, share)) for label, count, share in edits]
+        scene_name = f"2D cage {level}"
     first = lbc_core.bind(cage, faces, points)
-    centroids = cage[np.array(faces)].mean(axis=1)
-    picks = [int(np.argmax(centroids[:, 2])), int(np.argmax(centroids[:, 0])), len(faces) // 8]
-    edits = [(f"face {face} pulled out by {share:.0%}", face_pulled(cage, faces, face, share))
-             for face in picks for share in (0.02, 0.04)]
-    edits += [(f"{count} × {share:.0%}", edited(cage, faces, count, share)) for count, share in ((3, 0.01), (1, 0.02),
-                                                                                                 (5, 0.01))]
-    print(f"\ngargoyle mesh ({len(points)} points), cage {level}; load average {os.getloadavg()[0]:.1f}")
+    print(f"\n{scene_name} ({len(points)} points); load average {os.getloadavg()[0]:.1f}")
     print("| edit | cold on the carried mesh: from tight (iterations) | rings | s | iterations | cells solved | points "
           "evaluated | from tight: max, p99 of the vertices' largest |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
@@ -291,7 +303,8 @@ def main(argv=None):
                         help="--addon: also pull the vertices of this cage face out along its normal by 2 %% "
                              "(repeatable)")
     parser.add_argument("--rings", action="store_true",
-                        help="the rings solved again around the supports (2, 1, 0) on the cage --cage names")
+                        help="the rings solved again around the supports (2, 1, 0) on the cage --cage names (a "
+                             "gargoyle cage or woody, cactus, Gil_Gecko)")
     arguments = parser.parse_args(argv)
     if arguments.rings:
         rings_scene(arguments.cage)

@@ -57,7 +57,8 @@ _STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 
 WARM, COLD = "previous solution", "harmonic"
 # Rings of mesh vertices around the moved control points' supports that are solved again: room for a support to grow.
 # One ring leaves the weights as close to a tight solve as two (within 0.005, closer on the largest edits) on every
-# gargoyle edit measured, with up to 55 % fewer cells solved (bench/RESULTS.md, "One ring around the supports").
+# gargoyle edit measured, with up to 55 % fewer cells solved; on the paper's 2D cages within 0.006, 5-15 % fewer
+# (bench/RESULTS.md, "One ring around the supports").
 FREE_RINGS = 1
 # Points near domain vertices whose coordinates and position changed less than this (Binding.stale) since they were
 # evaluated keep their rows: those rows still meet every constraint exactly (the points that have weight on a moved
