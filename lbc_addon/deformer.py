@@ -14,6 +14,8 @@ modifier's "Enabled" input; the panel says why and offers Rebind.
 """
 
 import functools
+import hashlib
+from pathlib import Path
 
 import bpy
 import numpy as np
@@ -29,6 +31,8 @@ GROUP_NAME = "LBC Deform"
 # A node group's custom property recording what it was built for (see :func:`attach`), so that binding again with the
 # same counts keeps it: building one takes 0.05-0.15 s, a fifth of a warm Rebind.
 LAYOUT_KEY = "lbc_layout"
+# This module's own text, digested: any change to it (how groups are built included) makes older groups be rebuilt.
+_DESIGN = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
 
 _COLUMN = 220  # node editor spacing, for a readable node group
 
@@ -420,7 +424,7 @@ def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count, shar
     ``shared_slots``: how many of the ``slots`` stored on the mesh every vertex evaluates (see
     :func:`build_node_group`; :func:`shared_slot_count` of the weights written, for a bind); None, every slot.
 
-    The modifier's node group is kept when this version of the add-on built it for the same counts.
+    The modifier's node group is kept when this build of the add-on made it for the same counts.
 
     Returns
     -------
@@ -434,7 +438,7 @@ def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count, shar
         mesh_obj.modifiers.move(len(mesh_obj.modifiers) - 1, 0)
     replaced, kept = modifier.node_group, inputs(modifier)
     if replaced is not None and replaced.get(LAYOUT_KEY) == layout:
-        replaced = None  # built for the same counts by this version: kept as it is
+        replaced = None  # made for the same counts by this build: kept as it is
     else:
         modifier.node_group = build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots)
         modifier.node_group[LAYOUT_KEY] = layout
@@ -447,10 +451,11 @@ def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count, shar
 
 
 def _layout(slots, cage_vertex_count, mesh_vertex_count, shared_slots):
-    """What a node group is built for, as its :data:`LAYOUT_KEY` property stores it: a string, since the add-on's
-    version is part of it (a later version may build its groups otherwise)."""
+    """What a node group is built for, as its :data:`LAYOUT_KEY` property stores it: the counts, and the add-on's
+    version and this module's digest (another build may make its groups otherwise)."""
     shared = slots if shared_slots is None else min(shared_slots, slots)
-    return f"{lbc_core.__version__} slots {slots} shared {shared} cage {cage_vertex_count} mesh {mesh_vertex_count}"
+    return (f"{lbc_core.__version__} {_DESIGN} slots {slots} shared {shared} cage {cage_vertex_count} "
+            f"mesh {mesh_vertex_count}")
 
 
 def inputs(modifier):
