@@ -1,4 +1,5 @@
-"""One shared thread pool for the work that numpy and scipy run without the GIL (ufuncs, sparse products)."""
+"""One shared thread pool for the work that numpy and scipy run without the GIL (ufuncs, sparse products), and how
+busy the machine is for it (the load average, less what this process's own finished binds left in it)."""
 
 import functools
 import math
