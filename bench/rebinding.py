@@ -52,13 +52,10 @@ def edited(cage, faces, count, share, seed=1):
     """``cage`` with ``count`` vertices moved by ``share`` of its diagonal in random directions (a direction that
     makes the cage invalid is drawn again)."""
     rng = np.random.default_rng(seed)
-    diagonal = np.linalg.norm(np.ptp(cage, axis=0))
     moved = cage.copy()
     for vertex in rng.choice(len(cage), count, replace=False):
         for _ in range(20):
-            direction = rng.normal(size=cage.shape[1])
-            trial = moved.copy()
-            trial[vertex] += share * diagonal * direction / np.linalg.norm(direction)
+            trial = pushed(moved, [vertex], rng.normal(size=cage.shape[1]), share)
             try:
                 lbc_core.make_cage(trial, faces)
             except lbc_core.CageError:
@@ -68,23 +65,24 @@ def edited(cage, faces, count, share, seed=1):
     return moved
 
 
+def pushed(cage, vertices, direction, share):
+    """A copy of ``cage`` with ``vertices`` moved along ``direction`` (any length) by ``share`` of its diagonal."""
+    moved = cage.copy()
+    moved[vertices] += share * np.linalg.norm(np.ptp(cage, axis=0)) * direction / np.linalg.norm(direction)
+    return moved
+
+
 def outward(cage, vertex, share):
     """``cage`` with ``vertex`` moved away from the cage's centroid by ``share`` of its diagonal (an artist's edit of
     one vertex; an extreme vertex moved so changes the cage's extent)."""
-    moved = cage.copy()
-    direction = cage[vertex] - cage.mean(axis=0)
-    moved[vertex] += share * np.linalg.norm(np.ptp(cage, axis=0)) * direction / np.linalg.norm(direction)
-    return moved
+    return pushed(cage, [vertex], cage[vertex] - cage.mean(axis=0), share)
 
 
 def face_pulled(cage, faces, face, share):
     """``cage`` with the vertices of ``face`` moved together along its normal (outward for a cage whose faces turn
     counter-clockwise seen from outside) by ``share`` of its diagonal: an artist pulling out one face."""
     corners = cage[faces[face]]
-    normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
-    moved = cage.copy()
-    moved[faces[face]] += share * np.linalg.norm(np.ptp(cage, axis=0)) * normal / np.linalg.norm(normal)
-    return moved
+    return pushed(cage, faces[face], np.cross(corners[1] - corners[0], corners[2] - corners[0]), share)
 
 
 def pose(cage):
