@@ -284,7 +284,8 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     if cage_obj.type != "MESH":
         raise CageError(f"the cage {not_a_mesh(cage_obj, 'the cage must be one', 'use a mesh as the cage')}")
     if mesh_obj == cage_obj:
-        raise CageError("a mesh cannot be its own cage: select the mesh, then the cage last (active)")
+        raise CageError(f"'{mesh_obj.name}' cannot be its own cage: bind it to a closed mesh around it (select "
+                        "the mesh, then the cage last, so that it is active; in a script, api.bind(mesh, cage))")
     scales = np.linalg.svd(np.array(cage_obj.matrix_world)[:3, :3], compute_uv=False)
     if not scales[-1] > 1e-9 * scales[0]:
         raise CageError(f"the cage object '{cage_obj.name}' is scaled to 0 along an axis (Scale "
@@ -345,6 +346,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         cage_uid=cage_obj.session_uid,
         mesh_name=mesh_obj.name,
         cage_name=cage_obj.name,
+        bound_to_cage=is_bound(mesh_obj) and mesh_obj.lbc.cage == cage_obj,
         points=points,
         cage_points=cage_points,
         cage_faces=cage_faces,

@@ -75,6 +75,7 @@ class BindRequest:
     cage_modifiers: str = ""  # the cage's modifiers that can change its vertices, e.g. "modifier 'Mirror'"
     cage_modifiers_off: str = ""  # those of them off in viewports (the bind, as the deformer, sees the cage without)
     cage_name: str = ""
+    bound_to_cage: bool = False  # the mesh holds a binding to this cage already (a Rebind, or Bind again)
     # The 3D solve's geometry in world space: (cage vertices, cage faces pointing outward, mesh vertices); None: the
     # mesh-space arrays above.
     world: tuple = None
@@ -228,9 +229,7 @@ def solve(request, progress=None, cancel=None, earlier=()):
                         "active.)") from error
     except CageError as error:
         cause, note = _cage_modifiers_notes(request, str(error))
-        if cause or note:
-            raise CageError(f"{cause}{error}{f' ({note})' if note else ''}") from error
-        raise
+        raise CageError(f"{_swapped_hint(request)}{cause}{error}{f' ({note})' if note else ''}") from error
     column_vertex = column_base[binding.cage.first_inputs]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
     rest = binding.rest_cage_vertices
@@ -278,6 +277,17 @@ def _in_plane_of(request, previous):
 def verb_for(modifiers, singular, plural):
     """The verb agreeing with ``modifiers``, "modifier 'Mirror'" or "modifiers 'Mirror', 'Subdivision'"."""
     return plural if modifiers.startswith("modifiers") else singular
+
+
+def _swapped_hint(request):
+    """What to say before a refusal of the cage when the mesh and the cage look swapped ("" otherwise): a cage with
+    more vertices than its mesh is most often the mesh, made active by selecting it last."""
+    cage_count, mesh_count = len(request.cage_points), len(request.points)
+    if cage_count <= mesh_count:
+        return ""
+    return (f"'{request.cage_name}' is the cage here but has more vertices than '{request.mesh_name}' ({cage_count} "
+            f"against {mesh_count}): were they swapped? The cage is the object selected last (active); in a script, "
+            f"api.bind(mesh, cage). As a cage, '{request.cage_name}' is refused: ")
 
 
 def _cage_modifiers_notes(request, message):
@@ -363,6 +373,9 @@ def _rebind_report(request, previous, binding):
     if previous is None and own is not None and own.cage_uid == request.cage_uid:
         changed = [key for key in _SOLVE_OPTIONS if own.options[key] != request.options[key]]
         return f"bound from scratch: its {', '.join(changed)} changed since its last bind" if changed else report
+    if previous is None and own is None and request.bound_to_cage:
+        return (f"bound from scratch: no earlier binding of it is in memory (kept for this session's last "
+                f"{KEPT_BINDINGS} meshes, not in the .blend: a reopened file or an Unbind starts afresh)")
     if previous is None or previous.mesh_uid == request.mesh_uid:
         return report
     if binding.options.get("start") != WARM:

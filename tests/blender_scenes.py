@@ -84,7 +84,7 @@ def gargoyle_scene(level="L10"):
 
 
 def sphere_in_box_scene():
-    """An ico sphere (162 vertices) inside a box cage (8 vertices); returns (mesh, cage)."""
+    """An ico sphere (42 vertices) inside a box cage (8 vertices); returns (mesh, cage)."""
     reset()
     bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=0.8)
     mesh = bpy.context.active_object

@@ -335,6 +335,50 @@ def test_api_prints_progress_in_background_and_says_how_a_rebind_went(capsys):
     assert again["rebind"].startswith("bound again from the previous binding")
 
 
+def test_a_bind_from_scratch_of_a_mesh_bound_before_says_why(tmp_path):
+    """A new user's finding: Rebind after reopening the file took twice as long and its report was empty."""
+    mesh, cage = sphere_in_box_scene()
+    api.bind(mesh, cage, cells=1000)
+    path = tmp_path / "bound.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    again, = api.rebind_all(bpy.data.objects["Box"])
+    assert again["rebind"] == ("bound from scratch: no earlier binding of it is in memory (kept for this session's "
+                               "last 4 meshes, not in the .blend: a reopened file or an Unbind starts afresh)")
+    assert api.bind(bpy.data.objects["Sphere"], bpy.data.objects["Box"], cells=1000)["rebind"].startswith(
+        "bound again from the previous binding")
+
+
+def test_a_mesh_and_cage_given_the_other_way_round_are_asked_about():
+    """A new user's finding: with the garment active and the cage selected first, the refusal told them to decimate
+    "the cage" (the garment), and said nothing of the order."""
+    mesh, cage = sphere_in_box_scene()
+    remove_first_face(mesh)  # an open mesh, as a garment is
+    before = mesh_state(mesh), mesh_state(cage)
+    with pytest.raises(lbc_core.CageError, match=r"^'Sphere' is the cage here but has more vertices than 'Box' \(42 "
+                                                 r"against 8\): were they swapped\? The cage is the object selected "
+                                                 r"last \(active\); in a script, api.bind\(mesh, cage\). As a cage, "
+                                                 r"'Sphere' is refused: the cage is not closed"):
+        api.bind(cage, mesh, cells=1000)
+    assert (mesh_state(mesh), mesh_state(cage)) == before and not is_bound(cage)
+    remove_first_face(cage)
+    with pytest.raises(lbc_core.CageError, match="^the cage is not closed"):  # the right order: no question
+        api.bind(mesh, cage, cells=1000)
+    with pytest.raises(lbc_core.CageError, match=r"^'Sphere' cannot be its own cage: bind it to a closed mesh around "
+                                                 r"it"):
+        api.bind(mesh, mesh)
+
+
+def remove_first_face(obj):
+    """Delete ``obj``'s first face (its vertices stay): an open mesh."""
+    editing = bmesh.new()
+    editing.from_mesh(obj.data)
+    editing.faces.ensure_lookup_table()
+    editing.faces.remove(editing.faces[0])
+    editing.to_mesh(obj.data)
+    editing.free()
+
+
 def test_rebind_all_after_api_bind_with_options_blender_rounds_starts_from_the_previous_binding():
     """A reviewer's finding: Blender keeps Relaxation, Tolerance and Thinning as float32, so the options Rebind reads
     back differed from api.bind's exact 1e-4 and every Rebind bound from scratch."""
