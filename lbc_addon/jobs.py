@@ -280,11 +280,18 @@ def verb_for(modifiers, singular, plural):
 
 
 def _swapped_hint(request):
-    """What to say before a refusal of the cage when the mesh and the cage look swapped ("" otherwise): a cage with
-    more vertices than its mesh is most often the mesh, made active by selecting it last."""
+    """What to say before a refusal when the mesh and the cage look swapped ("" otherwise): a refused cage with more
+    vertices than its mesh is most often the mesh, made active by selecting it last. Only on the error path: it checks
+    the cage alone again, to tell its refusal from others (e.g. the memory a resolution needs)."""
     cage_count, mesh_count = len(request.cage_points), len(request.points)
     if cage_count <= mesh_count:
         return ""
+    cage_vertices, faces = request.solve_geometry()[:2]
+    try:
+        lbc_core.make_cage(cage_vertices, faces)
+        return ""
+    except CageError:
+        pass
     return (f"'{request.cage_name}' is the cage here but has more vertices than '{request.mesh_name}' ({cage_count} "
             f"against {mesh_count}): were they swapped? The cage is the object selected last (active); in a script, "
             f"api.bind(mesh, cage). As a cage, '{request.cage_name}' is refused: ")

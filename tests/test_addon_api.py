@@ -12,6 +12,7 @@ from lbc_addon.properties import is_bound
 from blender_scenes import (
     evaluated_positions,
     gargoyle_alone,
+    mesh_object,
     mesh_state,
     sphere_in_box_scene,
 )
@@ -349,7 +350,7 @@ def test_a_bind_from_scratch_of_a_mesh_bound_before_says_why(tmp_path):
         "bound again from the previous binding")
 
 
-def test_a_mesh_and_cage_given_the_other_way_round_are_asked_about():
+def test_a_mesh_and_cage_given_the_other_way_round_are_asked_about(monkeypatch):
     """A new user's finding: with the garment active and the cage selected first, the refusal told them to decimate
     "the cage" (the garment), and said nothing of the order."""
     mesh, cage = sphere_in_box_scene()
@@ -361,6 +362,10 @@ def test_a_mesh_and_cage_given_the_other_way_round_are_asked_about():
                                                  r"'Sphere' is refused: the cage is not closed"):
         api.bind(cage, mesh, cells=1000)
     assert (mesh_state(mesh), mesh_state(cage)) == before and not is_bound(cage)
+    triangle = mesh_object("Triangle", [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], [[0, 1, 2]])
+    monkeypatch.setattr(lbc_core.solver, "_available_memory", lambda: 2**20)
+    with pytest.raises(lbc_core.CageError, match="^binding 8 control points on 8000 cells would need"):
+        api.bind(triangle, cage)  # fewer vertices than the cage, which is fine: refused for another reason
     remove_first_face(cage)
     with pytest.raises(lbc_core.CageError, match="^the cage is not closed"):  # the right order: no question
         api.bind(mesh, cage, cells=1000)
