@@ -229,7 +229,10 @@ def solve(request, progress=None, cancel=None, earlier=()):
                         "active.)") from error
     except CageError as error:
         cause, note = _cage_modifiers_notes(request, str(error))
-        raise CageError(f"{_swapped_hint(request)}{cause}{error}{f' ({note})' if note else ''}") from error
+        hint = _swapped_hint(request)
+        if hint or cause or note:
+            raise CageError(f"{hint}{cause}{error}{f' ({note})' if note else ''}") from error
+        raise
     column_vertex = column_base[binding.cage.first_inputs]
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
     rest = binding.rest_cage_vertices
