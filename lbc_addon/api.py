@@ -15,7 +15,7 @@ import bpy
 
 from . import deformer, geometry, jobs, writing
 from .core import CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
-from .properties import DEFAULT_INFLUENCES, bound_to, is_bound
+from .properties import DEFAULT_INFLUENCES, is_bound
 
 
 def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, thinning=0.0,
@@ -94,15 +94,16 @@ def unbind(mesh_obj):
 def rebind_all(cage_obj, progress=None, cancel=None):
     """Bind every mesh of the scene bound to ``cage_obj`` again, to the cage as it is now, each with its own options.
 
-    A mesh that cannot be bound before any work (e.g. its data shared by a linked duplicate, Alt+D) is left as it was
-    with a ``UserWarning`` saying why, as the Rebind All operator does. Returns the summaries of :func:`bind`, one
+    A mesh that cannot be bound before any work (e.g. its data shared by a linked duplicate, Alt+D) or whose LBC
+    modifier was removed or applied is left as it was with a ``UserWarning`` saying why, as the Rebind All operator
+    does. Returns the summaries of :func:`bind`, one
     per mesh bound; raises as :func:`bind` does when every mesh is refused or a solve fails, the meshes bound before
     the error keeping their new binding.
     """
     _require_enabled()
-    targets = [(mesh_obj, cage_obj, mesh_obj.lbc.bind_options())
-               for mesh_obj in bound_to(cage_obj, bpy.context.scene.objects)]
-    requests, refused = geometry.snapshots(targets, bpy.context.evaluated_depsgraph_get(), skip_refused=True)
+    targets, left_out = deformer.rebind_all_targets(cage_obj, bpy.context.scene.objects)
+    requests, refused = geometry.snapshots(targets, bpy.context.evaluated_depsgraph_get(), skip_refused=True,
+                                           left_out=left_out)
     for message in refused:
         warnings.warn(message, stacklevel=2)
     return [_bind_request(request, progress, cancel) for request in requests]

@@ -24,7 +24,7 @@ from bpy.app.handlers import persistent
 from . import geometry, storage
 from .core import POSED_APART, lbc_core
 from .jobs import read_welded
-from .properties import is_bound
+from .properties import bound_to, is_bound
 
 MODIFIER_NAME = "LBC Deform"
 GROUP_NAME = "LBC Deform"
@@ -556,6 +556,24 @@ def find_modifier(mesh_obj):
         if modifier.type == "NODES" and group is not None and modifier.node_group == group:
             return modifier
     return None
+
+
+def rebind_all_targets(cage_obj, objects):
+    """What Rebind All binds again: (targets, left_out).
+
+    ``targets``: a (mesh, cage, options) triple for each of ``objects`` bound to ``cage_obj`` that still has its LBC
+    modifier; ``left_out``: "'Name' left as it was: …" for each one whose modifier was removed or applied. Binding
+    those again would put the deformer back on a mesh whose artist replaced it (a copy moved to Mesh Deform would be
+    deformed twice, an applied one would take its deformation as rest); Rebind of that mesh alone still does.
+    """
+    targets, left_out = [], []
+    for mesh_obj in bound_to(cage_obj, objects):
+        if find_modifier(mesh_obj) is None:
+            left_out.append(f"'{mesh_obj.name}' left as it was: its LBC modifier was removed or applied (select it "
+                            "and Rebind to add the modifier back, or Unbind it)")
+        else:
+            targets.append((mesh_obj, cage_obj, mesh_obj.lbc.bind_options()))
+    return targets, left_out
 
 
 def detach(mesh_obj):

@@ -398,14 +398,15 @@ def _binding_chain(obj):
     return chain
 
 
-def snapshots(targets, depsgraph, skip_refused=False):
+def snapshots(targets, depsgraph, skip_refused=False, left_out=()):
     """:func:`snapshot` of each (mesh, cage, options) triple of ``targets``.
 
     Returns (requests, refused): with ``skip_refused``, a mesh :func:`snapshot` refuses (e.g. its data shared by a
-    linked duplicate) is left out and ``refused`` says why ("'Name' left as it was: …"), unless every mesh is refused,
-    which raises CageError with all the reasons; without it, the first refusal raises.
+    linked duplicate) is left out and ``refused`` says why ("'Name' left as it was: …"), after the messages
+    ``left_out`` of meshes the caller left out already, unless every mesh is refused, which raises CageError with all
+    the reasons; without it, the first refusal raises.
     """
-    requests, refused = [], []
+    requests, refused = [], list(left_out)
     for mesh_obj, cage_obj, options in targets:
         try:
             requests.append(snapshot(mesh_obj, cage_obj, depsgraph, **options))

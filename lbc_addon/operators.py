@@ -12,7 +12,7 @@ binds again on the main thread: the UI waits for the solve, Esc does not cancel 
 
 import bpy
 
-from . import geometry, influence, jobs, writing
+from . import deformer, geometry, influence, jobs, writing
 from .core import CageError, Cancelled
 from .properties import OPTION_NAMES, BindOptionProperties, bound_to, is_bound
 
@@ -97,16 +97,17 @@ def _in_edit_mode(pairs):
 class _Binder:
     """What Bind and Rebind share: snapshot on the main thread, solve (modal or not), apply.
 
-    Subclasses define ``targets(context)``: the (mesh, cage, options) triples to bind, and ``skips_refused``: whether
-    a mesh that cannot be bound (e.g. its data shared by a linked duplicate) is left out with a warning, the others
-    bound, or stops them all.
+    Subclasses define ``targets(context)``: the (mesh, cage, options) triples to bind, and the messages of meshes
+    left out already ("'Name' left as it was: …"); and ``skips_refused``: whether a mesh that cannot be bound (e.g.
+    its data shared by a linked duplicate) is left out with a warning, the others bound, or stops them all.
     """
 
     skips_refused = False
 
     def snapshot(self, context):
-        requests, refused = geometry.snapshots(self.targets(context), context.evaluated_depsgraph_get(),
-                                               self.skips_refused)
+        targets, left_out = self.targets(context)
+        requests, refused = geometry.snapshots(targets, context.evaluated_depsgraph_get(), self.skips_refused,
+                                               left_out)
         for message in refused:
             self.report({"WARNING"}, message)
         return requests
@@ -236,7 +237,7 @@ class OBJECT_OT_lbc_bind(_Binder, BindOptionProperties, bpy.types.Operator):
     def targets(self, context):
         cage = context.active_object
         options = self.bind_options()
-        return [(obj, cage, options) for obj in context.selected_objects if obj.type == "MESH" and obj != cage]
+        return [(obj, cage, options) for obj in context.selected_objects if obj.type == "MESH" and obj != cage], ()
 
     def draw(self, context):
         layout = self.layout
@@ -268,7 +269,7 @@ class OBJECT_OT_lbc_rebind(_Binder, bpy.types.Operator):
             if obj.lbc.cage is None:
                 raise CageError(f"the cage of '{obj.name}' was deleted: select a cage and Bind instead")
             triples.append((obj, obj.lbc.cage, obj.lbc.bind_options()))
-        return triples
+        return triples, ()
 
 
 class OBJECT_OT_lbc_rebind_all(_Binder, bpy.types.Operator):
@@ -288,8 +289,7 @@ class OBJECT_OT_lbc_rebind_all(_Binder, bpy.types.Operator):
         return _allowed(cls, message)
 
     def targets(self, context):
-        cage = context.active_object
-        return [(obj, cage, obj.lbc.bind_options()) for obj in bound_to(cage, context.scene.objects)]
+        return deformer.rebind_all_targets(context.active_object, context.scene.objects)
 
 
 class OBJECT_OT_lbc_unbind(bpy.types.Operator):

@@ -430,6 +430,32 @@ def test_rebind_all_leaves_linked_duplicates_as_they_are_and_binds_the_others():
     assert is_bound(mesh) and is_bound(linked)
 
 
+def test_rebind_all_leaves_a_mesh_whose_lbc_modifier_was_removed_as_it_is(capfd):
+    """A new user's finding: a Shift+D copy moved to Mesh Deform got the LBC modifier back from Rebind All, above the
+    Mesh Deform, and was deformed twice."""
+    mesh, cage = sphere_in_box_scene()
+    assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
+    copy = mesh.copy()
+    copy.data = mesh.data.copy()  # Shift+D: its own data, the binding with it
+    bpy.context.scene.collection.objects.link(copy)
+    copy.modifiers.remove(copy.modifiers[0])
+    copy.modifiers.new("MeshDeform", "MESH_DEFORM").object = cage
+    before = mesh_state(copy)
+    capfd.readouterr()
+    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[cage]):
+        assert bpy.ops.object.lbc_rebind_all() == {"FINISHED"}
+    assert (f"Warning: '{copy.name}' left as it was: its LBC modifier was removed or applied (select it and Rebind to "
+            "add the modifier back, or Unbind it)") in capfd.readouterr().out
+    assert mesh_state(copy) == before and [m.type for m in copy.modifiers] == ["MESH_DEFORM"]
+    mesh.modifiers.remove(mesh.modifiers[0])  # now every mesh of the cage: nothing to do, and it says why
+    with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[cage]):
+        with pytest.raises(RuntimeError, match=f"'{mesh.name}' left as it was: its LBC modifier was removed"):
+            bpy.ops.object.lbc_rebind_all()
+    with bpy.context.temp_override(active_object=copy, object=copy, selected_objects=[copy]):
+        assert bpy.ops.object.lbc_rebind() == {"FINISHED"}  # the mesh alone: what the panel offers
+    assert [m.type for m in copy.modifiers] == ["NODES", "MESH_DEFORM"]
+
+
 def test_rebind_after_a_small_cage_edit_starts_from_the_previous_binding(capfd):
     mesh, cage = gargoyle_scene("L12")
     assert bind(mesh, cage, cells=2000) == {"FINISHED"}
