@@ -376,7 +376,8 @@ def _rebind_report(request, previous, binding):
     """How a bind that started from a binding of this session went, for the user; "" for any other bind.
 
     From the mesh's own binding, lbc_core's account (cells solved again, or why it bound from scratch); from another
-    mesh's, what it reused, and nothing when it bound from scratch (to the user, a first bind).
+    mesh's, what it reused, and when it bound from scratch, why for a mesh bound to this cage before (its own binding
+    no longer in memory: more meshes than KEPT_BINDINGS rebound), nothing for a first bind.
     """
     report = binding.options.get("rebind", "")
     own = _previous.get(request.mesh_uid)
@@ -389,7 +390,7 @@ def _rebind_report(request, previous, binding):
     if previous is None or previous.mesh_uid == request.mesh_uid:
         return report
     if binding.options.get("start") != WARM:
-        return ""
+        return report if request.bound_to_cage else ""  # why a mesh bound before bound from scratch
     solved_again = solved_again_text(binding.options["solved_again"])
     return f"started from the binding of '{previous.mesh_name}' to the same cage: {solved_again}"
 
