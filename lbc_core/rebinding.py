@@ -321,7 +321,7 @@ def carry_domain(previous, unit_cage):
                            f"than {QUALITY_KEPT:.0%} of their shape")
     bent = _faces_off_cage(old, previous.cage, unit_cage)
     if len(bent):
-        faces = ", ".join(map(str, bent[:5]))
+        faces = ", ".join(map(str, bent[:5])) + (f" and {len(bent) - 5} more" if len(bent) > 5 else "")
         if len(bent) == 1:
             return None, (f"cage face {faces} is no longer flat, and the cells the last bind filled the cage with "
                           "have faces across it")

@@ -287,6 +287,9 @@ def test_a_quad_bent_out_of_its_plane_falls_back_to_a_cold_bind():
     assert again.options["rebind"] == ("bound from scratch: cage faces 1, 3, 5 are no longer flat, and the cells the "
                                        "last bind filled the cage with have faces across them")
     assert_guarantees(again, points)
+    edited[0] += 0.01  # every quad bent: the first five named, the others counted (a new user read a cut list)
+    assert rebind(first, edited, quads).options["rebind"].startswith(
+        "bound from scratch: cage faces 0, 1, 2, 3, 4 and 1 more are no longer flat")
 
 
 def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm():
