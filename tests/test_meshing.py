@@ -474,3 +474,36 @@ def test_bad_arguments():
         meshing.mesh_domain(cage_2d, method="tetgen")
     with pytest.raises(ValueError, match="at least"):
         meshing.mesh_domain(cage_2d, cells=0)
+
+
+def test_well_shaped_quads_are_surface_regions_triangle_by_triangle():
+    """A quad's triangles are regions of their own where both are well shaped for the spacing (its diagonal a
+    feature the mesh follows: a warm re-bind can carry the mesh onto the quad bent); skinny or small quads, n-gons and
+    triangles keep merging with their coplanar neighbours."""
+    from lbc_core.meshing.surface import SPLIT_MIN_EDGE, split_facets
+
+    cube = make_cage(CUBE_VERTICES, CUBE_QUADS)
+    assert split_facets(cube, 0.1).all()
+    assert not split_facets(cube, 1.01 / SPLIT_MIN_EDGE).any()  # edges shorter than SPLIT_MIN_EDGE spacings
+    flat_box = make_cage(CUBE_VERTICES * [1.0, 1.0, 0.3], CUBE_QUADS)  # sides with 16.7° at their diagonals
+    assert split_facets(flat_box, 0.01).tolist() == [face in (4, 5) for face in flat_box.facet_face]  # z = 0, 1
+    # No quad among an n-gon-capped prism's caps, a fan's triangles: only the sides.
+    angles = np.linspace(0.0, 2.0 * np.pi, 6, endpoint=False)
+    ring = np.c_[np.cos(angles), np.sin(angles)]
+    prism = make_cage(np.concatenate([np.c_[ring, np.zeros(6)], np.c_[ring, np.ones(6)]]),
+                      [list(range(6))[::-1], list(range(6, 12))] + [[i, (i + 1) % 6, 6 + (i + 1) % 6, 6 + i]
+                                                                    for i in range(6)])
+    assert split_facets(prism, 0.01).tolist() == [face >= 2 for face in prism.facet_face]
+    # The cube's mesh follows the diagonals: every boundary triangle lies within one cage facet.
+    mesh = meshing.mesh_domain(cube, cells=2000)
+    triangles = boundary_facets(mesh.cells)
+    corners = cube.vertices[cube.facets]
+    within = np.zeros(len(triangles), dtype=bool)
+    for facet in range(len(cube.facets)):
+        inside = np.ones(len(triangles), dtype=bool)
+        for k in range(3):
+            points = mesh.vertices[triangles[:, k]]
+            squared, _ = closest_on_triangles(points, *[np.broadcast_to(c, points.shape) for c in corners[facet]])
+            inside &= squared <= 1e-24
+        within |= inside
+    assert within.all()

@@ -8,6 +8,11 @@ a grid-subdivided side of a box, a plane nudged by round-off. The edges between 
 ear-clipped cap's skinny triangles and their small angles never reach the tetrahedraliser, which meets only the
 angles between feature edges. Every sample still keeps the facet it lies on and its barycentric coordinates there,
 so boundary values stay exact at every sample.
+
+A quad whose two triangles are well shaped for the spacing (:func:`split_facets`) is the exception: each of its
+triangles is a region of its own, its diagonal and edges features. An artist's edit at rest bends the quads around
+the moved vertex along those lines, and a mesh that follows them keeps every boundary triangle on the bent cage: the
+warm re-bind (:mod:`lbc_core.rebinding`) can carry it instead of meshing again.
 """
 
 import time
@@ -27,6 +32,13 @@ JITTER = 0.05  # random shift of samples, × their spacing: breaks co-circular a
 # Region samples stay this far (× spacing) from the region's boundary and from the cage vertices in it: beyond
 # half a boundary piece, so no region sample encroaches a boundary piece to begin with.
 _MARGIN = 0.7
+# A quad's triangles are regions of their own (see split_facets) when every angle of both is at least this (degrees):
+# Blender's 64-sided cylinder's sides (diagonals at 2.8°) made five times the cells asked for at 2000.
+SPLIT_MIN_ANGLE = 20.0
+# ... and every edge of both at least this many sample spacings: shorter ones would add samples the cell count does
+# not pay for (the corpus's quad cages at 2000 cells: 1.35-1.54 times the cells asked for at 1 spacing, on target at
+# 1.5; bench/RESULTS.md).
+SPLIT_MIN_EDGE = 1.5
 # qhull joggles its input, as in 3D (see tetrahedra._QHULL_OPTIONS): a region's boundary samples are collinear
 # along its edges, and joggling once costs less than merging; 300 points 0.78 -> 0.51 ms.
 _QHULL_OPTIONS = "QJ Qbb Q3 Q5 Q8"
@@ -48,6 +60,32 @@ class OutOfBudget(RuntimeError):
     """Refinement would need more samples (or rounds) than its budget allows; ``Surface.trouble`` says where."""
 
 
+def split_facets(cage, spacing):
+    """Which facets are regions of their own: both triangles of each quad whose triangles have every angle at least
+    :data:`SPLIT_MIN_ANGLE` and every edge at least :data:`SPLIT_MIN_EDGE` spacings.
+
+    Parameters
+    ----------
+    cage : Cage (3D), in the meshing frame
+    spacing : float, the sample spacing (length units of the meshing frame)
+
+    Returns
+    -------
+    (E,) bool array, one per facet
+    """
+    corners = cage.vertices[cage.facets]
+    sides = np.linalg.norm(corners[:, [1, 2, 0]] - corners, axis=2)  # side k joins corners k and k + 1
+    # The angle at corner k lies between sides k and k - 1, opposite side k + 1: cos = (a² + b² − c²) / (2ab).
+    adjacent, previous, opposite = sides, sides[:, [2, 0, 1]], sides[:, [1, 2, 0]]
+    cosines = (adjacent**2 + previous**2 - opposite**2) / np.maximum(2.0 * adjacent * previous, np.finfo(float).tiny)
+    well_shaped = ((cosines <= np.cos(np.radians(SPLIT_MIN_ANGLE))).all(axis=1)
+                   & (sides.min(axis=1) >= SPLIT_MIN_EDGE * spacing))
+    face_facets = np.bincount(cage.facet_face)
+    face_well_shaped = np.ones(len(face_facets), dtype=bool)
+    np.logical_and.at(face_well_shaped, cage.facet_face, well_shaped)
+    return (face_facets[cage.facet_face] == 2) & face_well_shaped[cage.facet_face]
+
+
 class Surface:
     """The cage's planar regions and their samples, refined on request.
 
@@ -62,9 +100,12 @@ class Surface:
     rng : numpy.random.Generator
     budget : int, the most samples refinement may make
     deadline : float, the time.perf_counter() after which refinement gives up
+    split : (E,) bool array, optional
+        The facets that are regions of their own (:func:`split_facets`; chosen once per mesh, so that a retry at
+        another spacing keeps the same regions); None: every facet merges with its coplanar neighbours.
     """
 
-    def __init__(self, cage, spacing, rng, budget, deadline):
+    def __init__(self, cage, spacing, rng, budget, deadline, split=None):
         self.cage, self.rng, self.spacing, self.budget, self.deadline = cage, rng, spacing, budget, deadline
         facets = cage.facets
         n_facets = len(facets)
@@ -78,6 +119,8 @@ class Surface:
         # A closed manifold cage: every edge has exactly two facets.
         edge_facets = np.repeat(np.arange(n_facets), 3)[np.argsort(inverse, kind="stable")].reshape(-1, 2)
         flat = np.einsum("ij,ij->i", normals[edge_facets[:, 0]], normals[edge_facets[:, 1]]) > np.cos(COPLANAR_ANGLE)
+        if split is not None:
+            flat &= ~split[edge_facets[:, 0]] & ~split[edge_facets[:, 1]]
         links = edge_facets[flat]
         graph = sp.coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(n_facets, n_facets))
         _, region = connected_components(graph, directed=False)

@@ -31,7 +31,7 @@ from ..errors import CageError
 from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, row_keys, signed_measures
 from ..geometry import signed_radius_ratios_by_coordinate, triangle_normals, unit, winding_numbers
 from .common import far_points, on_common, raw_mesh, rows_in
-from .surface import JITTER, OutOfBudget, Surface
+from .surface import JITTER, OutOfBudget, Surface, split_facets
 
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
 # along the surface, the corpus's meshes have 8.2 to 10.8 per a^3 at 8000 cells (7.1 to 13.9 at 2000).
@@ -110,11 +110,14 @@ def mesh(cage, cells, steps):
     """Tetrahedra filling the cage (in the meshing frame): a DomainMesh before the final check."""
     side = (_TETS_PER_CUBE * cage.measure / cells) ** (1.0 / 3.0)
     deadline = time.perf_counter() + _SECONDS + _SECONDS_PER_1000 * cells / 1000.0
-    surface, vertices, tets = _attempts(cage, side, deadline, steps.part(0.0, 0.6))
+    # Chosen at the first spacing and kept: regions that changed with a retry's spacing would undo its correction.
+    split = split_facets(cage, _SURFACE_SPACING * side)
+    surface, vertices, tets = _attempts(cage, side, split, deadline, steps.part(0.0, 0.6))
     ratio = len(tets) / cells
     if abs(ratio - 1.0) > _COUNT_TOLERANCE:  # thin or small cages: mostly surface band, fewer tetrahedra per volume
         try:
-            surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), deadline, steps.part(0.6, 0.95))
+            surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), split, deadline,
+                                                steps.part(0.6, 0.95))
         except CageError:
             pass  # the first mesh conforms: keep it, with its cell count off target
     steps(0.95, "checking the tetrahedralisation")
@@ -122,12 +125,13 @@ def mesh(cage, cells, steps):
     return raw_mesh(vertices, tets, np.arange(len(samples.points)), samples.facet, samples.bary)
 
 
-def _attempts(cage, side, deadline, steps):
-    """The smoothed conforming tetrahedralisation at lattice side ``side``, retried with fresh jitter and a coarser
-    surface when refinement runs out of budget; CageError after the last attempt or past the deadline."""
+def _attempts(cage, side, split, deadline, steps):
+    """The smoothed conforming tetrahedralisation at lattice side ``side`` (``split``: see :class:`Surface`), retried
+    with fresh jitter and a coarser surface when refinement runs out of budget; CageError after the last attempt or
+    past the deadline."""
     for attempt in range(_ATTEMPTS):
         try:
-            return _tetrahedralise(cage, side, 1.5**attempt, attempt, deadline,
+            return _tetrahedralise(cage, side, split, 1.5**attempt, attempt, deadline,
                                    steps.part(attempt / _ATTEMPTS, (attempt + 1) / _ATTEMPTS))
         except _RunsAway as failure:
             raise CageError(_diagnose_gap(cage, failure.facets, failure.spacing)) from None
@@ -138,8 +142,9 @@ def _attempts(cage, side, deadline, steps):
     raise CageError(_diagnose(cage, facets))
 
 
-def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
-    """The conforming Delaunay tetrahedralisation for a lattice of cube side ``side``, smoothed.
+def _tetrahedralise(cage, side, split, coarsening, seed, deadline, steps):
+    """The conforming Delaunay tetrahedralisation for a lattice of cube side ``side``, smoothed (``split``: the
+    facets that are surface regions of their own, see :class:`Surface`).
 
     Returns
     -------
@@ -151,7 +156,7 @@ def _tetrahedralise(cage, side, coarsening, seed, deadline, steps):
     steps(0.0, "sampling the cage surface")
     spacing = _SURFACE_SPACING * side * coarsening
     budget = int(_SAMPLE_BUDGET * (_initial_count(cage, spacing)) + 5000)
-    surface = Surface(cage, spacing, rng, budget, deadline)
+    surface = Surface(cage, spacing, rng, budget, deadline, split)
     try:
         samples = surface.samples(steps)
     except OutOfBudget:
@@ -213,12 +218,13 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
             if is_face.all():
                 return samples, lattice, delaunay
             missing.append(np.count_nonzero(~is_face))
+            regions = np.unique(samples.triangle_region[~is_face])
             if _runs_away(missing, len(samples.points), surface.budget):
-                regions = np.unique(samples.triangle_region[~is_face])
                 raise _RunsAway(np.flatnonzero(np.isin(surface.region, regions)), surface.spacing)
             surface.refine(np.flatnonzero(~is_face), steps)
     except OutOfBudget:
-        pass
+        if _growing(missing):  # out of samples while the missing triangles kept growing: running away too
+            raise _RunsAway(np.flatnonzero(np.isin(surface.region, regions)), surface.spacing) from None
     raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble)))
 
 
@@ -276,11 +282,16 @@ def _runs_away(missing, n_samples, budget):
     n_samples : int, surface samples in the last round
     budget : int, the most samples refinement may make
     """
-    recent = missing[-_GROWING_ROUNDS - 1:]
-    if len(recent) <= _GROWING_ROUNDS or not all(b > a for a, b in zip(recent, recent[1:])):
+    if not _growing(missing):
         return False
     growth = missing[-1] / missing[-2]
     return n_samples + missing[-1] * (1.0 + growth) > budget
+
+
+def _growing(missing):
+    """Whether the missing surface triangles per round (list of int) grew _GROWING_ROUNDS rounds in a row."""
+    recent = missing[-_GROWING_ROUNDS - 1:]
+    return len(recent) > _GROWING_ROUNDS and all(b > a for a, b in zip(recent, recent[1:]))
 
 
 def _conforms(tets, across, inside, triangles, incidence):
