@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/rebinding.py [--skip-64k] [--addon [--cage L10] [--vertex V ...] [--face F ...]]
     .venv/bin/python bench/rebinding.py --rings [--cage L10]
+    .venv/bin/python bench/rebinding.py --quads
 
 For each scene: bind the gargoyle to its cage, move 1, 3 or 5 cage vertices (seeded random directions) by 1-10 % of
 the cage's diagonal, then bind the edited cage cold (lbc_core.bind) and warm (lbc_core.rebind from the first
@@ -10,6 +11,9 @@ cold solve's: the same problem, so any difference is the solver's tolerance), th
 points, and the largest difference of the points deformed by one pose, over the cage's diagonal. "mesh noise" is the
 same comparison between two cold binds at 8000 and 9000 cells: what remeshing alone changes.
 
+--quads  the corpus's quad cages as Blender makes them (tests/cage_corpus.py: a subdivided cube, limbs, a torus, an
+         8-sided prism of 5 rings, Blender's 8-sided cylinder), 3000 points spread inside each, the same table
+         (edits 1 × 1 %, 1 × 2 %, 3 × 1 %, 1 × 5 %): any edit bends the quads at the moved vertices.
 --rings  the rings of vertices solved again around the moved coordinates' supports (2, 1 and 0) on the gargoyle
          mesh (2674 points) in the cage ``--cage`` names, or on one of the paper's 2D cages (``--cage woody``,
          ``cactus``, ``Gil_Gecko``): each warm re-bind against a tight solve on its mesh.
@@ -108,7 +112,9 @@ def differences(a, b, cage):
 def on_carried_mesh(previous, edited_cage, faces, tolerance=None):
     """A cold solve (SolveResult, unit frame) on the mesh the warm re-bind carries, at ``tolerance`` (None: the
     default); None where the carried mesh is not valid."""
-    cage = lbc_core.make_cage(edited_cage, faces)
+    cage, why_not = rebinding._split_as_before(previous.cage, lbc_core.make_cage(edited_cage, faces))
+    if why_not is not None:
+        return None
     unit_cage = UnitFrame.of(cage).cage_to_unit(cage)
     mesh, _ = carry_domain(previous, unit_cage)
     if mesh is None:
@@ -163,6 +169,23 @@ def scene(name, cage, faces, points, edits):
     weights, deformation = differences(first, noise, cage)
     print(f"mesh noise (cold 8000 against cold 9000 cells, unedited cage): max weight difference {weights:.3f}, "
           f"deformation {deformation:.2e} of the diagonal; load average {os.getloadavg()[0]:.1f}", flush=True)
+
+
+QUAD_CAGES = ("grid-box", "limbs", "torus", "prism-8-rings-5", "cylinder-8-ngon")
+
+
+def points_inside(cage, faces, count=3000, seed=0):
+    """``count`` random points inside a closed cage (winding number above one half), (count, 3)."""
+    from lbc_core.geometry import winding_numbers
+
+    rng = np.random.default_rng(seed)
+    facets = lbc_core.make_cage(cage, faces).facets
+    low, high = cage.min(axis=0), cage.max(axis=0)
+    inside = np.zeros((0, 3))
+    while len(inside) < count:
+        trial = low + (high - low) * rng.random((4 * count, 3))
+        inside = np.concatenate([inside, trial[winding_numbers(cage, facets, trial) > 0.5]])
+    return inside[:count]
 
 
 def gargoyle_64k():
@@ -303,7 +326,17 @@ def main(argv=None):
     parser.add_argument("--rings", action="store_true",
                         help="the rings solved again around the supports (2, 1, 0) on the cage --cage names (a "
                              "gargoyle cage or woody, cactus, Gil_Gecko)")
+    parser.add_argument("--quads", action="store_true", help="the corpus's quad cages, 3000 points inside each")
     arguments = parser.parse_args(argv)
+    if arguments.quads:
+        sys.path.insert(0, str(ROOT / "tests"))
+        import cage_corpus
+
+        for name in QUAD_CAGES:
+            cage, faces = cage_corpus.load(name)
+            scene(f"corpus {name}", cage, faces, points_inside(cage, faces), [(1, 0.01), (1, 0.02), (3, 0.01),
+                                                                               (1, 0.05)])
+        return
     if arguments.rings:
         rings_scene(arguments.cage)
         return

@@ -5,8 +5,9 @@ in 2D, an outward-oriented triangulation of the faces in 3D. Boundary values are
 n-gon face is linear on each triangle of its triangulation. The triangulation is a documented, consistent choice that
 keeps the Lagrange and linearity properties on every edge of the input:
 
-* a quad is split along its shorter diagonal, unless that diagonal leaves the quad (a non-convex quad) or makes a
-  zero-area triangle; then along the other one;
+* a quad is split along its shorter diagonal, or, when the two are within :data:`QUAD_SPLIT_TIE` of each other,
+  along the one from its first vertex, unless that diagonal leaves the quad (a non-convex quad) or makes a zero-area
+  triangle; then along the other one;
 * an n-gon is ear-clipped in the plane of its Newell normal, always cutting the first ear in the face's vertex order.
 
 Checks, in this order (each failure raises :class:`~lbc_core.errors.CageError`, a ValueError, whose message names the
@@ -49,6 +50,11 @@ NEARLY_FLAT = 1e-3
 # vertices × control points². At 2000 control points the 3D default resolution (8000 tetrahedra) needs 6 to 19 GB
 # and the 2D default (3000 triangles) 2 to 6 GB: beyond that no machine binds in reasonable time, so such cages are
 # refused before any work. The solver refuses smaller problems that do not fit the machine's memory.
+# Diagonals of a quad whose lengths differ by less than this share count as equal: the quad splits from its first
+# vertex. Its split then stays when an artist's edit bends it a little, so a bind from scratch splits it as the warm
+# re-bind that carries the previous mesh does (a bent quad's surface depends on its split). With 0.05, 6 of 16 edits
+# of the corpus's quad cages re-split a bent quad and bound from scratch; with 0.25, 2 (bench/RESULTS.md).
+QUAD_SPLIT_TIE = 0.25
 MAX_CONTROL_POINTS = 2000
 # Closed triangle meshes have about 2 triangles per vertex; 4 leaves room for handles and unwelded input.
 _FACES_PER_CONTROL_POINT = 4
@@ -597,11 +603,13 @@ def _triangulate(vertices, faces, zero, defects):
 
 
 def _split_quad(vertices, quad, zero):
-    """(2, 3) int array: the quad's two triangles along the shorter diagonal that stays inside it."""
+    """(2, 3) int array: the quad's two triangles along the shorter diagonal that stays inside it (the one from its
+    first vertex when the two tie within QUAD_SPLIT_TIE)."""
     points = vertices[quad]
     options = (quad[[[0, 1, 2], [0, 2, 3]]], quad[[[0, 1, 3], [1, 2, 3]]])
-    lengths = (np.linalg.norm(points[0] - points[2]), np.linalg.norm(points[1] - points[3]))
-    preference = np.argsort(lengths, kind="stable")
+    lengths = np.array([np.linalg.norm(points[0] - points[2]), np.linalg.norm(points[1] - points[3])])
+    tie = abs(lengths[0] - lengths[1]) <= QUAD_SPLIT_TIE * lengths.max()
+    preference = (0, 1) if tie else np.argsort(lengths, kind="stable")
     for choice in preference:
         normals = triangle_normals(vertices[options[choice]])
         if normals[0] @ normals[1] > 0 and not np.any(_degenerate(vertices[options[choice]], zero)):

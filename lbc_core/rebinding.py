@@ -32,7 +32,7 @@ from .fem import boundary_facets
 from .frame import UnitFrame
 from .geodesics import geodesic_distances
 from .geodesics import tv_weights as make_tv_weights
-from .geometry import (bary_positions, orient_positive, radius_ratios, row_keys, signed_measures, triangle_normals,
+from .geometry import (bary_positions, closest_on_facets, orient_positive, radius_ratios, row_keys, signed_measures, triangle_normals,
                        unit)
 from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
@@ -321,12 +321,9 @@ def carry_domain(previous, unit_cage):
                            f"than {QUALITY_KEPT:.0%} of their shape")
     bent = _faces_off_cage(old, previous.cage, unit_cage)
     if len(bent):
-        faces = ", ".join(map(str, bent[:5])) + (f" and {len(bent) - 5} more" if len(bent) > 5 else "")
-        if len(bent) == 1:
-            return None, (f"cage face {faces} is no longer flat, and the cells the last bind filled the cage with "
-                          "have faces across it")
-        return None, (f"cage faces {faces} are no longer flat, and the cells the last bind filled the cage with "
-                      "have faces across them")
+        one = len(bent) == 1
+        return None, (f"{_named_faces(bent)} {'is' if one else 'are'} no longer flat, and the cells the last bind "
+                      f"filled the cage with have faces across {'it' if one else 'them'}")
     return replace(old, vertices=vertices, cells=cells), None
 
 
@@ -428,7 +425,8 @@ def _split_as_before(old, new):
 
     How a quad or an n-gon is split into triangles follows the positions (a quad's shorter diagonal), so a small edit
     can change the split alone; the carried mesh lies on the previous facets, which stay a valid surface of the same
-    faces as long as none of them folds against its face or flattens.
+    faces as long as none of them folds against its face or flattens, and as long as the faces split otherwise stay
+    flat: a bent face's surface is its split, and a cold bind would bind the other one.
     """
     if old.fingerprint() == new.fingerprint():
         return new, None
@@ -443,7 +441,31 @@ def _split_as_before(old, new):
         face_sizes = np.linalg.norm(face_normals[old.facet_face], axis=1)
         if np.any(facing <= ZERO_LENGTH * new.bbox_diagonal ** 2 * face_sizes):
             return new, "a cage face bent so far that its previous split into triangles folds"
+        # A bent face's surface is its split: keeping the previous one would bind another cage than a cold bind.
+        resplit = np.unique(old.facet_face[~np.isin(row_keys(np.sort(old.facets, axis=1), len(new.vertices)),
+                                                    row_keys(np.sort(new.facets, axis=1), len(new.vertices)))])
+        bent = _bent(normals, old.facet_face, resplit)
+        if len(bent):
+            return new, (f"{_named_faces(bent)} bent and now split into other triangles (the edit changed which "
+                         "diagonal a bind splits it along), which the cells the last bind filled the cage with do "
+                         "not follow")
     return Cage(new.vertices, old.facets, old.facet_face, new.vertex_map, new.warnings), None
+
+
+def _named_faces(faces):
+    """ "cage face 3", "cage faces 1, 4" or "cage faces 0, 1, 2, 3, 4 and 2 more": the first five of ``faces``."""
+    listed = ", ".join(map(str, faces[:5])) + (f" and {len(faces) - 5} more" if len(faces) > 5 else "")
+    return f"cage face{'s' if len(faces) > 1 else ''} {listed}"
+
+
+def _bent(normals, facet_face, faces):
+    """The faces among ``faces`` whose facets (normals (E, 3), any length) are not all coplanar within
+    COPLANAR_ANGLE."""
+    directions = unit(normals)
+    mean = np.zeros((int(facet_face.max()) + 1, 3))
+    np.add.at(mean, facet_face, normals)
+    off = np.einsum("ij,ij->i", directions, unit(mean)[facet_face]) < np.cos(COPLANAR_ANGLE)
+    return faces[np.isin(faces, facet_face[off])]
 
 
 def _polished(mesh, vertices, squashed):
@@ -488,13 +510,40 @@ def _faces_off_cage(mesh, old_cage, cage):
         return np.zeros(0, dtype=np.int64)
     facet_of = np.full(len(mesh.vertices), -1)
     facet_of[mesh.boundary_vertices] = mesh.boundary_facet
-    facets = facet_of[boundary_facets(mesh.cells)]  # (K, 3): the cage facet of each corner
-    facets = facets[np.any(facets != facets[:, :1], axis=1)]
+    triangles = boundary_facets(mesh.cells)
+    facets = facet_of[triangles]  # (K, 3): the cage facet of each corner
+    mixed = np.any(facets != facets[:, :1], axis=1)
+    triangles, facets = triangles[mixed], facets[mixed]
+    # A corner on an edge or at a corner of a facet is recorded on any facet there: a face lying within one facet
+    # is no face across a split line, whatever its corners' records say. That facet holds the first corner, so it
+    # shares a vertex with the facet the first corner is recorded on.
+    within = np.zeros(len(triangles), dtype=bool)
+    tolerance = (1e-9 * old_cage.bbox_diagonal) ** 2
+    for candidates in _facets_around(old_cage.facets, facets[:, 0]).T:
+        corners = old_cage.vertices[old_cage.facets[np.maximum(candidates, 0)]]
+        inside = candidates >= 0
+        for k in range(3):
+            inside &= closest_on_facets(mesh.vertices[triangles[:, k]], corners)[0] <= tolerance
+        within |= inside
+    facets = facets[~within]
     old_normals, normals = (unit(triangle_normals(c.vertices[c.facets])) for c in (old_cage, cage))
     off = np.zeros(len(facets), dtype=bool)
     for k in (1, 2):
         off |= _coplanar(old_normals, facets[:, 0], facets[:, k]) & ~_coplanar(normals, facets[:, 0], facets[:, k])
     return np.unique(cage.facet_face[facets[off, 0]])
+
+
+def _facets_around(facets, which):
+    """(len(which), D) int array: for each facet of ``which``, the facets sharing a vertex with it (itself included),
+    padded with -1."""
+    count = len(facets)
+    incidence = sp.csr_matrix((np.ones(facets.size), (np.repeat(np.arange(count), facets.shape[1]), facets.ravel())))
+    around = (incidence[which] @ incidence.T).tocsr()
+    lengths = np.diff(around.indptr)
+    padded = np.full((len(which), max(int(lengths.max(initial=0)), 1)), -1)
+    padded[np.repeat(np.arange(len(which)), lengths), np.arange(around.nnz) - np.repeat(around.indptr[:-1], lengths)] \
+        = around.indices
+    return padded
 
 
 def _coplanar(normals, first, second):
