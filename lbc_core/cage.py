@@ -52,8 +52,8 @@ NEARLY_FLAT = 1e-3
 # refused before any work. The solver refuses smaller problems that do not fit the machine's memory.
 # Diagonals of a quad whose lengths differ by less than this share count as equal: the quad splits from its first
 # vertex. Its split then stays when an artist's edit bends it a little, so a bind from scratch splits it as the warm
-# re-bind that carries the previous mesh does (a bent quad's surface depends on its split). With 0.05, 6 of 16 edits
-# of the corpus's quad cages re-split a bent quad and bound from scratch; with 0.25, 2 (bench/RESULTS.md).
+# re-bind that carries the previous mesh does (a bent quad's surface depends on its split). With 0.05, 11 of 16
+# edits of the corpus's quad cages re-split a bent quad and bound from scratch; with 0.25, 2 (bench/RESULTS.md).
 QUAD_SPLIT_TIE = 0.25
 MAX_CONTROL_POINTS = 2000
 # Closed triangle meshes have about 2 triangles per vertex; 4 leaves room for handles and unwelded input.
