@@ -13,10 +13,12 @@ at their previous weights as fixed values, starting from the previous solve's fi
 kept in memory) rather than from the harmonic coordinates; the geodesic weights and the evaluation at the points are
 computed afresh, as in :func:`lbc_core.bind`.
 
-Where the carried mesh is not valid (a cell folds or loses too much of its shape, a mesh face would leave a cage
-face that is no longer flat: typically a cage vertex moved by more than about a cell's size), the cage's topology,
-welding or face splitting changed, or the previous binding has no solver state (one loaded from a file), the re-bind
-is a cold bind with the previous options, and ``Binding.options["rebind"]`` says why.
+Where the carried mesh is not valid (a cell folds or loses too much of its shape, typically where a cage vertex
+moved by more than about a cell's size; a mesh face would leave a cage face that is no longer flat, which the mesher
+avoids for well-shaped quads by following their diagonals but not for n-gons and skinny quads), a bent face now
+splits into other triangles than before, the cage's topology or welding changed, or the previous binding has no
+solver state (one loaded from a file), the re-bind is a cold bind with the previous options, and
+``Binding.options["rebind"]`` says why.
 """
 
 import time
