@@ -67,6 +67,11 @@ FREE_RINGS = 1
 # control point are always evaluated again), and they differ from evaluating again by at most about a fifth of this,
 # which is below the solver's own error at its tolerance (bench/RESULTS.md, "Points near small changes").
 STALE = 1e-2
+# How far a cage's vertices may move in all, summed over warm re-binds since its last bind from scratch (each edit's
+# largest move, over the diagonal), before a re-bind binds from scratch: a mesh carried out and back drifts from a
+# fresh one (a subdivided cube's side vertex out and back in Blender: 2 % 0.0011 of the mesh's diagonal from a fresh
+# bind, 5 % 0.013, 10 % 0.020, against 0.0069 between fresh binds at 8000 and 9000 cells).
+CARRY_LIMIT = 0.08
 
 
 @counted_in_load
@@ -114,10 +119,14 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
         reason = "a simplex cage has nothing to solve"
     elif previous.solver_state is None:
         reason = "the previous binding's solver state is not at hand (it is kept in memory only, not in files)"
+    travel = previous.options.get("travel", 0.0) + _largest_move(previous, cage)
     if reason is None:
         frame = UnitFrame.of(cage)
         unit_cage = frame.cage_to_unit(cage)
         carried, reason = carry_domain(previous, unit_cage)
+    if carried is not None and travel > CARRY_LIMIT:
+        carried, reason = None, (f"its vertices moved {travel:.0%} of the cage's diagonal in all since it was last "
+                                 "bound from scratch, and a mesh carried that far drifts from a fresh one")
     if carried is None:
         progress(0.0, f"binding from scratch: {reason}")
         binding = bind(cage_vertices, cage_faces, points, options=request, progress=progress)
@@ -169,10 +178,19 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
               "points": len(points)}
     done = (solved_again_text(counts) if moved.any() or len(again)
             else "the cage has not moved since, so nothing was solved or evaluated again")
-    options = dict(previous.options, start=WARM, solved_again=counts,
+    options = dict(previous.options, start=WARM, solved_again=counts, travel=travel,
                    rebind=f"bound again from the previous binding: {done}")
     return lbc_binding(frame, cage, carried, replace(result, objective=objective, state=state), weights, outside,
                        points, options, timings, stale)
+
+
+def _largest_move(previous, cage):
+    """The largest distance a control point moved from ``previous``'s rest cage to ``cage``, over its diagonal (0
+    where the control points differ in number: that re-bind binds from scratch anyway)."""
+    rest = previous.rest_cage_vertices
+    if rest.shape != cage.vertices.shape:
+        return 0.0
+    return float(np.linalg.norm(cage.vertices - rest, axis=1).max() / previous.cage.bbox_diagonal)
 
 
 def solved_again_text(counts):
@@ -532,7 +550,9 @@ def _faces_off_cage(mesh, old_cage, cage):
     off = np.zeros(len(facets), dtype=bool)
     for k in (1, 2):
         off |= _coplanar(old_normals, facets[:, 0], facets[:, k]) & ~_coplanar(normals, facets[:, 0], facets[:, k])
-    return np.unique(cage.facet_face[facets[off, 0]])
+    faces = np.unique(cage.facet_face[facets[off]])
+    bent = _bent(triangle_normals(cage.vertices[cage.facets]), cage.facet_face, faces)
+    return bent if len(bent) else faces  # the faces that bent, not their flat neighbours the mesh spans with them
 
 
 def _facets_around(facets, which):

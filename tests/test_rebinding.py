@@ -322,12 +322,12 @@ def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm()
     """Widening a pyramid's rhombus base in its plane brings its diagonals within QUAD_SPLIT_TIE of each other, so it
     splits from its first vertex instead of along the shorter diagonal; the base stays flat, and the carried mesh
     lies on the previous split, which still fits the same faces."""
-    pyramid = np.array([[1.0, 0.0, 0.0], [0.0, 0.6, 0.0], [-1.0, 0.0, 0.0], [0.0, -0.6, 0.0], [0.0, 0.0, 1.0]])
+    pyramid = np.array([[1.0, 0.0, 0.0], [0.0, 0.7, 0.0], [-1.0, 0.0, 0.0], [0.0, -0.7, 0.0], [0.0, 0.0, 1.0]])
     faces = [[2, 1, 0, 3], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]  # the base first (from a long diagonal)
     points = np.array([[0.1, 0.05, 0.2], [-0.2, 0.1, 0.3], [0.0, -0.1, 0.5], [0.3, 0.0, 0.1]])
     first = lbc_core.bind(pyramid, faces, points, cells=2000)
     edited = pyramid.copy()
-    edited[[1, 3], 1] *= 1.5
+    edited[[1, 3], 1] *= 1.1  # diagonals 2 and 1.54: within QUAD_SPLIT_TIE
     assert lbc_core.make_cage(edited, faces).fingerprint() != first.cage.fingerprint()
     again = rebind(first, edited, faces)
     assert again.options["start"] == "previous solution", again.options["rebind"]
@@ -401,3 +401,23 @@ def test_a_simplex_cage_binds_again_from_scratch_and_says_why():
     # The points stay where they were bound: their coordinates in the edited tetrahedron.
     expected = np.linalg.solve(np.c_[edited, np.ones(4)].T, np.c_[bary @ tetrahedron, np.ones(50)].T).T
     np.testing.assert_allclose(again.weights.toarray(), expected, atol=1e-12)
+
+
+def test_a_cage_moved_far_in_all_since_its_last_cold_bind_binds_from_scratch(gargoyle):
+    """A new user's finding: a side vertex of a subdivided cube moved out by 10 % and back, re-bound warm both ways,
+    ended 2.6 times the remeshing noise from a fresh bind. The moves add up across warm re-binds."""
+    from lbc_core.rebinding import CARRY_LIMIT
+
+    cage, faces, points, first = gargoyle
+    diagonal = np.linalg.norm(np.ptp(cage, axis=0))
+    out = cage.copy()
+    out[5, 2] += 0.6 * CARRY_LIMIT * diagonal
+    there = rebind(first, out, faces)
+    assert there.options["start"] == "previous solution", there.options["rebind"]
+    assert there.options["travel"] == pytest.approx(0.6 * CARRY_LIMIT)
+    back = rebind(there, cage, faces)
+    assert back.options["rebind"] == ("bound from scratch: its vertices moved 10% of the cage's diagonal in all since "
+                                      "it was last bound from scratch, and a mesh carried that far drifts from a "
+                                      "fresh one")
+    assert "travel" not in back.options
+    assert rebind(back, out, faces).options["start"] == "previous solution"  # counted again from the cold bind
