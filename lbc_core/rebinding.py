@@ -29,13 +29,14 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from .cage import ZERO_LENGTH, Cage, make_cage
+from .constraints import padded_rows
 from .errors import CageError
 from .fem import boundary_facets
 from .frame import UnitFrame
 from .geodesics import geodesic_distances
 from .geodesics import tv_weights as make_tv_weights
-from .geometry import (bary_positions, closest_on_facets, orient_positive, radius_ratios, row_keys, signed_measures, triangle_normals,
-                       unit)
+from .geometry import (bary_positions, closest_on_facets, orient_positive, radius_ratios, row_keys, signed_measures,
+                       triangle_normals, unit)
 from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
 from .meshing.tetrahedra import polish
@@ -560,12 +561,8 @@ def _facets_around(facets, which):
     padded with -1."""
     count = len(facets)
     incidence = sp.csr_matrix((np.ones(facets.size), (np.repeat(np.arange(count), facets.shape[1]), facets.ravel())))
-    around = (incidence[which] @ incidence.T).tocsr()
-    lengths = np.diff(around.indptr)
-    padded = np.full((len(which), max(int(lengths.max(initial=0)), 1)), -1)
-    padded[np.repeat(np.arange(len(which)), lengths), np.arange(around.nnz) - np.repeat(around.indptr[:-1], lengths)] \
-        = around.indices
-    return padded
+    shared, around = padded_rows(incidence[which] @ incidence.T)  # shared vertices, 0 in the padding
+    return np.where(shared > 0, around, -1)
 
 
 def _coplanar(normals, first, second):
