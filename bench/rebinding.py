@@ -12,7 +12,8 @@ points, and the largest difference of the points deformed by one pose, over the 
 same comparison between two cold binds at 8000 and 9000 cells: what remeshing alone changes.
 
 --quads  the corpus's quad cages as Blender makes them (tests/cage_corpus.py: a subdivided cube, limbs, a torus, an
-         8-sided prism of 5 rings, Blender's 8-sided cylinder), 3000 points spread inside each, the same table
+         8-sided prism of 5 rings, Blender's 8- and 16-sided cylinders) and Blender's Cylinder with two loop cuts,
+         3000 points spread inside each, the same table
          (edits 1 × 1 %, 1 × 2 %, 3 × 1 %, 1 × 5 %): any edit bends the quads at the moved vertices.
 --rings  the rings of vertices solved again around the moved coordinates' supports (2, 1 and 0) on the gargoyle
          mesh (2674 points) in the cage ``--cage`` names, or on one of the paper's 2D cages (``--cage woody``,
@@ -171,7 +172,18 @@ def scene(name, cage, faces, points, edits):
           f"deformation {deformation:.2e} of the diagonal; load average {os.getloadavg()[0]:.1f}", flush=True)
 
 
-QUAD_CAGES = ("grid-box", "limbs", "torus", "prism-8-rings-5", "cylinder-8-ngon")
+QUAD_CAGES = ("grid-box", "limbs", "torus", "prism-8-rings-5", "cylinder-8-ngon", "cylinder-16-ngon")
+
+
+def loop_cut_cylinder(segments=32, cuts=2, depth=2.0):
+    """Blender's Cylinder (radius 1, 32-gon caps) with ``cuts`` loop cuts: (vertices (n, 3), faces)."""
+    rings = cuts + 2
+    angles = 2 * np.pi * np.arange(segments) / segments
+    vertices = np.array([[np.cos(a), np.sin(a), depth * (r / (rings - 1) - 0.5)] for r in range(rings) for a in angles])
+    faces = [[r * segments + s, r * segments + (s + 1) % segments, (r + 1) * segments + (s + 1) % segments,
+              (r + 1) * segments + s] for r in range(rings - 1) for s in range(segments)]
+    faces += [list(range(segments))[::-1], list(range((rings - 1) * segments, rings * segments))]
+    return vertices, faces
 
 
 def points_inside(cage, faces, count=3000, seed=0):
@@ -332,10 +344,9 @@ def main(argv=None):
         sys.path.insert(0, str(ROOT / "tests"))
         import cage_corpus
 
-        for name in QUAD_CAGES:
-            cage, faces = cage_corpus.load(name)
-            scene(f"corpus {name}", cage, faces, points_inside(cage, faces), [(1, 0.01), (1, 0.02), (3, 0.01),
-                                                                               (1, 0.05)])
+        cages = [(f"corpus {name}", *cage_corpus.load(name)) for name in QUAD_CAGES]
+        for name, cage, faces in cages + [("Blender's Cylinder, 2 loop cuts", *loop_cut_cylinder())]:
+            scene(name, cage, faces, points_inside(cage, faces), [(1, 0.01), (1, 0.02), (3, 0.01), (1, 0.05)])
         return
     if arguments.rings:
         rings_scene(arguments.cage)

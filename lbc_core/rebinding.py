@@ -14,11 +14,11 @@ kept in memory) rather than from the harmonic coordinates; the geodesic weights 
 computed afresh, as in :func:`lbc_core.bind`.
 
 Where the carried mesh is not valid (a cell folds or loses too much of its shape, typically where a cage vertex
-moved by more than about a cell's size; a mesh face would leave a cage face that is no longer flat, which the mesher
-avoids for well-shaped quads by following their diagonals but not for n-gons and skinny quads), a bent face now
-splits into other triangles than before, the cage's topology or welding changed, or the previous binding has no
-solver state (one loaded from a file), the re-bind is a cold bind with the previous options, and
-``Binding.options["rebind"]`` says why.
+moved by more than about a cell's size; a mesh face across a cage face the edit bent, which the mesher avoids for
+well-shaped quads by following their diagonals but not for n-gons and skinny quads, would leave the cage by more than
+CHORD_KEPT of a cell), a bent face now splits into other triangles than before, the cage's topology or welding
+changed, or the previous binding has no solver state (one loaded from a file), the re-bind is a cold bind with the
+previous options, and ``Binding.options["rebind"]`` says why.
 """
 
 import time
@@ -54,6 +54,10 @@ from .solver import SolveResult, solve_on_mesh
 # Cells with every corner on the cage are exempt: their values are the cage's boundary values, fixed, so their shape
 # never enters the solve (only folding them is refused).
 QUALITY_KEPT = 0.25
+# A carried boundary face may cross a cage face that the edit bent (a quad's diagonal, an n-gon's split) as a chord:
+# its corners stay on the cage, its inside leaves it. Up to this share of the median cell edge, the carried mesh is
+# kept: binds were measured as close to a bind from scratch as two binds from scratch are to each other.
+CHORD_KEPT = 0.25
 # Share of the progress bar each stage gets.
 _STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 0.9), "reduction": (0.9, 1.0)}
 # Binding.options["start"] of a re-bind: where the solver started.
@@ -340,11 +344,12 @@ def carry_domain(previous, unit_cage):
         return None, _near(previous, cells[squashed],
                            "the edit would squash some of the cells the last bind filled the cage with, to less "
                            f"than {QUALITY_KEPT:.0%} of their shape")
-    bent = _faces_off_cage(old, previous.cage, unit_cage)
+    bent = _faces_off_cage(old, vertices, previous.cage, unit_cage)
     if len(bent):
         one = len(bent) == 1
-        return None, (f"{_named_faces(bent)} {'is' if one else 'are'} no longer flat, and the cells the last bind "
-                      f"filled the cage with have faces across {'it' if one else 'them'}")
+        return None, (f"{_named_faces(bent)} bent so far that the cells the last bind filled the cage with, whose "
+                      f"faces cross {'it' if one else 'them'}, would leave the cage by more than "
+                      f"{CHORD_KEPT:.0%} of a cell")
     return replace(old, vertices=vertices, cells=cells), None
 
 
@@ -519,13 +524,20 @@ def _quality(vertices, cells):
     return (b + c - a) * (c + a - b) * (a + b - c) / np.maximum(a * b * c, np.finfo(float).tiny)
 
 
-def _faces_off_cage(mesh, old_cage, cage):
-    """Input faces (3D) that some mesh boundary face spans together with a facet it was coplanar with, and that are
-    no longer coplanar with it.
+def _faces_off_cage(mesh, vertices, old_cage, cage):
+    """Input faces (3D) that some carried mesh boundary face crosses as a chord leaving the cage by more than
+    CHORD_KEPT of the median cell edge.
 
-    A mesh boundary face may straddle the split lines of a planar cage face (a quad's diagonal); carried, it stays
-    on the cage only if those facets stay coplanar. (A face vertex on a sharp cage edge may be recorded on the facet
-    beyond it; such pairs were not coplanar before either, and the vertex stays on the edge.)
+    A mesh boundary face may straddle the split lines of a planar cage face (a quad's diagonal, the edge between two
+    coplanar faces); carried, its corners stay on their facets but its inside stays on the cage only if those facets
+    stay coplanar. (A face vertex on a sharp cage edge may be recorded on the facet beyond it; such pairs were not
+    coplanar before either, and the vertex stays on the edge.)
+
+    Parameters
+    ----------
+    mesh : DomainMesh, before the edit (in the frame of ``old_cage``)
+    vertices : (N, 3) float array, the mesh's vertices carried onto ``cage`` (in its unit frame)
+    old_cage, cage : Cage, before and after the edit, with the same facets
     """
     if cage.dim == 2:
         return np.zeros(0, dtype=np.int64)
@@ -546,14 +558,30 @@ def _faces_off_cage(mesh, old_cage, cage):
         for k in range(3):
             inside &= closest_on_facets(mesh.vertices[triangles[:, k]], corners)[0] <= tolerance
         within |= inside
-    facets = facets[~within]
+    triangles, facets = triangles[~within], facets[~within]
     old_normals, normals = (unit(triangle_normals(c.vertices[c.facets])) for c in (old_cage, cage))
     off = np.zeros(len(facets), dtype=bool)
     for k in (1, 2):
         off |= _coplanar(old_normals, facets[:, 0], facets[:, k]) & ~_coplanar(normals, facets[:, 0], facets[:, k])
-    faces = np.unique(cage.facet_face[facets[off]])
+    triangles, facets = triangles[off], facets[off]
+    far = _chord_distances(vertices[triangles], facets, cage) > CHORD_KEPT * median_edge(vertices, mesh.cells)
+    faces = np.unique(cage.facet_face[facets[far]])
     bent = _bent(triangle_normals(cage.vertices[cage.facets]), cage.facet_face, faces)
     return bent if len(bent) else faces  # the faces that bent, not their flat neighbours the mesh spans with them
+
+
+def _chord_distances(corners, facets, cage):
+    """(K,) float array: how far each triangle (corners (K, 3, 3), on the cage) leaves the surface of ``cage``, taken
+    at its centroid and edge midpoints, against the facets around its corners' facets ``facets`` (K, 3)."""
+    samples = np.stack([corners.mean(axis=1), *((corners[:, k] + corners[:, k - 1]) / 2 for k in range(3))], axis=1)
+    nearest = np.full(samples.shape[:2], np.inf)
+    for k in range(3):
+        for candidates in _facets_around(cage.facets, facets[:, k]).T:
+            facet_corners = cage.vertices[cage.facets[np.maximum(candidates, 0)]]
+            for s in range(samples.shape[1]):
+                squared = closest_on_facets(samples[:, s], facet_corners)[0]
+                nearest[:, s] = np.minimum(nearest[:, s], np.where(candidates >= 0, squared, np.inf))
+    return np.sqrt(nearest.max(axis=1))
 
 
 def _facets_around(facets, which):

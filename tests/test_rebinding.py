@@ -291,19 +291,44 @@ def test_a_quad_bent_out_of_its_plane_rebinds_warm_when_the_mesh_follows_its_dia
     assert abs(again.weights - fresh.weights).max() < 0.05  # within the remeshing noise of a 300-cell bind
 
 
-def test_a_bent_quad_the_mesh_crosses_falls_back_to_a_cold_bind():
-    # A flat box's sides are too skinny for their diagonals to be features (16.7° angles): the carried mesh has
-    # boundary faces across them, which would leave the bent cage.
+def test_a_quad_bent_a_little_rebinds_warm_though_the_mesh_crosses_its_diagonal(monkeypatch):
+    """A flat box's sides are too skinny for their diagonals to be features (16.7° angles), so the carried mesh has
+    boundary faces across them: bent by a small edit, they leave the cage by a small share of a cell, and the
+    previous mesh is kept. Past CHORD_KEPT (here 0), the re-bind binds from scratch and names the face."""
+    import lbc_core.rebinding as rebinding
+
     box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 0.3)], dtype=float)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
     points = box * 0.5 + [0.25, 0.25, 0.075]
     first = lbc_core.bind(box, quads, points, cells=300)
     edited = box.copy()
-    edited[7, 0] -= 0.01  # bends the side x = 1 (the other faces at vertex 7 keep their planes)
+    edited[7, 0] -= 0.01  # bends the faces at vertex 7 that are not perpendicular to x
     again = rebind(first, edited, quads)
-    assert again.options["rebind"] == ("bound from scratch: cage face 1 is no longer flat, and the cells the last "
-                                       "bind filled the cage with have faces across it")
+    assert again.options["start"] == "previous solution", again.options["rebind"]
     assert_guarantees(again, points)
+    monkeypatch.setattr(rebinding, "CHORD_KEPT", 0.0)
+    again = rebind(first, edited, quads)
+    assert again.options["rebind"] == ("bound from scratch: cage face 1 bent so far that the cells the last bind "
+                                       "filled the cage with, whose faces cross it, would leave the cage by more "
+                                       "than 0% of a cell")
+    assert_guarantees(again, points)
+
+
+def test_chord_distances_measure_how_far_a_face_across_a_fold_leaves_the_cage():
+    """A triangle across the fold of a roof (two facets meeting at 90° along x = 0) leaves it at its midpoints;
+    one lying in a facet does not."""
+    from lbc_core.cage import Cage
+    from lbc_core.rebinding import _chord_distances
+
+    roof = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 1.0], [-1.0, 0.0, 0.0], [-1.0, 1.0, 0.0], [1.0, 0.0, 0.0],
+                     [1.0, 1.0, 0.0]])
+    facets = np.array([[0, 2, 3], [0, 3, 1], [0, 1, 5], [0, 5, 4]])
+    cage = Cage(roof, facets, np.arange(4), np.arange(6), [])
+    across = np.array([[[-0.5, 0.2, 0.5], [0.5, 0.2, 0.5], [0.0, 0.8, 1.0]]])  # corners on facets 0, 3 and the ridge
+    within = np.array([[[-0.5, 0.2, 0.5], [-0.2, 0.5, 0.8], [0.0, 0.8, 1.0]]])
+    # The edge between the first two corners passes 0.5 under the ridge, its midpoint (0, 0.2, 0.5) is 0.5 / √2 off.
+    assert _chord_distances(across, np.array([[0, 3, 1]]), cage) == pytest.approx([0.5 / np.sqrt(2)])
+    assert _chord_distances(within, np.array([[0, 0, 1]]), cage) == pytest.approx([0.0], abs=1e-12)
 
 
 def test_a_cold_bind_for_many_bent_faces_names_five_and_counts_the_others(monkeypatch):
@@ -315,7 +340,7 @@ def test_a_cold_bind_for_many_bent_faces_names_five_and_counts_the_others(monkey
     first = lbc_core.bind(cube, quads, cube * 0.5 + 0.25, cells=300)
     monkeypatch.setattr(rebinding, "_faces_off_cage", lambda *args: np.arange(7))
     assert rebind(first, cube * 1.01, quads).options["rebind"].startswith(
-        "bound from scratch: cage faces 0, 1, 2, 3, 4 and 2 more are no longer flat")
+        "bound from scratch: cage faces 0, 1, 2, 3, 4 and 2 more bent so far that")
 
 
 def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm():
