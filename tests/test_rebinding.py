@@ -314,6 +314,26 @@ def test_a_quad_bent_a_little_rebinds_warm_though_the_mesh_crosses_its_diagonal(
     assert_guarantees(again, points)
 
 
+def test_a_loop_cut_cylinder_rebinds_warm_after_a_loop_is_scaled_or_a_cap_vertex_lifted():
+    """Blender's Cylinder with two loop cuts: scaling a loop keeps its quads planar trapezoids, lifting a cap vertex
+    bends the 32-gon cap; neither moves the carried mesh's faces off the cage by more than CHORD_KEPT of a cell. (The
+    check once judged faces by the facets their corners were recorded on, any facet at a cage vertex, and bound
+    every such edit from scratch.)"""
+    angles = 2 * np.pi * np.arange(32) / 32
+    cylinder = np.array([[np.cos(a), np.sin(a), z] for z in (-1, -1 / 3, 1 / 3, 1) for a in angles])
+    faces = [[r * 32 + s, r * 32 + (s + 1) % 32, (r + 1) * 32 + (s + 1) % 32, (r + 1) * 32 + s]
+             for r in range(3) for s in range(32)] + [list(range(32))[::-1], list(range(96, 128))]
+    points = np.array([[0.3, 0.2, -0.5], [-0.4, 0.1, 0.0], [0.0, -0.5, 0.6], [0.6, 0.0, 0.9], [0.1, 0.1, 0.1]])
+    first = lbc_core.bind(cylinder, faces, points, cells=2000)
+    scaled, lifted = cylinder.copy(), cylinder.copy()
+    scaled[32:64, :2] *= 1.05
+    lifted[100, 2] += 0.05
+    for edited in (scaled, lifted):
+        again = rebind(first, edited, faces)
+        assert again.options["start"] == "previous solution", again.options["rebind"]
+        assert_guarantees(again, points)
+
+
 def test_chord_distances_measure_how_far_a_face_across_a_fold_leaves_the_cage():
     """A triangle across the fold of a roof (two facets meeting at 90° along x = 0) leaves it at its midpoints;
     one lying in a facet does not."""
