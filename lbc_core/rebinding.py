@@ -57,7 +57,7 @@ QUALITY_KEPT = 0.25
 # A carried boundary face may cross a cage face that the edit bent (a quad's diagonal, an n-gon's split) as a chord:
 # its corners stay on the cage, its inside leaves it. Up to this share of the median cell edge, the carried mesh is
 # kept: binds were measured as close to a bind from scratch as two binds from scratch are to each other.
-CHORD_KEPT = 0.25
+CHORD_KEPT = 0.5
 # Share of the progress bar each stage gets.
 _STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 0.9), "reduction": (0.9, 1.0)}
 # Binding.options["start"] of a re-bind: where the solver started.
