@@ -347,9 +347,9 @@ def carry_domain(previous, unit_cage):
     bent = _faces_off_cage(old, vertices, previous.cage, unit_cage)
     if len(bent):
         one = len(bent) == 1
-        return None, (f"{_named_faces(bent)} bent so far that the cells the last bind filled the cage with, whose "
-                      f"faces cross {'it' if one else 'them'}, would leave the cage by more than "
-                      f"{CHORD_KEPT:.0%} of a cell")
+        return None, (f"{_named_faces(bent)} bent too far: the cells the last bind filled the cage with cross "
+                      f"{'it' if one else 'them'} and would leave the cage by more than {CHORD_KEPT:.0%} of a cell's "
+                      "size")
     return replace(old, vertices=vertices, cells=cells), None
 
 

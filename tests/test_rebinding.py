@@ -308,9 +308,9 @@ def test_a_quad_bent_a_little_rebinds_warm_though_the_mesh_crosses_its_diagonal(
     assert_guarantees(again, points)
     monkeypatch.setattr(rebinding, "CHORD_KEPT", 0.0)
     again = rebind(first, edited, quads)
-    assert again.options["rebind"] == ("bound from scratch: cage face 1 bent so far that the cells the last bind "
-                                       "filled the cage with, whose faces cross it, would leave the cage by more "
-                                       "than 0% of a cell")
+    assert again.options["rebind"] == ("bound from scratch: cage face 1 bent too far: the cells the last bind "
+                                       "filled the cage with cross it and would leave the cage by more than 0% of "
+                                       "a cell's size")
     assert_guarantees(again, points)
 
 
@@ -360,7 +360,7 @@ def test_a_cold_bind_for_many_bent_faces_names_five_and_counts_the_others(monkey
     first = lbc_core.bind(cube, quads, cube * 0.5 + 0.25, cells=300)
     monkeypatch.setattr(rebinding, "_faces_off_cage", lambda *args: np.arange(7))
     assert rebind(first, cube * 1.01, quads).options["rebind"].startswith(
-        "bound from scratch: cage faces 0, 1, 2, 3, 4 and 2 more bent so far that")
+        "bound from scratch: cage faces 0, 1, 2, 3, 4 and 2 more bent too far")
 
 
 def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm():
