@@ -14,8 +14,9 @@ its previous binding when this session still has it (``lbc_core.rebind``: a smal
 times faster; only the weights it changed are thinned again). A mesh bound to a cage another mesh was bound to with the
 same options starts from that mesh's binding likewise: the solve depends on the cage alone, so several meshes in one
 cage solve it once and each is only evaluated at its vertices. The previous bindings live in memory only, the last
-:data:`KEPT_BINDINGS` of them: their solver state is 8-30 MB a binding (their thinned weights about 8 MB for 64k
-vertices), too large for the .blend, so a reopened file, or a mesh bound long ago, binds from scratch.
+:data:`KEPT_BINDINGS` of them and the one the latest bind replaced (an undo brings it back into the scene): their
+solver state is 8-30 MB a binding (their thinned weights about 8 MB for 64k vertices), too large for the .blend, so a
+reopened file, or a mesh bound long ago, binds from scratch.
 """
 
 import numbers
@@ -54,6 +55,7 @@ class _Previous:
 
 
 _previous = OrderedDict()  # mesh session_uid -> _Previous, the most recent last
+_replaced = {}  # the binding the latest bind replaced: mesh session_uid -> _Previous, one entry at most
 
 
 @dataclass
@@ -336,11 +338,12 @@ def warm_start(request, earlier=()):
     with the same options (a 2D bind: the same outline), among ``earlier`` (see :func:`solve`) and the kept ones.
 
     First one of the cage exactly as it is now (nothing to solve again: e.g. the second mesh of a Rebind after a cage
-    edit starts from the first's new binding), the mesh's own first; else the mesh's own; else the latest other's.
+    edit starts from the first's new binding, and a Rebind after undoing a Rebind finds the binding the undo brought
+    back), the mesh's own first; else the mesh's own; else the latest other's.
     """
-    own = _previous.get(request.mesh_uid)
+    own = [_previous.get(request.mesh_uid), _replaced.get(request.mesh_uid)]
     others = [_as_previous(*pair) for pair in reversed(earlier)] + list(reversed(_previous.values()))
-    candidates = [previous for previous in [own] + others if previous is not None and _same_solve(previous, request)]
+    candidates = [previous for previous in own + others if previous is not None and _same_solve(previous, request)]
     vertices = np.asarray(request.solve_geometry()[0], dtype=float)
     unmoved = [previous for previous in candidates if _bound_at(previous.binding, vertices)]
     return (unmoved + candidates + [None])[0]
@@ -398,15 +401,19 @@ def _rebind_report(request, previous, binding):
 def remember(request, result):
     """Keep ``result``'s binding as the mesh's previous one (the last KEPT_BINDINGS meshes' only); called once the
     binding is written."""
-    _previous.pop(request.mesh_uid, None)
+    replaced = _previous.pop(request.mesh_uid, None)
+    _replaced.clear()
+    if replaced is not None:
+        _replaced[request.mesh_uid] = replaced
     _previous[request.mesh_uid] = _as_previous(request, result)
     while len(_previous) > KEPT_BINDINGS:
         _previous.popitem(last=False)
 
 
 def forget(mesh_uid):
-    """Drop a mesh's previous binding (it was unbound)."""
+    """Drop a mesh's previous bindings (it was unbound)."""
     _previous.pop(mesh_uid, None)
+    _replaced.pop(mesh_uid, None)
 
 
 class Worker:

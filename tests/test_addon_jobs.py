@@ -123,6 +123,7 @@ def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(
     from lbc_core.io import read_cage, read_mesh
 
     monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    monkeypatch.setattr(jobs, "_replaced", {})
     gargoyle = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
     cage, faces = read_cage(gargoyle / "cage_L10.obj")
     points, _ = read_mesh(gargoyle / "mesh.off")
@@ -152,6 +153,28 @@ def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(
     np.testing.assert_allclose(warm.weight, weight, atol=1e-7)
 
 
+def test_binding_again_at_the_rest_of_the_replaced_binding_reuses_it_unchanged(monkeypatch):
+    """A new user's find: undo after a Rebind brings the earlier binding back into the scene, and a Rebind then solved
+    again from the edited cage's binding (881 cells), ending beside the binding the undo restored. The binding the
+    latest bind replaced is kept, and a cage back at its rest finds it: nothing is solved again."""
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    monkeypatch.setattr(jobs, "_replaced", {})
+    first = request(cells=600)
+    rest = jobs.solve(first)
+    jobs.remember(first, rest)
+    edited = BOX.copy()
+    edited[0] *= 1.05
+    second = request(cage_points=edited, cells=600)
+    jobs.remember(second, jobs.solve(second))
+    again = jobs.solve(request(cells=600))  # the cage back at rest, as after an undo
+    assert again.rebind == "bound again from the previous binding: the cage has not moved since, so nothing was " \
+                           "solved or evaluated again", again.rebind
+    np.testing.assert_array_equal(again.index, rest.index)
+    np.testing.assert_array_equal(again.weight, rest.weight)
+    jobs.forget(first.mesh_uid)  # Unbind drops both
+    assert jobs.warm_start(request(cells=600)) is None
+
+
 def two_meshes(seed, cage_points=BOX):
     """Requests of two meshes in one cage: 'Mesh' (uid 1) and 'Other' (uid 7), their points drawn from ``seed``."""
     rng = np.random.default_rng(seed)
@@ -172,6 +195,7 @@ def solved_by_a_worker(requests):
 
 def test_a_second_mesh_in_the_same_cage_reuses_the_first_ones_solve(monkeypatch):
     monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    monkeypatch.setattr(jobs, "_replaced", {})
     first, second = two_meshes(3)
     results = solved_by_a_worker([first, second])
     shared = results[1][1]
@@ -199,6 +223,7 @@ def test_printed_progress_says_each_new_message_and_a_repeated_one_at_most_once_
 
 def test_after_a_cage_edit_the_second_mesh_starts_from_the_first_ones_new_binding(monkeypatch):
     monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    monkeypatch.setattr(jobs, "_replaced", {})
     for job in two_meshes(4):
         jobs.remember(job, jobs.solve(job))
     edited = BOX.copy()
@@ -233,6 +258,7 @@ def test_a_2d_re_bind_after_moving_one_cage_vertex_solves_only_near_it(monkeypat
     """A code review's finding: the flat cage's plane frame (its mean and principal axes) shifted with the edit, so
     every control point moved in 2D and the re-bind started from scratch. It keeps the first bind's frame now."""
     monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    monkeypatch.setattr(jobs, "_replaced", {})
     outline, inside, _ = woody
     cage = np.c_[outline, np.full(len(outline), 0.3)]  # the woody cage as a flat n-gon in Blender
     points = np.c_[inside[:400], np.full(400, 0.3)]
