@@ -401,13 +401,20 @@ def _rebind_report(request, previous, binding):
 def remember(request, result):
     """Keep ``result``'s binding as the mesh's previous one (the last KEPT_BINDINGS meshes' only); called once the
     binding is written."""
+    kept = _as_previous(request, result)
     replaced = _previous.pop(request.mesh_uid, None)
-    _replaced.clear()
-    if replaced is not None:
+    if replaced is not None and not _same_binding(replaced, kept):  # a Rebind that solved nothing replaces nothing
+        _replaced.clear()
         _replaced[request.mesh_uid] = replaced
-    _previous[request.mesh_uid] = _as_previous(request, result)
+    _previous[request.mesh_uid] = kept
     while len(_previous) > KEPT_BINDINGS:
         _previous.popitem(last=False)
+
+
+def _same_binding(first, second):
+    """Whether two :class:`_Previous` records bound the same rest cage with the same solve."""
+    a, b = first.binding.rest_cage_vertices, second.binding.rest_cage_vertices
+    return _same_solve(first, second) and a.shape == b.shape and np.array_equal(a, b)
 
 
 def forget(mesh_uid):

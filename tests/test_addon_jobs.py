@@ -166,6 +166,7 @@ def test_binding_again_at_the_rest_of_the_replaced_binding_reuses_it_unchanged(m
     edited[0] *= 1.05
     second = request(cage_points=edited, cells=600)
     jobs.remember(second, jobs.solve(second))
+    jobs.remember(second, jobs.solve(second))  # undo, Rebind: nothing solved, nothing replaced
     again = jobs.solve(request(cells=600))  # the cage back at rest, as after an undo
     assert again.rebind == "bound again from the previous binding: the cage has not moved since, so nothing was " \
                            "solved or evaluated again", again.rebind
