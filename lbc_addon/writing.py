@@ -78,7 +78,6 @@ def _store_settings(settings, request, result, cage_obj, group):
     settings.slots = result.index.shape[1]
     settings.mean_influences = float(np.count_nonzero(result.weight, axis=1).mean()) if len(result.weight) else 0.0
     settings.outside = result.outside
-    settings.bind_seconds = result.seconds
     settings.bind_report = result.rebind
     settings.warnings = "; ".join(result.warnings)
     settings.state = "FOLLOWING"
