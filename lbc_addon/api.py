@@ -10,6 +10,7 @@ Example::
 """
 
 import warnings
+from dataclasses import replace
 
 import bpy
 
@@ -19,11 +20,13 @@ from .properties import DEFAULT_INFLUENCES, is_bound
 
 
 def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, thinning=0.0,
-         influences=DEFAULT_INFLUENCES, mode="AUTO", progress=None, cancel=None):
+         influences=DEFAULT_INFLUENCES, mode="AUTO", from_scratch=False, progress=None, cancel=None):
     """Bind ``mesh_obj`` to ``cage_obj`` (replacing an existing binding) and add the deformer.
 
     Parameters are those of the Bind operator; ``progress(fraction, message)`` and ``cancel() -> bool`` are passed
-    to lbc_core. Nothing in the scene changes unless the bind succeeds.
+    to lbc_core. Nothing in the scene changes unless the bind succeeds. A mesh bound before in this session starts
+    from its previous binding (``lbc_core.rebind``) unless ``from_scratch``: a pipeline that wants the same result
+    whatever the session bound before asks for that.
 
     Returns
     -------
@@ -45,14 +48,17 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
     request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), cells=cells,
                                 weighting=weighting, epsilon=epsilon, tolerance=tolerance, thinning=thinning,
                                 influences=influences, mode=mode)
-    return _bind_request(request, progress, cancel)
+    return _bind_request(replace(request, from_scratch=from_scratch), progress, cancel)
 
 
-def _bind_request(request, progress, cancel):
-    """Solve and write one :class:`jobs.BindRequest`; returns :func:`bind`'s summary."""
+def _bind_request(request, progress, cancel, solved=None):
+    """Solve and write one :class:`jobs.BindRequest`; returns :func:`bind`'s summary. ``solved``: a list of the
+    (request, result) pairs of the same call, which the solve may start from (:func:`jobs.solve`) and this one joins."""
     if progress is None and bpy.app.background:
         progress = jobs.printed_progress()
-    result = jobs.solve(request, progress, cancel)
+    result = jobs.solve(request, progress, cancel, earlier=() if solved is None else solved)
+    if solved is not None:
+        solved.append((request, result))
     bound = writing.apply(request, result)
     settings = bound.lbc
     return {
@@ -91,8 +97,9 @@ def unbind(mesh_obj):
     return writing.remove(mesh_obj)
 
 
-def rebind_all(cage_obj, progress=None, cancel=None):
-    """Bind every mesh of the scene bound to ``cage_obj`` again, to the cage as it is now, each with its own options.
+def rebind_all(cage_obj, progress=None, cancel=None, from_scratch=False):
+    """Bind every mesh of the scene bound to ``cage_obj`` again, to the cage as it is now, each with its own options;
+    ``from_scratch`` as in :func:`bind` (the meshes with the same options still share one solve).
 
     A mesh that cannot be bound before any work (e.g. its data shared by a linked duplicate, Alt+D) or whose LBC
     modifier was removed or applied is left as it was with a ``UserWarning`` saying why, as the Rebind All operator
@@ -106,7 +113,9 @@ def rebind_all(cage_obj, progress=None, cancel=None):
                                            left_out=left_out)
     for message in refused:
         warnings.warn(message, stacklevel=2)
-    return [_bind_request(request, progress, cancel) for request in requests]
+    solved = []
+    return [_bind_request(replace(request, from_scratch=from_scratch), progress, cancel, solved)
+            for request in requests]
 
 
 def set_deformer(mesh_obj, **inputs):

@@ -78,6 +78,9 @@ class BindRequest:
     cage_modifiers_off: str = ""  # those of them off in viewports (the bind, as the deformer, sees the cage without)
     cage_name: str = ""
     bound_to_cage: bool = False  # the mesh holds a binding to this cage already (a Rebind, or Bind again)
+    # Mesh and solve anew rather than start from a binding this session kept (From Scratch): the result then does not
+    # depend on the edits and re-binds before it. Other meshes of the same call still share its solve.
+    from_scratch: bool = False
     # The 3D solve's geometry in world space: (cage vertices, cage faces pointing outward, mesh vertices); None: the
     # mesh-space arrays above.
     world: tuple = None
@@ -339,14 +342,17 @@ def warm_start(request, earlier=()):
 
     First one of the cage exactly as it is now (nothing to solve again: e.g. the second mesh of a Rebind after a cage
     edit starts from the first's new binding, and a Rebind after undoing a Rebind finds the binding the undo brought
-    back), the mesh's own first; else the mesh's own; else the latest other's.
+    back), the mesh's own first; else the mesh's own; else the latest other's. A request ``from_scratch`` starts only
+    from one of ``earlier`` (solved in the same call, from scratch too) of the cage exactly as it is now.
     """
-    own = [_previous.get(request.mesh_uid), _replaced.get(request.mesh_uid)]
-    others = [_as_previous(*pair) for pair in reversed(earlier)] + list(reversed(_previous.values()))
+    own = [] if request.from_scratch else [_previous.get(request.mesh_uid), _replaced.get(request.mesh_uid)]
+    others = [_as_previous(*pair) for pair in reversed(earlier)]
+    if not request.from_scratch:
+        others += list(reversed(_previous.values()))
     candidates = [previous for previous in own + others if previous is not None and _same_solve(previous, request)]
     vertices = np.asarray(request.solve_geometry()[0], dtype=float)
     unmoved = [previous for previous in candidates if _bound_at(previous.binding, vertices)]
-    return (unmoved + candidates + [None])[0]
+    return (unmoved + ([] if request.from_scratch else candidates) + [None])[0]
 
 
 def _bound_at(binding, cage_vertices):
@@ -384,6 +390,8 @@ def _rebind_report(request, previous, binding):
     """
     report = binding.options.get("rebind", "")
     own = _previous.get(request.mesh_uid)
+    if previous is None and request.from_scratch:
+        return "bound from scratch, as asked (From Scratch)" if request.bound_to_cage or own is not None else ""
     if previous is None and own is not None and own.cage_uid == request.cage_uid:
         changed = [key for key in _SOLVE_OPTIONS if own.options[key] != request.options[key]]
         return f"bound from scratch: its {', '.join(changed)} changed since its last bind" if changed else report

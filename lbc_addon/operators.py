@@ -10,7 +10,10 @@ Blender's source, editors/undo/ed_undo.cc and windowmanager/intern/wm_event_syst
 binds again on the main thread: the UI waits for the solve, Esc does not cancel it, progress goes to the console.
 """
 
+from dataclasses import replace
+
 import bpy
+from bpy.props import BoolProperty
 
 from . import deformer, geometry, influence, jobs, writing
 from .core import CageError, Cancelled
@@ -104,13 +107,20 @@ class _Binder:
 
     skips_refused = False
 
+    from_scratch: BoolProperty(
+        name="From Scratch",
+        description="Mesh the cage and solve anew instead of starting from this session's previous binding: slower, "
+        "but the result no longer depends on the cage edits and binds before it",
+        default=False,
+    )
+
     def snapshot(self, context):
         targets, left_out = self.targets(context)
         requests, refused = geometry.snapshots(targets, context.evaluated_depsgraph_get(), self.skips_refused,
                                                left_out)
         for message in refused:
             self.report({"WARNING"}, message)
-        return requests
+        return [replace(request, from_scratch=self.from_scratch) for request in requests]
 
     def execute(self, context):
         try:
@@ -244,6 +254,7 @@ class OBJECT_OT_lbc_bind(_Binder, BindOptionProperties, bpy.types.Operator):
         layout.use_property_split = True
         for name in OPTION_NAMES:
             layout.prop(self, name)
+        layout.prop(self, "from_scratch")
 
 
 class OBJECT_OT_lbc_rebind(_Binder, bpy.types.Operator):

@@ -351,6 +351,23 @@ def test_a_bind_from_scratch_of_a_mesh_bound_before_says_why(tmp_path):
         "bound again from the previous binding")
 
 
+def test_api_from_scratch_binds_anew_and_rebind_all_still_solves_the_cage_once(monkeypatch):
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    mesh, cage = sphere_in_box_scene()
+    other = mesh_object("Other", positions(mesh.data) * 0.5, [list(face.vertices) for face in mesh.data.polygons],
+                        mesh.matrix_world.copy())
+    api.bind(mesh, cage, cells=1000)
+    api.bind(other, cage, cells=1000)
+    cage.data.vertices[7].co.z += 0.02
+    cage.data.update()
+    first, second = api.rebind_all(cage, from_scratch=True)
+    assert first["rebind"] == "bound from scratch, as asked (From Scratch)", first
+    assert second["rebind"].startswith("started from the binding of 'Sphere' to the same cage: 0 of "), second
+    assert api.bind(mesh, cage, cells=1000, from_scratch=True)["rebind"] == "bound from scratch, as asked (From " \
+                                                                             "Scratch)"
+    assert api.bind(mesh, cage, cells=1000)["rebind"].startswith("bound again from the previous binding")
+
+
 def test_rebind_all_of_more_meshes_than_are_kept_says_why_each_bound_from_scratch():
     """A new user's finding: Rebind All of five meshes after a cage edit that binds from scratch left the first one's
     report empty (its own binding was no longer kept, and it bound from scratch from another's)."""

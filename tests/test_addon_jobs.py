@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -272,3 +273,25 @@ def test_a_2d_re_bind_after_moving_one_cage_vertex_solves_only_near_it(monkeypat
     counts = again.binding.options["solved_again"]
     assert 0 < counts["cells solved"] < counts["cells"] / 4
     np.testing.assert_allclose(again.rest, points, atol=1e-5 * np.ptp(outline))  # the mesh at rest, in 3D
+
+
+def test_from_scratch_after_a_cage_edit_binds_as_a_new_session_would_and_the_second_mesh_shares_its_solve(monkeypatch):
+    """From Scratch: a pipeline asks for the result a fresh session gives, whatever this one bound before; the other
+    meshes of the same call still start from its own new binding, which is a bind from scratch too."""
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    monkeypatch.setattr(jobs, "_replaced", {})
+    for job in two_meshes(4):
+        jobs.remember(job, jobs.solve(job))
+    edited = BOX.copy()
+    edited[4:, 0] += 0.1
+    asked = [replace(job, from_scratch=True) for job in two_meshes(4, edited)]
+    results = solved_by_a_worker(asked)
+    assert results[0][1].rebind == "bound from scratch, as asked (From Scratch)"
+    assert results[1][1].rebind.startswith("started from the binding of 'Mesh' to the same cage: 0 of ")
+    for job, result in results:  # written: kept, and a start again for a bind without From Scratch
+        jobs.remember(job, result)
+    assert jobs.warm_start(two_meshes(4, edited * 1.01)[0]).binding is results[0][1].binding
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())  # a new session: nothing kept
+    for (job, result), (_, fresh) in zip(results, solved_by_a_worker(two_meshes(4, edited))):
+        np.testing.assert_array_equal(result.index, fresh.index)
+        np.testing.assert_allclose(result.weight, fresh.weight, atol=1e-6)

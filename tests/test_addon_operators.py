@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from mathutils import Matrix
 
+from lbc_addon import storage
 from lbc_addon.properties import is_bound
 from blender_scenes import (
     bind,
@@ -482,6 +483,26 @@ def test_rebind_after_a_small_cage_edit_starts_from_the_previous_binding(capfd):
     cold = evaluated_positions(mesh)
     # Within remeshing's own noise: cold binds at 2000 and 2200 cells differ by 1.3 % of the diagonal in this pose.
     assert np.abs(warm - cold).max() < 1e-2 * diagonal(mesh)
+
+
+def test_rebind_from_scratch_gives_what_unbind_and_bind_give(capfd):
+    """From Scratch: after a cage edit, Rebind meshes and solves anew, so the result is the one a new session (or
+    Unbind, then Bind) gives, not one that depends on the binding before the edit."""
+    mesh, cage = gargoyle_scene("L12")
+    assert bind(mesh, cage, cells=2000) == {"FINISHED"}
+    cage.data.vertices[5].co.z += 0.01 * diagonal(cage)
+    cage.data.update()
+    capfd.readouterr()
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_rebind(from_scratch=True) == {"FINISHED"}
+    assert "Gargoyle: bound from scratch, as asked (From Scratch)" in capfd.readouterr().out
+    asked = storage.read(mesh.data)
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_unbind() == {"FINISHED"}
+    assert bind(mesh, cage, cells=2000) == {"FINISHED"}
+    fresh = storage.read(mesh.data)
+    np.testing.assert_array_equal(asked[0], fresh[0])
+    np.testing.assert_allclose(asked[1], fresh[1], atol=1e-6)
 
 
 def test_unbinding_a_linked_duplicate_keeps_the_weights_the_original_still_uses(capfd):
