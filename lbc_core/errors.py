@@ -5,6 +5,11 @@ class CageError(ValueError):
     """The cage (or the points bound to it) cannot be used; the message says why and what to do."""
 
 
+class GapTooNarrow(CageError):
+    """Parts of the cage nearly touch, far closer than the cells: the mesher cannot follow them, and twice the cells
+    would not either (only closing or widening the gap, or far more cells)."""
+
+
 class Cancelled(RuntimeError):
     """A long computation was cancelled through its ``cancel`` callback; nothing was returned."""
 

@@ -15,7 +15,7 @@ import cage_corpus
 import lbc_core
 from lbc_core import meshing
 from lbc_core.cage import make_cage
-from lbc_core.errors import CageError, Cancelled
+from lbc_core.errors import CageError, Cancelled, GapTooNarrow
 from test_meshing import CAGES_2D, CUBE_QUADS, CUBE_VERTICES, check_contract, load_cage
 
 # Variants on cages of every kind: n-gon caps, a small-angle apex, rings of coplanar quads, extrusions, a thin plate.
@@ -158,6 +158,16 @@ def test_nearly_touching_parts_are_refused_when_refinement_runs_away(cells):
         meshing.mesh_domain(slotted_prism(1e-4), cells=cells)
     assert time.perf_counter() - clock < 30.0
     assert "intersect" not in str(refused.value)
+
+
+def test_a_gap_refused_in_a_cage_with_few_cells_per_vertex_is_not_told_to_double_the_cells():
+    """A new-user-like find: a vertex of Blender's UV sphere moved past its neighbours near a pole was refused at 8000
+    cells with "few for so fine a cage: try more cells (16000)", and 16,000 were refused the same way. A gap far below
+    the cells is no matter of the cell count: the refusal says what the gap is and what to do, not to double."""
+    with pytest.raises(GapTooNarrow) as refused:
+        meshing.mesh_domain(slotted_prism(1e-4), cells=200)  # 16 vertices: under 20 cells per vertex
+    assert str(refused.value).startswith("parts of the cage nearly touch near its faces"), refused.value
+    assert "try more cells" not in str(refused.value)
 
 
 def test_a_narrow_valid_slot_still_meshes():

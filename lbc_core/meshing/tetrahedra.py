@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
-from ..errors import CageError
+from ..errors import CageError, GapTooNarrow
 from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, row_keys, signed_measures
 from ..geometry import signed_radius_ratios_by_coordinate, triangle_normals, unit, winding_numbers
 from .common import far_points, on_common, raw_mesh, rows_in
@@ -134,7 +134,7 @@ def _attempts(cage, side, split, deadline, steps):
             return _tetrahedralise(cage, side, split, 1.5**attempt, attempt, deadline,
                                    steps.part(attempt / _ATTEMPTS, (attempt + 1) / _ATTEMPTS))
         except _RunsAway as failure:
-            raise CageError(_diagnose_gap(cage, failure.facets, failure.spacing)) from None
+            raise GapTooNarrow(_diagnose_gap(cage, failure.facets, failure.spacing)) from None
         except _NotConforming as failure:
             facets = failure.facets
         if time.perf_counter() > deadline:
