@@ -33,7 +33,8 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
     dict
         ``dimension``, ``control_points``, ``slots`` (K), ``mean_influences``, ``outside``, ``warnings``, ``seconds``,
         and ``rebind``: for a mesh bound before in this session, how it went (from its previous binding, or from
-        scratch and why); "" for a first bind. With no ``progress`` in background mode, progress lines are printed.
+        scratch and why); "" for a first bind (unless ``from_scratch``). With no ``progress`` in background mode,
+        progress lines are printed.
 
     Raises
     ------
@@ -97,7 +98,7 @@ def unbind(mesh_obj):
     return writing.remove(mesh_obj)
 
 
-def rebind_all(cage_obj, progress=None, cancel=None, from_scratch=False):
+def rebind_all(cage_obj, *, from_scratch=False, progress=None, cancel=None):
     """Bind every mesh of the scene bound to ``cage_obj`` again, to the cage as it is now, each with its own options;
     ``from_scratch`` as in :func:`bind` (the meshes with the same options still share one solve).
 

@@ -391,19 +391,20 @@ def _rebind_report(request, previous, binding):
     report = binding.options.get("rebind", "")
     own = _previous.get(request.mesh_uid)
     if previous is None and request.from_scratch:
-        return "bound from scratch, as asked (From Scratch)" if request.bound_to_cage or own is not None else ""
+        return "bound from scratch, as asked (From Scratch)"
     if previous is None and own is not None and own.cage_uid == request.cage_uid:
         changed = [key for key in _SOLVE_OPTIONS if own.options[key] != request.options[key]]
         return f"bound from scratch: its {', '.join(changed)} changed since its last bind" if changed else report
     if previous is None and own is None and request.bound_to_cage:
         return (f"bound from scratch: no earlier binding of it is in memory (kept for this session's last "
-                f"{KEPT_BINDINGS} meshes, not in the .blend: a reopened file or an Unbind starts afresh)")
+                f"{KEPT_BINDINGS} meshes, not in the .blend: a reopened file or an Unbind forgets it)")
     if previous is None or previous.mesh_uid == request.mesh_uid:
         return report
     if binding.options.get("start") != WARM:
         return report if request.bound_to_cage else ""  # why a mesh bound before bound from scratch
     solved_again = solved_again_text(binding.options["solved_again"])
-    return f"started from the binding of '{previous.mesh_name}' to the same cage: {solved_again}"
+    made = ", bound from scratch just before (From Scratch)" if request.from_scratch else ""
+    return f"started from the binding of '{previous.mesh_name}' to the same cage{made}: {solved_again}"
 
 
 def remember(request, result):

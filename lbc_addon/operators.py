@@ -112,6 +112,7 @@ class _Binder:
         description="Mesh the cage and solve anew instead of starting from this session's previous binding: slower, "
         "but the result no longer depends on the cage edits and binds before it",
         default=False,
+        options={"SKIP_SAVE"},  # asked for one bind: the next Rebind button press starts warm again
     )
 
     def snapshot(self, context):

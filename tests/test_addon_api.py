@@ -346,7 +346,7 @@ def test_a_bind_from_scratch_of_a_mesh_bound_before_says_why(tmp_path):
     bpy.ops.wm.open_mainfile(filepath=str(path))
     again, = api.rebind_all(bpy.data.objects["Box"])
     assert again["rebind"] == ("bound from scratch: no earlier binding of it is in memory (kept for this session's "
-                               "last 4 meshes, not in the .blend: a reopened file or an Unbind starts afresh)")
+                               "last 4 meshes, not in the .blend: a reopened file or an Unbind forgets it)")
     assert api.bind(bpy.data.objects["Sphere"], bpy.data.objects["Box"], cells=1000)["rebind"].startswith(
         "bound again from the previous binding")
 
@@ -362,7 +362,8 @@ def test_api_from_scratch_binds_anew_and_rebind_all_still_solves_the_cage_once(m
     cage.data.update()
     first, second = api.rebind_all(cage, from_scratch=True)
     assert first["rebind"] == "bound from scratch, as asked (From Scratch)", first
-    assert second["rebind"].startswith("started from the binding of 'Sphere' to the same cage: 0 of "), second
+    assert second["rebind"].startswith("started from the binding of 'Sphere' to the same cage, bound from scratch just "
+                                       "before (From Scratch): 0 of "), second
     assert api.bind(mesh, cage, cells=1000, from_scratch=True)["rebind"] == "bound from scratch, as asked (From " \
                                                                              "Scratch)"
     assert api.bind(mesh, cage, cells=1000)["rebind"].startswith("bound again from the previous binding")

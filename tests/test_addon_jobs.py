@@ -287,7 +287,8 @@ def test_from_scratch_after_a_cage_edit_binds_as_a_new_session_would_and_the_sec
     asked = [replace(job, from_scratch=True) for job in two_meshes(4, edited)]
     results = solved_by_a_worker(asked)
     assert results[0][1].rebind == "bound from scratch, as asked (From Scratch)"
-    assert results[1][1].rebind.startswith("started from the binding of 'Mesh' to the same cage: 0 of ")
+    assert results[1][1].rebind.startswith("started from the binding of 'Mesh' to the same cage, bound from scratch "
+                                           "just before (From Scratch): 0 of ")
     for job, result in results:  # written: kept, and a start again for a bind without From Scratch
         jobs.remember(job, result)
     assert jobs.warm_start(two_meshes(4, edited * 1.01)[0]).binding is results[0][1].binding
