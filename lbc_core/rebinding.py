@@ -13,10 +13,15 @@ at their previous weights as fixed values, starting from the previous solve's fi
 kept in memory) rather than from the harmonic coordinates; the geodesic weights and the evaluation at the points are
 computed afresh, as in :func:`lbc_core.bind`.
 
+Where the edit bends a cage edge between coplanar facets (a quad's diagonal, an n-gon's split line, a loop cut across
+a flat side), which the previous mesh's faces may cross (the mesher follows only well-shaped quads' diagonals), the
+mesh edges it crosses are split there first (:func:`following_bent_edges`), so that the carried surface follows the
+new crease of the boundary values.
+
 Where the carried mesh is not valid (a cell folds or loses too much of its shape, typically where a cage vertex
-moved by more than about a cell's size; a mesh face across a cage face the edit bent, which the mesher avoids for
-well-shaped quads by following their diagonals but not for n-gons and skinny quads, would leave the cage by more than
-CHORD_KEPT of a cell), a bent face now splits into other triangles than before, the cage's topology or welding
+moved by more than about a cell's size; a mesh face left across a bent edge, unsplit within CROSSING_END of a mesh
+vertex, would leave the cage by more than CHORD_KEPT of a cell), a bent face now splits into other triangles than
+before, the cage's topology or welding
 changed, or the previous binding has no solver state (one loaded from a file), the re-bind is a cold bind with the
 previous options, and ``Binding.options["rebind"]`` says why.
 """
@@ -62,6 +67,10 @@ CHORD_KEPT = 0.5
 _STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 0.9), "reduction": (0.9, 1.0)}
 # Binding.options["start"] of a re-bind: where the solver started.
 WARM, COLD = "previous solution", "harmonic"
+# A cage edge the edit bends is followed by splitting the mesh edges it crosses (following_bent_edges), except within
+# this share of a mesh edge's length from its ends: a split so near a corner would make a sliver, and the mesh
+# follows the cage edge there within that share already.
+CROSSING_END = 0.05
 # Rings of mesh vertices around the moved control points' supports that are solved again: room for a support to grow.
 # One ring leaves the weights as close to a tight solve as two (within 0.005, closer on the largest edits) on every
 # gargoyle edit measured, with up to 55 % fewer cells solved; on the paper's 2D cages within 0.006, 5-15 % fewer
@@ -125,9 +134,11 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     elif previous.solver_state is None:
         reason = "the previous binding's solver state is not at hand (it is kept in memory only, not in files)"
     travel = previous.options.get("travel", 0.0) + _largest_move(previous, cage)
+    touched = None
     if reason is None:
         frame = UnitFrame.of(cage)
         unit_cage = frame.cage_to_unit(cage)
+        previous, touched = following_bent_edges(previous, cage)
         carried, reason = carry_domain(previous, unit_cage)
     if carried is not None and travel > CARRY_LIMIT:
         carried, reason = None, (f"its vertices moved {travel:.0%} of the cage's diagonal in all since it was last "
@@ -142,7 +153,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
                                      else "the previous mesh and solution reused: the cage has not moved")
     timings = {"carry": time.perf_counter() - clock}
 
-    result, objective, state, solved, free = _solve_near(previous, carried, unit_cage, moved,
+    result, objective, state, solved, free = _solve_near(previous, carried, unit_cage, moved, touched,
                                                          progress.part(*_STAGES["solve"]))
     timings.update(result.seconds)
 
@@ -207,9 +218,10 @@ def solved_again_text(counts):
             f"{counts['points evaluated']} of {counts['points']} points evaluated")
 
 
-def _solve_near(previous, carried, unit_cage, moved, progress):
+def _solve_near(previous, carried, unit_cage, moved, touched, progress):
     """Solve again where the moved control points' coordinates reach (their support, grown by FREE_RINGS rings of
-    vertices), the rest of the carried mesh held at the previous solution, from the previous solver state.
+    vertices), and around the vertices ``touched`` ((N,) bool array, or None), the rest of the carried mesh held at the
+    previous solution, from the previous solver state.
 
     Returns
     -------
@@ -234,6 +246,8 @@ def _solve_near(previous, carried, unit_cage, moved, progress):
     # a flip made (see _flipped_slivers), must be solved again.
     carried_to = previous.domain_weights @ unit_cage.vertices
     free |= np.linalg.norm(carried.vertices - carried_to, axis=1) > REPRODUCTION_TOLERANCE
+    if touched is not None:
+        free |= touched
     state = previous.solver_state
     if len(carried.cells) != len(previous.domain.cells):  # flips replaced cells: the state follows the cells
         source, new = _cell_sources(previous.domain.cells, carried.cells)
@@ -302,6 +316,121 @@ def _merged_rows(previous, again, weights_again, outside_again):
     outside = previous.outside.copy()
     outside[again] = outside_again
     return weights, outside
+
+
+def following_bent_edges(previous, cage):
+    """``previous`` with its mesh's surface split along the cage edges the edit bends, where its faces cross them.
+
+    Where coplanar facets meet (a quad's diagonal, an n-gon's split lines, a loop cut across a flat side), the mesher
+    needs no mesh edge along the cage edge, and mesh faces cross it. The edit bends such an edge into a crease of the
+    boundary values; carried, those faces would cut across it as chords, and a mesh that does not follow the crease
+    holds on to the flat cage's coordinates: the loop-cut Cylinder's side vertex moved out by 0.25-2 % came out 2.3-3.2
+    times as far from a fine bind as a bind from scratch under a pose of that vertex (bench/RESULTS.md). Each mesh
+    edge on the cage that the bent edge crosses is split where it crosses, the cells around it in two, in the previous
+    (flat) geometry; the segment between two crossings then is a mesh edge, so the carried surface follows the crease.
+    A new vertex lies on the cage, with the exact boundary values there; the previous solution and state are kept
+    elsewhere (a split cell's state is its parent's), and the cells around the new vertices are solved again.
+
+    Parameters
+    ----------
+    previous : Binding (3D: else returned as it is)
+    cage : Cage
+        The edited cage, split into the previous cage's facets (:func:`_split_as_before`).
+
+    Returns
+    -------
+    previous : Binding
+        On the split mesh (the same object when nothing was split).
+    touched : (N,) bool array or None
+        The vertices of the cells around the new vertices; None when nothing was split.
+    """
+    if cage.dim != 3:
+        return previous, None
+    old_cage, mesh = previous.cage, previous.domain
+    bent = _bent_edges(old_cage, cage)
+    if not len(bent):
+        return previous, None
+    vertices, cells = mesh.vertices, mesh.cells
+    weights, stale = previous.domain_weights, previous.stale
+    boundary = [mesh.boundary_vertices, mesh.boundary_facet, mesh.boundary_bary]
+    source = np.arange(len(cells))
+    first_new = len(vertices)
+    zero = ZERO_LENGTH * old_cage.bbox_diagonal
+    for a, b, facet in bent:
+        ends = old_cage.vertices[[a, b]]
+        for p, q, at in _crossings(ends, vertices, cells, zero):
+            x = len(vertices)
+            row = np.zeros((1, weights.shape[1]))
+            row[0, a], row[0, b] = 1.0 - at, at  # the boundary values on the cage edge
+            around = np.flatnonzero(np.any(cells == p, axis=1) & np.any(cells == q, axis=1))
+            towards_p, towards_q = cells[around].copy(), cells[around].copy()
+            towards_p[towards_p == q] = x
+            towards_q[towards_q == p] = x
+            halves = np.concatenate([towards_p, towards_q])
+            # Where the edit bends the edge inwards, halves thin across it fold once carried: left as a chord.
+            carried = np.vstack([weights, row]) @ cage.vertices
+            before = np.vstack([vertices, (1.0 - at) * ends[0] + at * ends[1]])
+            if np.any(signed_measures(carried, halves) <= 0) or np.any(
+                    _quality(carried, halves) < QUALITY_KEPT * _quality(before, halves)):
+                continue
+            vertices = before
+            weights = np.vstack([weights, row])
+            if stale is not None:
+                stale = np.append(stale, max(stale[p], stale[q]))
+            corners = list(old_cage.facets[facet])
+            bary = np.zeros((1, 3))
+            bary[0, corners.index(a)], bary[0, corners.index(b)] = 1.0 - at, at
+            boundary = [np.append(boundary[0], x), np.append(boundary[1], facet), np.vstack([boundary[2], bary])]
+            cells = np.vstack([cells, towards_q])
+            cells[around] = towards_p
+            source = np.append(source, source[around])
+    if len(vertices) == first_new:
+        return previous, None
+    touched = np.zeros(len(vertices), dtype=bool)
+    touched[cells[np.any(cells >= first_new, axis=1)].ravel()] = True
+    domain = replace(mesh, vertices=vertices, cells=cells, boundary_vertices=boundary[0], boundary_facet=boundary[1],
+                     boundary_bary=boundary[2])
+    state = None if previous.solver_state is None else previous.solver_state.for_cells(source)
+    return replace(previous, domain=domain, domain_weights=weights, stale=stale, solver_state=state), touched
+
+
+def _bent_edges(old_cage, cage):
+    """(K, 3) int array: the cage edges (a, b) whose two facets were coplanar in ``old_cage`` and are not in ``cage``
+    (same facets), with one of those facets."""
+    facets = old_cage.facets
+    directed = np.stack([facets, np.roll(facets, -1, axis=1)], axis=2).reshape(-1, 2)
+    keys = row_keys(np.sort(directed, axis=1), len(old_cage.vertices))
+    order = np.argsort(keys, kind="stable")  # a closed manifold cage: each edge twice, its two facets side by side
+    edges = np.sort(directed, axis=1)[order[::2]]
+    first, second = order[::2] // 3, order[1::2] // 3
+    old_normals, normals = (unit(triangle_normals(c.vertices[facets])) for c in (old_cage, cage))
+    bent = _coplanar(old_normals, first, second) & ~_coplanar(normals, first, second)
+    return np.column_stack([edges[bent], first[bent]])
+
+
+def _crossings(ends, vertices, cells, zero):
+    """The mesh edges on the cage that the segment ``ends`` (2, 3) crosses, in the flat geometry where both lie in
+    one plane (within COPLANAR_ANGLE): a list of (p, q, t), the crossing at (1 - t) ends[0] + t ends[1]. Crossings
+    within CROSSING_END of an edge's length from its ends are left out: the mesh there follows the cage edge within
+    that share already, and splitting so near a corner would make slivers."""
+    triangles = boundary_facets(cells)
+    edges = np.unique(np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [0, 2]]]),
+                             axis=1), axis=0)
+    start, direction = ends[0], ends[1] - ends[0]
+    p, along = vertices[edges[:, 0]], vertices[edges[:, 1]] - vertices[edges[:, 0]]
+    normal = np.cross(direction, along)
+    area = np.einsum("ij,ij->i", normal, normal)
+    apart = p - start
+    with np.errstate(divide="ignore", invalid="ignore"):  # parallel edges: nan, never a crossing
+        on_segment = np.einsum("ij,ij->i", np.cross(apart, along), normal) / area
+        on_edge = np.einsum("ij,ij->i", np.cross(apart, direction), normal) / area
+        lengths = np.linalg.norm(along, axis=1)
+        gap = np.linalg.norm(start + on_segment[:, None] * direction - (p + on_edge[:, None] * along), axis=1)
+        end = CROSSING_END * lengths / np.linalg.norm(direction)
+        hit = np.flatnonzero((gap <= zero + np.sin(COPLANAR_ANGLE) * lengths)
+                            & (CROSSING_END < on_edge) & (on_edge < 1 - CROSSING_END)
+                            & (end < on_segment) & (on_segment < 1 - end))
+    return [(int(edges[k, 0]), int(edges[k, 1]), float(on_segment[k])) for k in hit]
 
 
 def carry_domain(previous, unit_cage):
