@@ -193,7 +193,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     counts = {"cells solved": int(solved), "cells": len(carried.cells), "points evaluated": len(again),
               "points": len(points)}
     done = (solved_again_text(counts) if moved.any() or len(again)
-            else "the cage has not moved since, so nothing was solved or evaluated again")
+            else "it was made for the cage as it is now, so nothing was solved or evaluated again")
     options = dict(previous.options, start=WARM, solved_again=counts, travel=travel,
                    rebind=f"bound again from the previous binding: {done}")
     return lbc_binding(frame, cage, carried, replace(result, objective=objective, state=state), weights, outside,

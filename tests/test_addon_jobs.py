@@ -169,8 +169,8 @@ def test_binding_again_at_the_rest_of_the_replaced_binding_reuses_it_unchanged(m
     jobs.remember(second, jobs.solve(second))
     jobs.remember(second, jobs.solve(second))  # undo, Rebind: nothing solved, nothing replaced
     again = jobs.solve(request(cells=600))  # the cage back at rest, as after an undo
-    assert again.rebind == "bound again from the previous binding: the cage has not moved since, so nothing was " \
-                           "solved or evaluated again", again.rebind
+    assert again.rebind == "bound again from the previous binding: it was made for the cage as it is now, so " \
+                           "nothing was solved or evaluated again", again.rebind
     np.testing.assert_array_equal(again.index, rest.index)
     np.testing.assert_array_equal(again.weight, rest.weight)
     jobs.forget(first.mesh_uid)  # Unbind drops both

@@ -157,8 +157,8 @@ def test_an_unmoved_cage_gives_the_previous_weights_back(gargoyle):
     again = rebind(first, cage, faces)
     assert again.iterations == 0
     # Said plainly, not as "0 of 2939 cells solved, 0 of 2674 points evaluated" (a colleague's Rebind after Undo).
-    assert again.options["rebind"] == ("bound again from the previous binding: the cage has not moved since, so "
-                                       "nothing was solved or evaluated again")
+    assert again.options["rebind"] == ("bound again from the previous binding: it was made for the cage as it is now, "
+                                       "so nothing was solved or evaluated again")
     np.testing.assert_array_equal(again.domain_weights, first.domain_weights)
     assert abs(again.weights - first.weights).max() < 1e-9
 
