@@ -686,7 +686,7 @@ def _degenerate(corners, zero):
     return twice_area <= zero * longest
 
 
-def _edge_pairing(triangles):
+def edge_pairing(triangles):
     """Directed edges and how they pair up across the mesh.
 
     Returns
@@ -712,12 +712,12 @@ def _check_closed_manifold(triangles, names, defects, excused=()):
     Returns
     -------
     (first, second) : two (3T / 2,) int arrays, or None when the surface is not closed and manifold
-        The two directed edges (rows of the ``directed`` array of :func:`_edge_pairing`) of each undirected edge.
+        The two directed edges (rows of the ``directed`` array of :func:`edge_pairing`) of each undirected edge.
     """
     if not len(triangles):
         return None
     found = len(defects)
-    directed, order, counts = _edge_pairing(triangles)
+    directed, order, counts = edge_pairing(triangles)
     edge_of = directed[order[np.cumsum(counts) - counts]]
     holes = counts == 1
     if excused:

@@ -33,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .cage import ZERO_LENGTH, Cage, make_cage
+from .cage import ZERO_LENGTH, Cage, edge_pairing, make_cage
 from .constraints import padded_rows
 from .errors import CageError
 from .fem import boundary_facets
@@ -44,6 +44,7 @@ from .geometry import (bary_positions, closest_on_facets, orient_positive, radiu
                        triangle_normals, unit)
 from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
+from .meshing.common import cell_edges
 from .meshing.tetrahedra import polish
 from .objective import tv_objective
 from .options import WEIGHTINGS, BindOptions
@@ -355,6 +356,7 @@ def following_bent_edges(previous, cage):
     boundary = [mesh.boundary_vertices, mesh.boundary_facet, mesh.boundary_bary]
     source = np.arange(len(cells))
     first_new = len(vertices)
+    carried = weights @ cage.vertices  # where the carry will put each vertex
     zero = ZERO_LENGTH * old_cage.bbox_diagonal
     for a, b, facet in bent:
         ends = old_cage.vertices[[a, b]]
@@ -368,12 +370,12 @@ def following_bent_edges(previous, cage):
             towards_q[towards_q == p] = x
             halves = np.concatenate([towards_p, towards_q])
             # Where the edit bends the edge inwards, halves thin across it fold once carried: left as a chord.
-            carried = np.vstack([weights, row]) @ cage.vertices
+            after = np.vstack([carried, row @ cage.vertices])
             before = np.vstack([vertices, (1.0 - at) * ends[0] + at * ends[1]])
-            if np.any(signed_measures(carried, halves) <= 0) or np.any(
-                    _quality(carried, halves) < QUALITY_KEPT * _quality(before, halves)):
+            if np.any(signed_measures(after, halves) <= 0) or np.any(
+                    _quality(after, halves) < QUALITY_KEPT * _quality(before, halves)):
                 continue
-            vertices = before
+            vertices, carried = before, after
             weights = np.vstack([weights, row])
             if stale is not None:
                 stale = np.append(stale, max(stale[p], stale[q]))
@@ -398,11 +400,9 @@ def _bent_edges(old_cage, cage):
     """(K, 3) int array: the cage edges (a, b) whose two facets were coplanar in ``old_cage`` and are not in ``cage``
     (same facets), with one of those facets."""
     facets = old_cage.facets
-    directed = np.stack([facets, np.roll(facets, -1, axis=1)], axis=2).reshape(-1, 2)
-    keys = row_keys(np.sort(directed, axis=1), len(old_cage.vertices))
-    order = np.argsort(keys, kind="stable")  # a closed manifold cage: each edge twice, its two facets side by side
-    edges = np.sort(directed, axis=1)[order[::2]]
-    first, second = order[::2] // 3, order[1::2] // 3
+    directed, order, _ = edge_pairing(facets)  # a closed manifold cage: each edge twice, its two facets side by side
+    edges = np.sort(directed[order[::2]], axis=1)
+    first, second = order[::2] % len(facets), order[1::2] % len(facets)
     old_normals, normals = (unit(triangle_normals(c.vertices[facets])) for c in (old_cage, cage))
     bent = _coplanar(old_normals, first, second) & ~_coplanar(normals, first, second)
     return np.column_stack([edges[bent], first[bent]])
@@ -413,9 +413,7 @@ def _crossings(ends, vertices, cells, zero):
     one plane (within COPLANAR_ANGLE): a list of (p, q, t), the crossing at (1 - t) ends[0] + t ends[1]. Crossings
     within CROSSING_END of an edge's length from its ends are left out: the mesh there follows the cage edge within
     that share already, and splitting so near a corner would make slivers."""
-    triangles = boundary_facets(cells)
-    edges = np.unique(np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [0, 2]]]),
-                             axis=1), axis=0)
+    edges = cell_edges(boundary_facets(cells))
     start, direction = ends[0], ends[1] - ends[0]
     p, along = vertices[edges[:, 0]], vertices[edges[:, 1]] - vertices[edges[:, 0]]
     normal = np.cross(direction, along)
