@@ -28,6 +28,13 @@ def request(cage_points=BOX, cage_faces=BOX_FACES, points=None, flat=None, **opt
                             cage_topology="", mesh_topology="")
 
 
+@pytest.fixture
+def new_session(monkeypatch):
+    """No binding kept from earlier tests: a bind starts as in a new Blender session."""
+    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
+    monkeypatch.setattr(jobs, "_replaced", {})
+
+
 def test_jobs_imports_and_solves_without_bpy():
     script = (
         "import sys; sys.modules['bpy'] = None  # any import of bpy now fails\n"
@@ -120,11 +127,9 @@ def test_a_solve_stopped_at_the_iteration_limit_is_a_warning(monkeypatch):
     assert not any("iterations" in warning for warning in jobs.solve(request()).warnings)
 
 
-def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(monkeypatch):
+def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(new_session, monkeypatch):
     from lbc_core.io import read_cage, read_mesh
 
-    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
-    monkeypatch.setattr(jobs, "_replaced", {})
     gargoyle = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
     cage, faces = read_cage(gargoyle / "cage_L10.obj")
     points, _ = read_mesh(gargoyle / "mesh.off")
@@ -154,12 +159,10 @@ def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(
     np.testing.assert_allclose(warm.weight, weight, atol=1e-7)
 
 
-def test_binding_again_at_the_rest_of_the_replaced_binding_reuses_it_unchanged(monkeypatch):
+def test_binding_again_at_the_rest_of_the_replaced_binding_reuses_it_unchanged(new_session):
     """A new user's find: undo after a Rebind brings the earlier binding back into the scene, and a Rebind then solved
     again from the edited cage's binding (881 cells), ending beside the binding the undo restored. The binding the
     latest bind replaced is kept, and a cage back at its rest finds it: nothing is solved again."""
-    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
-    monkeypatch.setattr(jobs, "_replaced", {})
     first = request(cells=600)
     rest = jobs.solve(first)
     jobs.remember(first, rest)
@@ -195,9 +198,7 @@ def solved_by_a_worker(requests):
     return worker.results
 
 
-def test_a_second_mesh_in_the_same_cage_reuses_the_first_ones_solve(monkeypatch):
-    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
-    monkeypatch.setattr(jobs, "_replaced", {})
+def test_a_second_mesh_in_the_same_cage_reuses_the_first_ones_solve(new_session):
     first, second = two_meshes(3)
     results = solved_by_a_worker([first, second])
     shared = results[1][1]
@@ -223,9 +224,7 @@ def test_printed_progress_says_each_new_message_and_a_repeated_one_at_most_once_
                                                     "LBC bind:  20% ADMM iteration 10"]
 
 
-def test_after_a_cage_edit_the_second_mesh_starts_from_the_first_ones_new_binding(monkeypatch):
-    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
-    monkeypatch.setattr(jobs, "_replaced", {})
+def test_after_a_cage_edit_the_second_mesh_starts_from_the_first_ones_new_binding(new_session):
     for job in two_meshes(4):
         jobs.remember(job, jobs.solve(job))
     edited = BOX.copy()
@@ -256,11 +255,9 @@ def test_the_note_on_vertex_numbers_follows_only_a_message_that_has_them():
         jobs.solve(flat)
 
 
-def test_a_2d_re_bind_after_moving_one_cage_vertex_solves_only_near_it(monkeypatch, woody):
+def test_a_2d_re_bind_after_moving_one_cage_vertex_solves_only_near_it(new_session, woody):
     """A code review's finding: the flat cage's plane frame (its mean and principal axes) shifted with the edit, so
     every control point moved in 2D and the re-bind started from scratch. It keeps the first bind's frame now."""
-    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
-    monkeypatch.setattr(jobs, "_replaced", {})
     outline, inside, _ = woody
     cage = np.c_[outline, np.full(len(outline), 0.3)]  # the woody cage as a flat n-gon in Blender
     points = np.c_[inside[:400], np.full(400, 0.3)]
@@ -275,11 +272,10 @@ def test_a_2d_re_bind_after_moving_one_cage_vertex_solves_only_near_it(monkeypat
     np.testing.assert_allclose(again.rest, points, atol=1e-5 * np.ptp(outline))  # the mesh at rest, in 3D
 
 
-def test_from_scratch_after_a_cage_edit_binds_as_a_new_session_would_and_the_second_mesh_shares_its_solve(monkeypatch):
+def test_from_scratch_after_a_cage_edit_binds_as_a_new_session_would_and_the_second_mesh_shares_its_solve(
+        new_session, monkeypatch):
     """From Scratch: a pipeline asks for the result a fresh session gives, whatever this one bound before; the other
     meshes of the same call still start from its own new binding, which is a bind from scratch too."""
-    monkeypatch.setattr(jobs, "_previous", jobs.OrderedDict())
-    monkeypatch.setattr(jobs, "_replaced", {})
     for job in two_meshes(4):
         jobs.remember(job, jobs.solve(job))
     edited = BOX.copy()
