@@ -9,9 +9,7 @@ slots. Rows travel as padded (m, K) arrays of values and column indices (:func:`
 
 import numpy as np
 import scipy.sparse as sp
-
-# The starting weight of the control points a vertex's support takes in when none of its candidates can reproduce it.
-OTHER_CONTROLS_WEIGHT = 1e-9
+from scipy.optimize import linprog
 
 
 def project_onto_constraints(clamped, unclamped, controls, positions, check=None):
@@ -20,7 +18,7 @@ def project_onto_constraints(clamped, unclamped, controls, positions, check=None
 
     A vertex whose support is too small to reproduce it (three control points for a point off their plane) gets
     ``unclamped``'s next largest weights added, largest first, until it is; where even all of ``unclamped``'s positive
-    weights cannot, the other control points too (a point inside their hull always has such weights on all of them).
+    weights cannot, it gets the non-negative weights nearest to ``clamped`` that do (:func:`nearest_feasible`).
 
     Parameters
     ----------
@@ -47,13 +45,47 @@ def project_onto_constraints(clamped, unclamped, controls, positions, check=None
                                   check=check)
         grown = grown.toarray()
         if not met.all():
-            # Every control point a candidate: the others after unclamped's own, with a weight too small to matter.
-            candidates, keep = candidates[~met], keep[~met]
-            candidates[candidates == 0] = OTHER_CONTROLS_WEIGHT
-            grown[~met] = grow_support(sp.csr_matrix(candidates), controls, positions[failed][~met], keep,
-                                       tolerance=1e-12, check=check)[0].toarray()
+            grown[~met] = nearest_feasible(clamped[failed][~met], controls, positions[failed][~met], check)
         on_support[failed] = grown
     return on_support
+
+
+def nearest_feasible(weights, controls, positions, check=None):
+    """Non-negative weights that meet partition of unity and reproduction, nearest to ``weights`` in the L1 norm.
+
+    Growing a support from the largest candidates first can end on a support that cannot reproduce the point, when
+    the weights it needs are where the candidates are zero: a vertex 1e-4 of the diagonal off the plane of its three
+    control points needs a little weight off that plane (measured on the gargoyle's cage L10 at 3000 cells).
+    A small linear program per row finds it, changing as few weights as it can; the constraints are then restored
+    on its support to round-off.
+
+    Parameters
+    ----------
+    weights : (m, n) float array, non-negative
+    controls : (n, d) float array
+    positions : (m, d) float array, inside the controls' convex hull
+    check : callable, optional
+        Called before each row (it raises to cancel).
+
+    Returns
+    -------
+    (m, n) float array; a row whose point lies outside the controls' hull is returned as given.
+    """
+    n = len(controls)
+    affine = np.c_[controls, np.ones(n)].T  # (d+1, n)
+    # Variables [w, s], both non-negative: minimise Σ s with |w - weights| ≤ s and affine @ w = [x, 1].
+    bound_rows = sp.bmat([[sp.eye(n), -sp.eye(n)], [-sp.eye(n), -sp.eye(n)]], format="csr")
+    equality = sp.hstack([sp.csr_matrix(affine), sp.csr_matrix((len(affine), n))], format="csr")
+    cost = np.r_[np.zeros(n), np.ones(n)]
+    result = np.array(weights, dtype=float)
+    for row, (given, x) in enumerate(zip(weights, positions)):
+        if check is not None:
+            check()
+        solution = linprog(cost, A_ub=bound_rows, b_ub=np.r_[given, -given], A_eq=equality, b_eq=np.r_[x, 1.0],
+                           bounds=(0, None), method="highs")
+        if solution.status == 0:
+            result[row] = restore_constraints(np.maximum(solution.x[None, :n], 0.0), controls, x[None])[0]
+    return result
 
 
 def restore_constraints(weights, controls, positions, columns=None, rounds=20, check=None):

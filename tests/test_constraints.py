@@ -65,3 +65,18 @@ def test_projection_takes_in_other_control_points_where_the_candidates_cannot_re
     projected = project_onto_constraints(clamped, unclamped, SQUARE, points)
     unity, reproduction = constraint_residuals(projected, SQUARE, points)
     assert unity.max() < 1e-12 and reproduction.max() < 1e-12 and projected.min() >= 0
+
+
+def test_projection_finds_the_weights_off_a_plane_its_candidates_all_lie_in():
+    # Five control points of the gargoyle's cage L10 and a domain vertex 1.4e-4 off the plane of the first three,
+    # whose iterate was positive on those three only (3000 cells). Growing the support by the candidates' size, then
+    # taking in the other two at a tiny weight, dropped them again: the row was left 3.4e-5 off partition of unity.
+    controls = np.array([[0.041879, 0.247219, 0.101472], [0.060128, 0.283689, -0.080511],
+                         [0.149222, 0.208004, 0.003787], [-0.052135, 0.236593, -0.08668], [0.176048, 0.226018, 0.142043]])
+    points = np.array([[0.112362, 0.233182, -0.006909]])
+    clamped = np.array([[0.121551, 0.267438, 0.611812, 0.0, 0.0]])
+    unclamped = np.where(clamped > 0, clamped, -1e-5)
+    projected = project_onto_constraints(clamped, unclamped, controls, points)
+    unity, reproduction = constraint_residuals(projected, controls, points)
+    assert unity.max() < 1e-12 and reproduction.max() < 1e-12 and projected.min() >= 0
+    assert projected[0, 3] == 0.0  # the nearest such weights: none on the point on the plane's far side
