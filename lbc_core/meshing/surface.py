@@ -159,7 +159,7 @@ class Surface:
         self.region_edges = [np.flatnonzero(np.any(self.edge_regions == r, axis=1)) for r in range(self.n_regions)]
         lengths = np.linalg.norm(cage.vertices[self.edges[:, 1]] - cage.vertices[self.edges[:, 0]], axis=1)
         self.edge_length = lengths
-        self.shell_scale = 1.0 + 0.1 * rng.uniform(-1.0, 1.0, len(lengths))
+        self.shell_scale = 1.0 + 0.1 * rng.uniform(-1.0, 1.0, cage.n_control_points)  # per cage vertex: see _split
         # At least two pieces per edge, slightly uneven: evenly split edges give co-circular samples whose
         # Delaunay triangulation is ambiguous, and no sample-free sphere may run through a box's corners.
         # The corner of edge_facet holding each feature edge's lower and higher vertex: (K, 2).
@@ -372,9 +372,11 @@ class Surface:
         length = self.edge_length[k]
         if (t0 == 0.0) != (t1 == 1.0):
             from_end = t * length if t0 == 0.0 else (1.0 - t) * length
-            # Each edge's shells are scaled by its own factor near 1: equal radii on two edges through one vertex
-            # would put four samples on a circle in a common plane, a flat tetrahedron qhull may keep.
-            shell = 2.0 ** np.round(np.log2(from_end)) * self.shell_scale[k]
+            # One radius per vertex, for all its edges: shells of their own radius per edge (1 ± 10 %) let the
+            # pieces of two edges at a small angle encroach on each other at every scale, and refinement ran down
+            # into a UV sphere's pole once an edit folded its fan (bench/RESULTS.md). Four samples on a circle in
+            # a common plane that equal radii can make are joggled by qhull, and a flat cell is flipped away.
+            shell = 2.0 ** np.round(np.log2(from_end)) * self.shell_scale[self.edges[k, 0 if t0 == 0.0 else 1]]
             candidate = shell / length if t0 == 0.0 else 1.0 - shell / length
             if t0 + 0.25 * (t1 - t0) <= candidate <= t1 - 0.25 * (t1 - t0):
                 t = candidate
