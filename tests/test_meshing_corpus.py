@@ -22,7 +22,7 @@ from test_meshing import CAGES_2D, CUBE_QUADS, CUBE_VERTICES, check_contract, lo
 VARIANT_CAGES = ["cube", "cylinder-32-ngon", "cone-32-ngon", "prism-16-rings-3", "limbs", "thin-plate"]
 VARIANTS = [kind for kind in cage_corpus.VARIANTS if kind != "as-made"]
 # The cage's own detail sets a floor on the cell count: each of a 64-sided cone's sliver-thin sides needs samples,
-# and its apex refinement (measured: about 6000 tetrahedra for a target of 2000).
+# and its apex refinement (measured: about 5000 tetrahedra for a target of 2000).
 DETAILED = {"cone-64-ngon", "cone-64-fan"}
 
 
@@ -185,7 +185,7 @@ def test_a_uv_sphere_with_a_vertex_pulled_past_its_pole_meshes(vertex, position)
     pulled past it. The pole's 32 feature edges meet at small angles; each edge's splits near the pole sat on shells
     of its own radius (1 ± 10 %), so the pieces of neighbouring edges kept encroaching on each other, and refinement
     ran down into the pole until it was refused as a gap, at 2000, 8000 and 32,000 cells alike. The shells are now
-    one radius per vertex."""
+    one radius per vertex (per edge only by a hair)."""
     vertices, faces = blender_uv_sphere()
     vertices[vertex] = position
     cage = make_cage(vertices, faces)

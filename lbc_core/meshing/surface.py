@@ -43,6 +43,7 @@ SPLIT_MIN_EDGE = 1.5
 # along its edges, and joggling once costs less than merging; 300 points 0.78 -> 0.51 ms.
 _QHULL_OPTIONS = "QJ Qbb Q3 Q5 Q8"
 _ROUNDS_2D = 30  # rounds of splitting boundary pieces missing from a region's triangulation
+SHELL_HAIR = 1e-3  # relative spread of the shells' radii between the edges of one vertex (see Surface._split)
 
 Samples = namedtuple("Samples", "points facet bary triangles triangle_region incidence")
 Samples.__doc__ = """The cage-surface samples of one refinement round.
@@ -159,7 +160,10 @@ class Surface:
         self.region_edges = [np.flatnonzero(np.any(self.edge_regions == r, axis=1)) for r in range(self.n_regions)]
         lengths = np.linalg.norm(cage.vertices[self.edges[:, 1]] - cage.vertices[self.edges[:, 0]], axis=1)
         self.edge_length = lengths
-        self.shell_scale = 1.0 + 0.1 * rng.uniform(-1.0, 1.0, cage.n_control_points)  # per cage vertex: see _split
+        # The refinement's shell radii: per cage vertex, and per edge by a hair (see _split), the hair from a fixed
+        # generator of its own.
+        self.shell_scale = 1.0 + 0.1 * rng.uniform(-1.0, 1.0, cage.n_control_points)
+        self.edge_shell_scale = 1.0 + SHELL_HAIR * np.random.default_rng(0).uniform(-1.0, 1.0, len(lengths))
         # At least two pieces per edge, slightly uneven: evenly split edges give co-circular samples whose
         # Delaunay triangulation is ambiguous, and no sample-free sphere may run through a box's corners.
         # The corner of edge_facet holding each feature edge's lower and higher vertex: (K, 2).
@@ -372,11 +376,13 @@ class Surface:
         length = self.edge_length[k]
         if (t0 == 0.0) != (t1 == 1.0):
             from_end = t * length if t0 == 0.0 else (1.0 - t) * length
-            # One radius per vertex, for all its edges: shells of their own radius per edge (1 ± 10 %) let the
-            # pieces of two edges at a small angle encroach on each other at every scale, and refinement ran down
-            # into a UV sphere's pole once an edit folded its fan (bench/RESULTS.md). Four samples on a circle in
-            # a common plane that equal radii can make are joggled by qhull, and a flat cell is flipped away.
-            shell = 2.0 ** np.round(np.log2(from_end)) * self.shell_scale[self.edges[k, 0 if t0 == 0.0 else 1]]
+            # One radius per vertex for all its edges, so that the pieces of two edges at a small angle do not
+            # encroach on each other: radii of their own per edge (1 ± 10 %) let them at every scale, and refinement
+            # ran down into a UV sphere's pole once an edit folded its fan. Per edge only by a hair (SHELL_HAIR):
+            # equal radii put two edges' samples on a circle in their common plane, a flat tetrahedron (the 64-sided
+            # cone at 4000 cells); the hair lets a piece be encroached only by an edge within 2.6° of it.
+            scale = self.shell_scale[self.edges[k, 0 if t0 == 0.0 else 1]] * self.edge_shell_scale[k]
+            shell = 2.0 ** np.round(np.log2(from_end)) * scale
             candidate = shell / length if t0 == 0.0 else 1.0 - shell / length
             if t0 + 0.25 * (t1 - t0) <= candidate <= t1 - 0.25 * (t1 - t0):
                 t = candidate
