@@ -9,7 +9,6 @@ slots. Rows travel as padded (m, K) arrays of values and column indices (:func:`
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import linprog
 
 
 def project_onto_constraints(clamped, unclamped, controls, positions, check=None):
@@ -71,6 +70,8 @@ def nearest_feasible(weights, controls, positions, check=None):
     -------
     (m, n) float array; a row whose point lies outside the controls' hull is returned as given.
     """
+    from scipy.optimize import linprog  # here: importing it costs the extension's start 60 ms, for a rare path
+
     n = len(controls)
     affine = np.c_[controls, np.ones(n)].T  # (d+1, n)
     # Variables [w, s], both non-negative: minimise Σ s with |w - weights| ≤ s and affine @ w = [x, 1].
