@@ -38,9 +38,11 @@ MODE_ITEMS = (
 
 
 # Whether the deformer works: the panel picks its icon and actions from this, and shows ``status`` (the why) as text.
+# Numbered, because files store the number: UNBOUND came last, so the states saved before it keep theirs.
 STATE_ITEMS = (
-    ("FOLLOWING", "Following", "The mesh follows its cage"),
-    ("STOPPED", "Stopped", "The deformer cannot work (the status says why): the mesh stays at rest"),
+    ("FOLLOWING", "Following", "The mesh follows its cage", 0),
+    ("STOPPED", "Stopped", "The deformer cannot work (the status says why): the mesh stays at rest", 1),
+    ("UNBOUND", "Unbound", "The mesh is not bound to a cage", 2),
 )
 
 
@@ -131,7 +133,7 @@ class LBC_PG_binding(BindOptionProperties, bpy.types.PropertyGroup):
     outside: IntProperty(name="Outside", description="Mesh vertices outside the cage at bind time")
     bind_seconds: FloatProperty(name="Bind Time", unit="TIME_ABSOLUTE")
     warnings: StringProperty(name="Warnings", description="What lbc_core repaired or noticed at bind time")
-    state: EnumProperty(name="State", items=STATE_ITEMS, default="FOLLOWING")
+    state: EnumProperty(name="State", items=STATE_ITEMS, default="UNBOUND")
     status: StringProperty(name="Status", description="Why the deformer works or stopped")
     active_modifier: StringProperty(description="The modifier that was active before binding, made active again on "
                                     "unbind")

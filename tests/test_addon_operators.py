@@ -116,6 +116,7 @@ def test_unbind_restores_the_mesh_bit_for_bit():
         assert bpy.ops.object.lbc_unbind() == {"FINISHED"}
     assert mesh_state(mesh) == before
     assert not is_bound(mesh)
+    assert mesh.lbc.state == "UNBOUND"  # a new user's find: it read "FOLLOWING" after Unbind
 
 
 def _join_into(target, bound):
