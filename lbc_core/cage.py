@@ -38,6 +38,10 @@ from .geometry import cross2, enclosed_measure, in_triangle_2d, triangle_normals
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
+# n-gons from this many sides whose ear clipping fans out from one vertex are named in the cage's warnings: on
+# Blender's Cylinder (32-gon caps) the apex's coordinate sums to 466 over the points inside, its neighbours' to 18-166;
+# poked caps give 28-67 and the centre 540-570 (bench/RESULTS.md).
+FAN_NOTICE_SIDES = 8
 # Blender keeps positions in float32, off by up to 6e-8 of the coordinates' size: the triangles of a subdivided cube
 # rotated and applied leave its faces' planes by that much. Two triangles meeting at a vertex count as coplanar within
 # this share of the largest coordinate (a generous multiple of that rounding) if also within NEARLY_FLAT (radians) of
@@ -497,7 +501,34 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     _raise_all(defects)
     if enclosed_measure(welded, triangles) <= ZERO_LENGTH * diagonal**3:
         raise CageError("the cage encloses zero volume: give it thickness, or bind in 2D with a polygon cage")
+    warnings += _fans(triangles, triangle_face, faces, names)
     return Cage(welded, triangles, triangle_face, vertex_map, warnings)
+
+
+def _fans(triangles, triangle_face, faces, names):
+    """A notice (a list of at most one string) naming the n-gons of :data:`FAN_NOTICE_SIDES` sides or more whose
+    triangles fan out from one vertex: its boundary values span the whole face, and the other vertices' slivers."""
+    fans = []
+    for index, face in faces:
+        if len(face) >= FAN_NOTICE_SIDES:
+            counts = np.bincount(triangles[triangle_face == index].ravel())
+            apex = int(np.argmax(counts))
+            if counts[apex] > (len(face) - 2) / 2:
+                fans.append((index, len(face), int(names[apex])))
+    if not fans:
+        return []
+    sides = sorted({count for _, count, _ in fans})
+    size = f"{sides[0]} sides" if len(sides) == 1 else f"{sides[0]} to {sides[-1]} sides"
+    which = _some([index for index, _, _ in fans])
+    apexes = _some([apex for _, _, apex in fans])
+    if len(fans) == 1:
+        start = f"cage face {which} ({size}) is split into triangles that fan out from its vertex {apexes}, which"
+    else:
+        start = (f"cage faces {which} ({size}) are split into triangles that fan out from one vertex each "
+                 f"({apexes}), which")
+    return [f"{start} moves most of its face, and the others little: for every vertex to move its share, poke "
+            f"{'it' if len(fans) == 1 else 'them'} (in Blender: Face > Poke Faces; a Cylinder's Cap Fill Type: "
+            "Triangle Fan)"]
 
 
 def _face_list(faces, n_vertices):

@@ -691,7 +691,22 @@ def test_an_ngon_cap_left_out_of_plane_by_float32_rounding_is_not_a_self_interse
     vertices[cap, 2] -= np.float32(0.3)
     assert np.any(vertices[cap, 2] != 1.0)  # the round trip is not exact
     cage = make_cage(vertices.astype(float), faces)
-    assert cage.n_control_points == 64 and not cage.warnings
+    assert cage.n_control_points == 64 and len(cage.warnings) == 1 and "fan out" in cage.warnings[0]  # no repair
+
+
+def test_an_n_gon_that_fans_out_from_one_vertex_is_named_with_the_fix():
+    """Blender's Cylinder: each 32-gon cap is ear-clipped into a fan from one vertex, whose coordinate then moves the
+    whole cap (its weights sum to 466 over the points inside, the other rim vertices' to 18-166). The warning names
+    the faces, the vertices and the fix; caps already poked (Triangle Fan), and a pentagonal prism's, are not named."""
+    import cage_corpus
+
+    cage = make_cage(*cage_corpus.load("cylinder-32-ngon"))
+    assert cage.warnings == [
+        "cage faces 30, 33 (32 sides) are split into triangles that fan out from one vertex each (5, 62), which moves "
+        "most of its face, and the others little: for every vertex to move its share, poke them (in Blender: Face > "
+        "Poke Faces; a Cylinder's Cap Fill Type: Triangle Fan)"]
+    assert make_cage(*cage_corpus.load("cylinder-32-fan")).warnings == []
+    assert make_cage(*cage_corpus.load("cylinder-5-ngon")).warnings == []
 
 
 @pytest.mark.parametrize("cuts", [3, 9])
