@@ -1,5 +1,7 @@
 """Panels: the same content in the Properties editor (Object tab) and the 3D view's sidebar (LBC tab)."""
 
+import textwrap
+
 import bpy
 
 from . import deformer, geometry, storage
@@ -39,12 +41,22 @@ def draw_binding(layout, obj):
     if settings.bind_report:  # warm (what was solved again) or from scratch (why)
         column.label(text=settings.bind_report[:1].upper() + settings.bind_report[1:])
     if settings.warnings:
-        layout.label(text=settings.warnings, icon="INFO")
+        wrapped_label(layout, settings.warnings, icon="INFO")
     row = layout.row(align=True)
     row.operator("object.lbc_rebind", icon="FILE_REFRESH")
     row.operator("object.lbc_unbind", icon="X")
     layout.operator("object.lbc_save_shape_key", icon="SHAPEKEY_DATA")
     draw_influence(layout, obj)
+
+
+def wrapped_label(layout, text, icon="NONE"):
+    """A long text as lines of labels as wide as the panel (a label does not wrap: a 300-character warning showed
+    only its start, and its advice came last), the icon on the first line."""
+    region = bpy.context.region
+    width = 60 if region is None else max(30, int(region.width / (7 * bpy.context.preferences.system.ui_scale)))
+    column = layout.column(align=True)
+    for number, line in enumerate(textwrap.wrap(text, width)):
+        column.label(text=line, icon=icon if number == 0 else "BLANK1")
 
 
 def edited_since_bind(settings):

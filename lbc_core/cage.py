@@ -519,16 +519,17 @@ def _fans(triangles, triangle_face, faces, names):
         return []
     sides = sorted({count for _, count, _ in fans})
     size = f"{sides[0]} sides" if len(sides) == 1 else f"{sides[0]} to {sides[-1]} sides"
-    which = _some([index for index, _, _ in fans])
-    apexes = _some([apex for _, _, apex in fans])
+    which = " and ".join(_some([index for index, _, _ in fans]).rsplit(", ", 1))
+    apexes = " and ".join(_some([apex for _, _, apex in fans]).rsplit(", ", 1))
     if len(fans) == 1:
-        start = f"cage face {which} ({size}) is split into triangles that fan out from its vertex {apexes}, which"
+        said = (f"cage face {which} (an n-gon of {size}) is split into a fan of triangles from vertex {apexes}, which "
+                "moves most of the face while its other vertices barely do: poke it")
     else:
-        start = (f"cage faces {which} ({size}) are split into triangles that fan out from one vertex each "
-                 f"({apexes}), which")
-    return [f"{start} moves most of its face, and the others little: for every vertex to move its share, poke "
-            f"{'it' if len(fans) == 1 else 'them'} (in Blender: Face > Poke Faces; a Cylinder's Cap Fill Type: "
-            "Triangle Fan)"]
+        said = (f"cage faces {which} (n-gons of {size}) are split into fans of triangles from vertices {apexes}, "
+                "which move most of their faces while the other vertices barely do: poke them")
+    them = "it" if len(fans) == 1 else "them"
+    return [f"{said} (in Blender, select {them} with Select > Select All by Trait > Faces by Sides, greater than "
+            f"{FAN_NOTICE_SIDES - 1}, then Face > Poke Faces, or make a Cylinder with Cap Fill Type Triangle Fan)"]
 
 
 def _face_list(faces, n_vertices):

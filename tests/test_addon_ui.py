@@ -72,6 +72,21 @@ def test_bound_mesh_shows_state_figures_and_actions(bound_gargoyle):
     assert layout.props() == ["Strength", "Vertex Group", ""]
 
 
+def test_a_long_warning_is_shown_whole_over_several_lines(bound_gargoyle):
+    """A new user's find: the panel drew a 300-character warning on one label, which Blender does not wrap, so only
+    its start showed and the advice at its end did not."""
+    mesh, _ = bound_gargoyle
+    warning = "cage faces 30 and 33 are split into fans of triangles: poke them " * 5
+    mesh.lbc.warnings = warning
+    try:
+        lines = [text for kind, text in _draw(mesh, [mesh]).record if kind == "label"]
+    finally:
+        mesh.lbc.warnings = ""
+    shown = [line for line in lines if line in warning]
+    assert len(shown) > 1 and all(len(line) <= 60 for line in shown)
+    assert " ".join(shown) == warning.strip()
+
+
 def test_deleted_cage_shows_why_and_offers_bind(bound_gargoyle):
     mesh, cage = bound_gargoyle
     delete_with_x(cage)

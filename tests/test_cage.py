@@ -691,7 +691,7 @@ def test_an_ngon_cap_left_out_of_plane_by_float32_rounding_is_not_a_self_interse
     vertices[cap, 2] -= np.float32(0.3)
     assert np.any(vertices[cap, 2] != 1.0)  # the round trip is not exact
     cage = make_cage(vertices.astype(float), faces)
-    assert cage.n_control_points == 64 and len(cage.warnings) == 1 and "fan out" in cage.warnings[0]  # no repair
+    assert cage.n_control_points == 64 and len(cage.warnings) == 1 and "fans of triangles" in cage.warnings[0]
 
 
 def test_an_n_gon_that_fans_out_from_one_vertex_is_named_with_the_fix():
@@ -702,9 +702,12 @@ def test_an_n_gon_that_fans_out_from_one_vertex_is_named_with_the_fix():
 
     cage = make_cage(*cage_corpus.load("cylinder-32-ngon"))
     assert cage.warnings == [
-        "cage faces 30, 33 (32 sides) are split into triangles that fan out from one vertex each (5, 62), which moves "
-        "most of its face, and the others little: for every vertex to move its share, poke them (in Blender: Face > "
-        "Poke Faces; a Cylinder's Cap Fill Type: Triangle Fan)"]
+        "cage faces 30 and 33 (n-gons of 32 sides) are split into fans of triangles from vertices 5 and 62, which move "
+        "most of their faces while the other vertices barely do: poke them (in Blender, select them with Select > "
+        "Select All by Trait > Faces by Sides, greater than 7, then Face > Poke Faces, or make a Cylinder with Cap "
+        "Fill Type Triangle Fan)"]
+    assert "cage face 30 (an n-gon of 32 sides) is split into a fan of triangles from vertex 31" in make_cage(
+        *cage_corpus.load("cone-32-ngon")).warnings[0]
     assert make_cage(*cage_corpus.load("cylinder-32-fan")).warnings == []
     assert make_cage(*cage_corpus.load("cylinder-5-ngon")).warnings == []
 
