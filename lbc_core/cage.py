@@ -523,13 +523,14 @@ def _fans(triangles, triangle_face, faces, names):
     apexes = " and ".join(_some([apex for _, _, apex in fans]).rsplit(", ", 1))
     if len(fans) == 1:
         said = (f"cage face {which} (an n-gon of {size}) is split into a fan of triangles from vertex {apexes}, which "
-                "moves most of the face while its other vertices barely do: poke it")
+                "moves most of the face while its other vertices barely do")
     else:
         said = (f"cage faces {which} (n-gons of {size}) are split into fans of triangles from vertices {apexes}, "
-                "which move most of their faces while the other vertices barely do: poke them")
+                "which move most of their faces while the other vertices barely do")
     them = "it" if len(fans) == 1 else "them"
-    return [f"{said} (in Blender, select {them} with Select > Select All by Trait > Faces by Sides, greater than "
-            f"{FAN_NOTICE_SIDES - 1}, then Face > Poke Faces, or make a Cylinder with Cap Fill Type Triangle Fan)"]
+    return [f"{said}: poke {them} (in Blender, select {them} with Select > Select All by Trait > Faces by Sides, "
+            f"greater than {FAN_NOTICE_SIDES - 1}, then Face > Poke Faces, or make a Cylinder with Cap Fill Type "
+            "Triangle Fan)"]
 
 
 def _face_list(faces, n_vertices):
