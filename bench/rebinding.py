@@ -191,12 +191,12 @@ def points_inside(cage, faces, count=3000, seed=0):
     from lbc_core.geometry import winding_numbers
 
     rng = np.random.default_rng(seed)
-    facets = lbc_core.make_cage(cage, faces).facets
+    made = lbc_core.make_cage(cage, faces)
     low, high = cage.min(axis=0), cage.max(axis=0)
     inside = np.zeros((0, 3))
     while len(inside) < count:
         trial = low + (high - low) * rng.random((4 * count, 3))
-        inside = np.concatenate([inside, trial[winding_numbers(cage, facets, trial) > 0.5]])
+        inside = np.concatenate([inside, trial[winding_numbers(made.surface_vertices, made.facets, trial) > 0.5]])
     return inside[:count]
 
 

@@ -57,7 +57,9 @@ def mean_value_coordinates(cage, points, progress=None, cancel=None):
     """
     progress = Progress.of(progress, cancel)
     points = np.asarray(points, dtype=float)
-    vertices, facets = cage.vertices, cage.facets
+    # Over the surface's vertices, a poked n-gon's centre among them; its column is passed on to the n-gon's control
+    # points at the end, as its boundary values are.
+    vertices, facets = cage.surface_vertices, cage.facets
     tolerance = ON_CAGE_TOLERANCE * cage.bbox_diagonal
     chunk = max(1, CHUNK_ENTRIES // len(facets))
     # Facet corner -> control point: scatters per-corner contributions (chunk, 3E) into (chunk, n) in one product.
@@ -71,6 +73,9 @@ def mean_value_coordinates(cage, points, progress=None, cancel=None):
         stop = min(start + chunk, len(points))
         weights[start:stop] = evaluate(vertices, facets, scatter, points[start:stop], tolerance)
     progress(1.0, "mean value coordinates: done")
+    if cage.centres:
+        n = cage.n_control_points
+        weights = weights[:, :n] + (cage.centre_values.T @ weights[:, n:].T).T
     return weights
 
 

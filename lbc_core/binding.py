@@ -139,6 +139,8 @@ class Binding:
             cage_facets=self.cage.facets,
             cage_facet_face=self.cage.facet_face,
             cage_vertex_map=self.cage.vertex_map,
+            cage_centre_sizes=np.array([len(corners) for corners in self.cage.centres], dtype=np.int64),
+            cage_centre_corners=np.concatenate(self.cage.centres + (np.zeros(0, np.int64),)).astype(np.int64),
             rest_cage_vertices=self.rest_cage_vertices,
             weights_data=weights.data,
             weights_indices=weights.indices,
@@ -203,7 +205,8 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
         damaged("its cage does not match its fingerprint")
     if cage_vertices is not None:
         given = make_cage(cage_vertices, cage_faces)
-        if given.fingerprint() != cage.fingerprint():
+        # The faces, not their split: a file of a version that split n-gons otherwise serves the same cage.
+        if not np.array_equal(given.vertex_map, cage.vertex_map) or given.face_corners() != cage.face_corners():
             raise CageError(
                 f"{path} was bound to another cage ({len(cage.vertex_map)} vertices, {len(cage.facets)} facets; "
                 f"this one has {len(given.vertex_map)} vertices, {len(given.facets)} facets): bind this cage again"
@@ -236,6 +239,9 @@ FILE_ARRAYS = {
     "domain_weights": ("f", 2), "options": ("U", 0), "timings": ("U", 0), "iterations": ("iu", 0),
     "converged": ("b", 0), "objective": ("f", 0),
 }
+# Arrays a file may lack: the poked n-gons' control points (their counts, then the points one n-gon after the other),
+# which files written while every n-gon was ear-clipped do not hold.
+OPTIONAL_FILE_ARRAYS = {"cage_centre_sizes": ("iu", 1), "cage_centre_corners": ("iu", 1)}
 
 
 def _damaged(path, what):
@@ -263,11 +269,13 @@ def _read_archive(path):
             if missing:
                 _damaged(path, f"it lacks {', '.join(missing)}")
             arrays = {key: data[key] for key in FILE_ARRAYS}
+            arrays.update({key: data[key] if key in data.files else np.zeros(0, np.int64)
+                           for key in OPTIONAL_FILE_ARRAYS})
         except CageError:
             raise
         except Exception as error:  # a damaged member: bad CRC, truncated stream, bad header
             _damaged(path, f"it cannot be read ({_reason(error)})")
-    for key, (kinds, ndim) in FILE_ARRAYS.items():
+    for key, (kinds, ndim) in {**FILE_ARRAYS, **OPTIONAL_FILE_ARRAYS}.items():
         if arrays[key].dtype.kind not in kinds or arrays[key].ndim != ndim:
             _damaged(path, f"{key} has type {arrays[key].dtype} and {arrays[key].ndim} dimensions")
     return arrays
@@ -283,6 +291,15 @@ def _checked_parts(arrays, damaged):
     n, d = cage_vertices.shape
     if d not in (2, 3) or n < d + 1 or facets.shape[1:] != (d,) or not len(facets):
         damaged(f"its cage has {n} vertices in {d}D and facets of shape {facets.shape}")
+    sizes, centre_corners = arrays["cage_centre_sizes"], arrays["cage_centre_corners"]
+    if np.any(sizes < 3) or np.sum(sizes) != len(centre_corners) or np.any((centre_corners < 0)
+                                                                          | (centre_corners >= n)):
+        damaged(f"its {len(sizes)} poked n-gons name {len(centre_corners)} control points of {n}")
+    centres = tuple(np.split(centre_corners.astype(np.int64), np.cumsum(sizes)[:-1])) if len(sizes) else ()
+    for c, corners in enumerate(centres):  # each centre's triangles run around its n-gon's control points
+        around = facets[np.any(facets == n + c, axis=1)]
+        if len(around) != len(corners) or set(around[around < n].tolist()) != set(corners.tolist()):
+            damaged(f"its poked n-gon {c} does not match the facets around its centre")
     m = len(arrays["points"])
     domain_vertices, cells = arrays["domain_vertices"], arrays["domain_cells"]
     n_domain = len(domain_vertices)
@@ -300,7 +317,7 @@ def _checked_parts(arrays, damaged):
     if tuple(arrays["weights_shape"]) != (m, n):
         damaged(f"its weights claim shape {tuple(arrays['weights_shape'])} for {m} points and {n} control points")
     ranges = {
-        "cage_facets": n, "cage_vertex_map": n, "weights_indices": n, "domain_cells": n_domain,
+        "cage_facets": n + len(centres), "cage_vertex_map": n, "weights_indices": n, "domain_cells": n_domain,
         "domain_boundary_vertices": n_domain, "domain_boundary_facet": len(facets),
         "domain_control_vertices": n_domain,
     }
@@ -316,7 +333,7 @@ def _checked_parts(arrays, damaged):
         damaged("its weights' row pointers do not run from 0 to the number of weights")
     weights = sp.csr_matrix((arrays["weights_data"], arrays["weights_indices"], indptr), shape=(m, n))
     _check_weights(weights, arrays, damaged)
-    cage = Cage(cage_vertices, facets, arrays["cage_facet_face"], arrays["cage_vertex_map"])
+    cage = Cage(cage_vertices, facets, arrays["cage_facet_face"], arrays["cage_vertex_map"], centres=centres)
     domain = DomainMesh(domain_vertices, cells, arrays["domain_boundary_vertices"], arrays["domain_boundary_facet"],
                         arrays["domain_boundary_bary"], arrays["domain_control_vertices"])
     return cage, domain, weights

@@ -8,7 +8,8 @@ def boundary_weights(domain, cage):
 
     A vertex on facet f with barycentric coordinates b gets weight b_k for the facet's k-th control point and 0 for
     every other, so each coordinate is linear along cage edges (2D) and across cage triangles (3D), equals 1 at its own
-    control point and 0 on every facet that does not touch it.
+    control point and 0 on every facet that does not touch it. A facet corner that is a poked n-gon's centre passes
+    its share on to the n-gon's control points (:attr:`Cage.centre_values`).
 
     Parameters
     ----------
@@ -19,11 +20,13 @@ def boundary_weights(domain, cage):
     -------
     (B, n) float array, rows in the order of ``domain.boundary_vertices``
     """
-    n_boundary = len(domain.boundary_vertices)
-    weights = np.zeros((n_boundary, cage.n_control_points))
+    n_boundary, n = len(domain.boundary_vertices), cage.n_control_points
+    weights = np.zeros((n_boundary, len(cage.surface_vertices)))
     corners = cage.facets[domain.boundary_facet]  # (B, d)
     rows = np.repeat(np.arange(n_boundary), corners.shape[1])
     np.add.at(weights, (rows, corners.ravel()), domain.boundary_bary.ravel())
+    if cage.centres:
+        weights = weights[:, :n] + (cage.centre_values.T @ weights[:, n:].T).T
     # Control points are exact: snap their rows to unit vectors (bary may carry round-off there).
     position = {v: k for k, v in enumerate(domain.boundary_vertices)}
     for i, vertex in enumerate(domain.control_vertices):

@@ -8,7 +8,14 @@ keeps the Lagrange and linearity properties on every edge of the input:
 * a quad is split along its shorter diagonal, or, when the two are within :data:`QUAD_SPLIT_TIE` of each other,
   along the one from its first vertex, unless that diagonal leaves the quad (a non-convex quad) or makes a zero-area
   triangle; then along the other one;
-* an n-gon is ear-clipped in the plane of its Newell normal, always cutting the first ear in the face's vertex order.
+* an n-gon of :data:`POKE_SIDES` sides or more is poked: split into triangles from a centre, the mean of its
+  vertices, when that centre sees each of its sides from at least :data:`POKE_HEIGHT` of its reach (any convex
+  n-gon, a star). The centre is no control point: it is a surface vertex whose boundary values are 1/k for each of
+  the face's k control points, so values and surface are one linear construction (partition of unity and
+  reproduction hold on the face), and no vertex of the face is favoured. The cage's surface vertices
+  (``surface_vertices``) are its control points followed by these centres;
+* any other n-gon is ear-clipped in the plane of its Newell normal, always cutting the first ear in the face's vertex
+  order.
 
 Checks, in this order (each failure raises :class:`~lbc_core.errors.CageError`, a ValueError, whose message names the
 problem and what to do; repairs are reported in ``Cage.warnings``):
@@ -26,7 +33,7 @@ Lengths below :data:`ZERO_LENGTH` × bounding-box diagonal count as zero in ever
 
 import hashlib
 import operator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -38,9 +45,16 @@ from .geometry import cross2, enclosed_measure, in_triangle_2d, triangle_normals
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
-# n-gons from this many sides whose ear clipping fans out from one vertex are named in the cage's warnings: on
-# Blender's Cylinder (32-gon caps) the apex's coordinate sums to 466 over the points inside, its neighbours' to 18-166;
-# poked caps give 28-67 and the centre 540-570 (bench/RESULTS.md).
+# n-gons from this many sides are poked at their vertices' mean (the module docstring). Ear-clipped, Blender's
+# Cylinder's 32-gon caps fanned out from one vertex, whose coordinate summed to 466 over the points inside against
+# 18-166 for the others (bench/RESULTS.md).
+POKE_SIDES = 5
+# An n-gon is poked only when its centre's distance to the line of each of its sides (in the plane of its Newell
+# normal) is at least this share of the centre's largest distance to a vertex: regular polygons have cos(pi / k)
+# (0.81 and more), a five-pointed star 0.31; below it a triangle of the poke would be a sliver or fold.
+POKE_HEIGHT = 0.1
+# n-gons from this many sides that could not be poked and whose ear clipping fans out from one vertex are named in the
+# cage's warnings.
 FAN_NOTICE_SIDES = 8
 # Blender keeps positions in float32, off by up to 6e-8 of the coordinates' size: the triangles of a subdivided cube
 # rotated and applied leave its faces' planes by that much. Two triangles meeting at a vertex count as coplanar within
@@ -87,6 +101,8 @@ class Cage:
         Index in ``vertices`` of each input vertex (welding merges some).
     warnings : list of str
         What was repaired (welded vertices, flipped faces), for the user to read.
+    centres : tuple of int arrays
+        The control points of each poked n-gon (3D); its centre, surface vertex n + c, is their mean.
     """
 
     vertices: np.ndarray
@@ -94,6 +110,7 @@ class Cage:
     facet_face: np.ndarray
     vertex_map: np.ndarray
     warnings: list = field(default_factory=list)
+    centres: tuple = ()
 
     @property
     def dim(self):
@@ -114,13 +131,40 @@ class Cage:
         return self.n_control_points == self.dim + 1
 
     @property
+    def centre_values(self):
+        """(C, n) scipy.sparse.csr_matrix: each poked n-gon's centre as a combination of the control points (1/k
+        for each of its k vertices), its boundary values and its position (``centre_values @ vertices``)."""
+        sizes = np.array([len(corners) for corners in self.centres], dtype=np.int64)
+        columns = np.concatenate(self.centres).astype(np.int64) if self.centres else np.zeros(0, np.int64)
+        indptr = np.r_[0, np.cumsum(sizes)]
+        return sp.csr_matrix((np.repeat(1.0 / np.maximum(sizes, 1), sizes), columns, indptr),
+                             shape=(len(self.centres), self.n_control_points))
+
+    @property
+    def surface_vertices(self):
+        """(n + C, d) float array: the vertices of ``facets``, the control points and then the poked n-gons' centres."""
+        if not self.centres:
+            return self.vertices
+        return np.vstack([self.vertices, self.centre_values @ self.vertices])
+
+    @property
+    def surface_values(self):
+        """(n + C, n) scipy.sparse.csr_matrix: the boundary values at each surface vertex (a unit row at a control
+        point, :attr:`centre_values` at a centre)."""
+        return sp.vstack([sp.identity(self.n_control_points, format="csr"), self.centre_values], format="csr")
+
+    def surface(self):
+        """The cage as the mesher sees it: every surface vertex a vertex of its own, no centres."""
+        return replace(self, vertices=self.surface_vertices, centres=())
+
+    @property
     def bbox_diagonal(self):
         return float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
 
     @property
     def measure(self):
         """Signed area (2D) or volume (3D) enclosed; positive for the stored orientation."""
-        return float(enclosed_measure(self.vertices, self.facets))
+        return float(enclosed_measure(self.surface_vertices, self.facets))
 
     def fingerprint(self):
         """A hash of the topology (vertex count and facets); positions do not enter it.
@@ -134,6 +178,15 @@ class Cage:
         digest.update(np.ascontiguousarray(self.vertex_map, dtype=np.int64).tobytes())
         digest.update(np.ascontiguousarray(self.facets, dtype=np.int64).tobytes())
         return digest.hexdigest()[:16]
+
+    def face_corners(self):
+        """The control points of each input face that has facets, however it was split: a list of (face index,
+        frozenset of int), in face order."""
+        n = self.n_control_points
+        faces = {}
+        for facet, face in zip(self.facets.tolist(), self.facet_face.tolist()):
+            faces.setdefault(face, set()).update(corner for corner in facet if corner < n)
+        return [(face, frozenset(corners)) for face, corners in sorted(faces.items())]
 
     def control_points_from_input(self, input_vertices):
         """Map positions given per input vertex (e.g. a posed cage) to the welded control points.
@@ -209,8 +262,9 @@ class Cage:
                             "vertices: pose the cage that was bound")
         corners = [set(self.vertex_map[faces[f]].tolist()) if f < len(faces) else set()
                    for f in range(int(self.facet_face.max()) + 1)]
+        n = self.n_control_points
         for facet, face in zip(self.facets.tolist(), self.facet_face.tolist()):
-            if not set(facet) <= corners[face]:
+            if not {corner for corner in facet if corner < n} <= corners[face]:
                 raise CageError(
                     f"this cage's faces differ from the bound cage's (face {face} and on): same vertex count, other "
                     "faces; pose the cage that was bound, or bind this one again"
@@ -497,20 +551,79 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
                     f"flipped {_count(len(np.unique(triangle_face[flipped])), 'cage face')} to make the orientation "
                     "consistent and outward"
                 )
-    _check_self_intersection(welded, triangles[clean], triangle_face[clean], zero, defects)
+    triangles, triangle_face, clean, centres = _poke(welded, triangles, triangle_face, clean, faces)
+    surface = np.vstack([welded] + [welded[corners].mean(axis=0, keepdims=True) for corners in centres])
+    _check_self_intersection(surface, triangles[clean], triangle_face[clean], zero, defects)
     _raise_all(defects)
-    if enclosed_measure(welded, triangles) <= ZERO_LENGTH * diagonal**3:
+    if enclosed_measure(surface, triangles) <= ZERO_LENGTH * diagonal**3:
         raise CageError("the cage encloses zero volume: give it thickness, or bind in 2D with a polygon cage")
     warnings += _fans(triangles, triangle_face, faces, names)
-    return Cage(welded, triangles, triangle_face, vertex_map, warnings)
+    return Cage(welded, triangles, triangle_face, vertex_map, warnings, tuple(centres))
+
+
+def _poke(vertices, triangles, triangle_face, clean, faces):
+    """The n-gons of :data:`POKE_SIDES` sides or more whose mean sees every side (:data:`POKE_HEIGHT`) split into
+    triangles from it instead of their ear clipping, in the orientation their ear clipping was given.
+
+    Returns
+    -------
+    triangles (T', 3) int array, triangle_face (T',) int array, clean (T',) bool array
+        As given, the poked faces' triangles replaced (centre c is vertex n + c), in input face order.
+    centres : list of (k,) int arrays
+        The vertices of each poked face, in its outward order.
+    """
+    n = len(vertices)
+    centres, replaced, added = [], [], []
+    for index, face in faces:
+        low, high = np.searchsorted(triangle_face, [index, index + 1])  # triangles come in input face order
+        if len(face) < POKE_SIDES or not clean[low:high].all():
+            continue
+        ring = np.array(face)
+        if _reversed(triangles[low], face):
+            ring = ring[::-1]
+        if _sees_every_side(vertices[ring]):
+            replaced.append(np.arange(low, high))
+            added.append((index, np.column_stack([np.full(len(ring), n + len(centres)), ring, np.roll(ring, -1)])))
+            centres.append(ring)
+    if not centres:
+        return triangles, triangle_face, clean, centres
+    kept = np.ones(len(triangles), dtype=bool)
+    kept[np.concatenate(replaced)] = False
+    triangles = np.vstack([triangles[kept]] + [pieces for _, pieces in added])
+    triangle_face = np.concatenate([triangle_face[kept]] + [np.full(len(pieces), index) for index, pieces in added])
+    clean = np.r_[clean[kept], np.ones(len(triangles) - np.count_nonzero(kept), dtype=bool)]
+    order = np.argsort(triangle_face, kind="stable")
+    return triangles[order], triangle_face[order], clean[order], centres
+
+
+def _reversed(triangle, face):
+    """Whether a triangle cut from ``face`` (its corners in the face's cyclic order or against it) runs against it."""
+    position = {corner: k for k, corner in enumerate(face)}
+    a, b, c = (position[corner] for corner in triangle.tolist())
+    return (b - a) % len(face) + (c - b) % len(face) + (a - c) % len(face) > len(face)
+
+
+def _sees_every_side(points):
+    """Whether the mean of an n-gon's points (k, 3), in outward order, stands at least POKE_HEIGHT of its largest
+    distance to them inside the line of each side, in the plane of the n-gon's Newell normal."""
+    normal = np.sum(np.cross(points, np.roll(points, -1, axis=0)), axis=0)
+    centre = points.mean(axis=0)
+    if not np.linalg.norm(normal) > 0:
+        return False
+    normal /= np.linalg.norm(normal)
+    sides = np.roll(points, -1, axis=0) - points
+    lengths = np.linalg.norm(sides, axis=1)
+    heights = np.einsum("ij,j->i", np.cross(sides, centre - points), normal) / np.maximum(lengths, np.finfo(float).tiny)
+    reach = np.max(np.linalg.norm(points - centre, axis=1))
+    return bool(np.all(lengths > 0) and np.all(heights >= POKE_HEIGHT * reach))
 
 
 def _fans(triangles, triangle_face, faces, names):
-    """A notice (a list of at most one string) naming the n-gons of :data:`FAN_NOTICE_SIDES` sides or more whose
-    triangles fan out from one vertex: its boundary values span the whole face, and the other vertices' slivers."""
+    """A notice (a list of at most one string) naming the n-gons of :data:`FAN_NOTICE_SIDES` sides or more, not
+    poked, whose triangles fan out from one vertex: its boundary values span the whole face, the others' slivers."""
     fans = []
     for index, face in faces:
-        if len(face) >= FAN_NOTICE_SIDES:
+        if len(face) >= FAN_NOTICE_SIDES and np.all(triangles[triangle_face == index] < len(names)):
             counts = np.bincount(triangles[triangle_face == index].ravel())
             apex = int(np.argmax(counts))
             if counts[apex] > (len(face) - 2) / 2:
@@ -527,10 +640,10 @@ def _fans(triangles, triangle_face, faces, names):
     else:
         said = (f"cage faces {which} (n-gons of {size}) are split into fans of triangles from vertices {apexes}, "
                 "which move most of their faces while the other vertices barely do")
-    them = "it" if len(fans) == 1 else "them"
-    return [f"{said}: poke {them} (in Blender, select {them} with Select > Select All by Trait > Faces by Sides, "
-            f"greater than {FAN_NOTICE_SIDES - 1}, then Face > Poke Faces, or make a Cylinder with Cap Fill Type "
-            "Triangle Fan)"]
+    them, whose = ("it", "its") if len(fans) == 1 else ("them", "their")
+    return [f"{said}: {whose} middle lies too near a side to poke {them}; triangulate {them} (in Blender, select "
+            f"{them} with Select > Select All by Trait > Faces by Sides, greater than {FAN_NOTICE_SIDES - 1}, then "
+            f"Face > Triangulate Faces), or split {them} into rounder faces"]
 
 
 def _face_list(faces, n_vertices):

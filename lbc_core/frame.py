@@ -18,7 +18,6 @@ import dataclasses
 
 import numpy as np
 
-from .cage import Cage
 from .geometry import bary_positions
 
 
@@ -136,7 +135,7 @@ class MeshingFrame:
 
     def cage(self, cage):
         """The cage in this frame (same facets and numbering)."""
-        return Cage(self.to_local(cage.vertices), cage.facets, cage.facet_face, cage.vertex_map, list(cage.warnings))
+        return dataclasses.replace(cage, vertices=self.to_local(cage.vertices), warnings=list(cage.warnings))
 
     def to_local(self, points):
         """(P, d) points in this frame."""

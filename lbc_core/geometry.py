@@ -314,7 +314,7 @@ def bary_positions(cage, facet, bary):
     Parameters
     ----------
     cage : Cage
-        Anything with the cage's ``vertices`` (n, d) and ``facets`` (E, d).
+        Anything with the cage's ``surface_vertices`` (S, d) and ``facets`` (E, d).
     facet : (P,) int array
     bary : (P, d) float array
 
@@ -322,7 +322,7 @@ def bary_positions(cage, facet, bary):
     -------
     (P, d) float array
     """
-    corners = cage.vertices[cage.facets[facet]]  # (P, d, d)
+    corners = cage.surface_vertices[cage.facets[facet]]  # (P, d, d)
     points = bary[:, 0, None] * corners[:, 0]
     for k in range(1, bary.shape[1]):
         points = points + bary[:, k, None] * corners[:, k]

@@ -33,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .cage import ZERO_LENGTH, Cage, edge_pairing, make_cage
+from .cage import ZERO_LENGTH, edge_pairing, make_cage
 from .constraints import padded_rows
 from .errors import CageError
 from .fem import boundary_facets
@@ -358,12 +358,12 @@ def following_bent_edges(previous, cage):
     first_new = len(vertices)
     carried = weights @ cage.vertices  # where the carry will put each vertex
     zero = ZERO_LENGTH * old_cage.bbox_diagonal
+    values = cage.surface_values.toarray()
     for a, b, facet in bent:
-        ends = old_cage.vertices[[a, b]]
+        ends = old_cage.surface_vertices[[a, b]]
         for p, q, at in _crossings(ends, vertices, cells, zero):
             x = len(vertices)
-            row = np.zeros((1, weights.shape[1]))
-            row[0, a], row[0, b] = 1.0 - at, at  # the boundary values on the cage edge
+            row = (1.0 - at) * values[[a]] + at * values[[b]]  # the boundary values on the cage edge
             around = np.flatnonzero(np.any(cells == p, axis=1) & np.any(cells == q, axis=1))
             towards_p, towards_q = cells[around].copy(), cells[around].copy()
             towards_p[towards_p == q] = x
@@ -403,7 +403,7 @@ def _bent_edges(old_cage, cage):
     directed, order, _ = edge_pairing(facets)  # a closed manifold cage: each edge twice, its two facets side by side
     edges = np.sort(directed[order[::2]], axis=1)
     first, second = order[::2] % len(facets), order[1::2] % len(facets)
-    old_normals, normals = (unit(triangle_normals(c.vertices[facets])) for c in (old_cage, cage))
+    old_normals, normals = (unit(triangle_normals(c.surface_vertices[facets])) for c in (old_cage, cage))
     bent = _coplanar(old_normals, first, second) & ~_coplanar(normals, first, second)
     return np.column_stack([edges[bent], first[bent]])
 
@@ -587,22 +587,23 @@ def _split_as_before(old, new):
             and np.array_equal(np.sort(old.facet_face), np.sort(new.facet_face))):
         return new, "the cage's vertices, faces or welding changed"
     if new.dim == 3:
-        normals = triangle_normals(new.vertices[old.facets])
+        normals = triangle_normals(new.surface_vertices[old.facets])
         face_normals = np.zeros((int(new.facet_face.max()) + 1, 3))
-        np.add.at(face_normals, new.facet_face, triangle_normals(new.vertices[new.facets]))
+        np.add.at(face_normals, new.facet_face, triangle_normals(new.surface_vertices[new.facets]))
         facing = np.einsum("ij,ij->i", normals, face_normals[old.facet_face])
         face_sizes = np.linalg.norm(face_normals[old.facet_face], axis=1)
         if np.any(facing <= ZERO_LENGTH * new.bbox_diagonal ** 2 * face_sizes):
             return new, "a cage face bent so far that its previous split into triangles folds"
         # A bent face's surface is its split: keeping the previous one would bind another cage than a cold bind.
-        resplit = np.unique(old.facet_face[~np.isin(row_keys(np.sort(old.facets, axis=1), len(new.vertices)),
-                                                    row_keys(np.sort(new.facets, axis=1), len(new.vertices)))])
+        size = len(new.surface_vertices)
+        resplit = np.unique(old.facet_face[~np.isin(row_keys(np.sort(old.facets, axis=1), size),
+                                                    row_keys(np.sort(new.facets, axis=1), size))])
         bent = _bent(normals, old.facet_face, resplit)
         if len(bent):
             return new, (f"{_named_faces(bent)} bent and now split into other triangles (the edit changed which "
                          "diagonal a bind splits it along), which the cells the last bind filled the cage with do "
                          "not follow")
-    return Cage(new.vertices, old.facets, old.facet_face, new.vertex_map, new.warnings), None
+    return replace(new, facets=old.facets, facet_face=old.facet_face), None
 
 
 def _named_faces(faces):
@@ -680,20 +681,20 @@ def _faces_off_cage(mesh, vertices, old_cage, cage):
     within = np.zeros(len(triangles), dtype=bool)
     tolerance = (1e-9 * old_cage.bbox_diagonal) ** 2
     for candidates in _facets_around(old_cage.facets, facets[:, 0]).T:
-        corners = old_cage.vertices[old_cage.facets[np.maximum(candidates, 0)]]
+        corners = old_cage.surface_vertices[old_cage.facets[np.maximum(candidates, 0)]]
         inside = candidates >= 0
         for k in range(3):
             inside &= closest_on_facets(mesh.vertices[triangles[:, k]], corners)[0] <= tolerance
         within |= inside
     triangles, facets = triangles[~within], facets[~within]
-    old_normals, normals = (unit(triangle_normals(c.vertices[c.facets])) for c in (old_cage, cage))
+    old_normals, normals = (unit(triangle_normals(c.surface_vertices[c.facets])) for c in (old_cage, cage))
     off = np.zeros(len(facets), dtype=bool)
     for k in (1, 2):
         off |= _coplanar(old_normals, facets[:, 0], facets[:, k]) & ~_coplanar(normals, facets[:, 0], facets[:, k])
     triangles, facets = triangles[off], facets[off]
     far = _chord_distances(vertices[triangles], facets, cage) > CHORD_KEPT * median_edge(vertices, mesh.cells)
     faces = np.unique(cage.facet_face[facets[far]])
-    bent = _bent(triangle_normals(cage.vertices[cage.facets]), cage.facet_face, faces)
+    bent = _bent(triangle_normals(cage.surface_vertices[cage.facets]), cage.facet_face, faces)
     return bent if len(bent) else faces  # the faces that bent, not their flat neighbours the mesh spans with them
 
 
@@ -704,7 +705,7 @@ def _chord_distances(corners, facets, cage):
     nearest = np.full(samples.shape[:2], np.inf)
     for k in range(3):
         for candidates in _facets_around(cage.facets, facets[:, k]).T:
-            facet_corners = cage.vertices[cage.facets[np.maximum(candidates, 0)]]
+            facet_corners = cage.surface_vertices[cage.facets[np.maximum(candidates, 0)]]
             for s in range(samples.shape[1]):
                 squared = closest_on_facets(samples[:, s], facet_corners)[0]
                 nearest[:, s] = np.minimum(nearest[:, s], np.where(candidates >= 0, squared, np.inf))

@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import lbc_core
-from lbc_core.binding import FILE_ARRAYS
+from lbc_core.binding import FILE_ARRAYS, OPTIONAL_FILE_ARRAYS
 from lbc_core.errors import CageError
 from lbc_core.io import read_mesh
 from random_cages import STAR
@@ -60,6 +60,45 @@ def test_load_against_another_3d_cage_of_the_same_size_is_refused(tmp_path, clot
     other, other_faces = read_mesh(DATA / "cages-3d" / "gargoyle" / "cage_L13.obj")
     with pytest.raises(CageError, match="bound to another cage"):
         lbc_core.load_binding(tmp_path / "clothing.npz", other, other_faces)
+
+
+def test_a_binding_of_poked_n_gons_loads_with_them_and_so_does_a_file_from_before_they_were_poked(tmp_path,
+                                                                                                  monkeypatch):
+    """A pentagonal prism: its caps are poked (a centre each), saved and loaded with the binding, and checked against
+    the facets around them. A file written while n-gons were ear-clipped has no centres: it loads, and the same
+    cage given beside it (poked now) is the cage it was bound to, its faces split otherwise."""
+    import lbc_core.cage as cage_module
+
+    angles = 2 * np.pi * np.arange(5) / 5
+    prism = np.array([[np.cos(a), np.sin(a), z] for z in (0.0, 1.0) for a in angles])
+    faces = [[4, 3, 2, 1, 0], [5, 6, 7, 8, 9]] + [[i, (i + 1) % 5, 5 + (i + 1) % 5, 5 + i] for i in range(5)]
+    points = np.array([[0.1, 0.2, 0.3], [-0.3, 0.1, 0.8], [0.0, 0.0, 0.5]])
+    binding = lbc_core.bind(prism, faces, points, cells=300)
+    assert len(binding.cage.centres) == 2
+    binding.save(tmp_path / "poked.npz")
+    loaded = lbc_core.load_binding(tmp_path / "poked.npz", prism, faces)
+    assert [corners.tolist() for corners in loaded.cage.centres] == [c.tolist() for c in binding.cage.centres]
+    np.testing.assert_array_equal(loaded.cage.surface_vertices, binding.cage.surface_vertices)
+
+    def other_centre(arrays):
+        arrays["cage_centre_corners"] = np.roll(arrays["cage_centre_corners"], 5)
+
+    with pytest.raises(CageError, match="poked n-gon 0 does not match the facets around its centre"):
+        lbc_core.load_binding(_rewritten(tmp_path / "poked.npz", tmp_path / "edited.npz", other_centre))
+
+    monkeypatch.setattr(cage_module, "POKE_SIDES", 1000)
+    clipped = lbc_core.bind(prism, faces, points, cells=300)
+    assert clipped.cage.centres == ()
+    clipped.save(tmp_path / "clipped.npz")
+    monkeypatch.undo()
+
+    def before_centres(arrays):
+        del arrays["cage_centre_sizes"], arrays["cage_centre_corners"]
+
+    old = _rewritten(tmp_path / "clipped.npz", tmp_path / "old.npz", before_centres)
+    loaded = lbc_core.load_binding(old, prism, faces)
+    assert loaded.cage.centres == () and len(lbc_core.make_cage(prism, faces).centres) == 2
+    np.testing.assert_array_equal(loaded.deform(prism * 1.1), clipped.deform(prism * 1.1))
 
 
 def test_load_of_a_file_that_is_not_a_binding_is_refused(tmp_path):
@@ -240,7 +279,7 @@ _EDITS = {
 
 
 @FUZZ
-@given(key=st.sampled_from(sorted(FILE_ARRAYS)), edit=st.sampled_from(sorted(_EDITS)),
+@given(key=st.sampled_from(sorted({**FILE_ARRAYS, **OPTIONAL_FILE_ARRAYS})), edit=st.sampled_from(sorted(_EDITS)),
        seed=st.integers(0, 2**16))
 def test_fuzz_edited_arrays(square_file, tmp_path, key, edit, seed):
     rng = np.random.default_rng(seed)

@@ -36,7 +36,7 @@ def test_a_domain_maps_back_with_control_and_boundary_vertices_exact():
     unit_domain = mesh_domain(frame.cage_to_unit(cage), 400)
     domain = frame.domain_from_unit(unit_domain, cage)
     assert domain.vertices[domain.control_vertices].tobytes() == cage.vertices.tobytes()
-    corners = cage.vertices[cage.facets[domain.boundary_facet]]
+    corners = cage.surface_vertices[cage.facets[domain.boundary_facet]]
     bary = domain.boundary_bary
     combination = bary[:, 0, None] * corners[:, 0] + bary[:, 1, None] * corners[:, 1]
     combination = combination + bary[:, 2, None] * corners[:, 2]

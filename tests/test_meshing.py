@@ -72,7 +72,7 @@ def on_facets(cage, points, tolerance):
     A point lies on a facet when its barycentric coordinates there are all >= -tolerance / edge scale and its
     distance to the facet's line / plane is at most ``tolerance``.
     """
-    corners = cage.vertices[cage.facets]  # (E, d, d)
+    corners = cage.surface_vertices[cage.facets]  # (E, d, d)
     origin, spans = corners[:, 0], corners[:, 1:] - corners[:, :1]  # spans: (E, d-1, d)
     offset = points[:, None, :] - origin[None]  # (P, E, d)
     gram = np.einsum("ekd,eld->ekl", spans, spans)
@@ -101,7 +101,7 @@ def check_contract(cage, mesh):
     bary, facet = mesh.boundary_bary, mesh.boundary_facet
     assert bary.shape == (len(mesh.boundary_vertices), d)
     assert np.all(bary >= 0.0) and np.allclose(bary.sum(axis=1), 1.0, rtol=0, atol=4e-16)
-    corners = cage.vertices[cage.facets[facet]]
+    corners = cage.surface_vertices[cage.facets[facet]]
     combination = bary[:, 0, None] * corners[:, 0]
     for k in range(1, d):
         combination = combination + bary[:, k, None] * corners[:, k]
@@ -125,7 +125,7 @@ def check_contract(cage, mesh):
         assert on.any(axis=1).all(), "a mesh boundary edge straddles a cage corner or lies off the cage"
         covered = np.bincount(np.argmax(on, axis=1), facet_measures(mesh.vertices, boundary),
                               minlength=len(cage.facets))
-        np.testing.assert_allclose(covered, facet_measures(cage.vertices, cage.facets), rtol=1e-10)
+        np.testing.assert_allclose(covered, facet_measures(cage.surface_vertices, cage.facets), rtol=1e-10)
         return
     # 3D: each boundary triangle on the cage (none straddles a feature edge), together as large as the cage.
     corners = mesh.vertices[boundary]
@@ -134,13 +134,13 @@ def check_contract(cage, mesh):
     tolerance = (1e-12 + 8 * offset) * cage.bbox_diagonal + bend * size
     assert np.all(gap <= tolerance), "a boundary triangle straddles a feature edge"
     assert facet_measures(mesh.vertices, boundary).sum() == pytest.approx(
-        facet_measures(cage.vertices, cage.facets).sum(), rel=1e-11 + 10 * bend + 1e3 * offset)
+        facet_measures(cage.surface_vertices, cage.facets).sum(), rel=1e-11 + 10 * bend + 1e3 * offset)
 
 
 def bent_angle(cage):
     """The largest angle (radians) between the normals of two facets sharing an edge, among those bent by less
     than meshing.COPLANAR_ANGLE (0 when the cage's planar parts are all exactly flat)."""
-    corners = cage.vertices[cage.facets]
+    corners = cage.surface_vertices[cage.facets]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     edges = np.sort(np.concatenate([cage.facets[:, [0, 1]], cage.facets[:, [1, 2]], cage.facets[:, [2, 0]]]), axis=1)
@@ -156,7 +156,7 @@ def bent_angle(cage):
 
 def surface_distance(cage, points):
     """Distance from each 3D point to the cage surface."""
-    corners = cage.vertices[cage.facets]
+    corners = cage.surface_vertices[cage.facets]
     best = np.full(len(points), np.inf)
     for k in range(len(corners)):
         squared, _ = closest_on_triangles(points, *np.broadcast_to(corners[k], (len(points), 3, 3)).transpose(1, 0, 2))
@@ -333,7 +333,7 @@ def test_depth_in_convex_cage_is_the_distance_to_its_surface():
     cage = cube_cage()
     points = np.random.default_rng(0).uniform(-0.5, 1.5, (500, 3))
     depth = tetrahedra._depth_in_convex(cage, points)
-    corners = cage.vertices[cage.facets]
+    corners = cage.surface_vertices[cage.facets]
     squared = np.min([closest_on_triangles(points, *np.broadcast_to(c[:, None], (3, len(points), 3)))[0]
                       for c in corners], axis=0)
     inside = np.all((points > 0.0) & (points < 1.0), axis=1)
@@ -487,13 +487,13 @@ def test_well_shaped_quads_are_surface_regions_triangle_by_triangle():
     assert not split_facets(cube, 1.01 / SPLIT_MIN_EDGE).any()  # edges shorter than SPLIT_MIN_EDGE spacings
     flat_box = make_cage(CUBE_VERTICES * [1.0, 1.0, 0.3], CUBE_QUADS)  # sides with 16.7° at their diagonals
     assert split_facets(flat_box, 0.01).tolist() == [face in (4, 5) for face in flat_box.facet_face]  # z = 0, 1
-    # No quad among an n-gon-capped prism's caps, a fan's triangles: only the sides.
+    # No quad among an n-gon-capped prism's caps, poked into triangles: only the sides (the mesher sees the surface).
     angles = np.linspace(0.0, 2.0 * np.pi, 6, endpoint=False)
     ring = np.c_[np.cos(angles), np.sin(angles)]
     prism = make_cage(np.concatenate([np.c_[ring, np.zeros(6)], np.c_[ring, np.ones(6)]]),
                       [list(range(6))[::-1], list(range(6, 12))] + [[i, (i + 1) % 6, 6 + (i + 1) % 6, 6 + i]
                                                                     for i in range(6)])
-    assert split_facets(prism, 0.01).tolist() == [face >= 2 for face in prism.facet_face]
+    assert split_facets(prism.surface(), 0.01).tolist() == [face >= 2 for face in prism.facet_face]
     # The cube's mesh follows the diagonals: every boundary triangle lies within one cage facet.
     mesh = meshing.mesh_domain(cube, cells=2000)
     triangles = boundary_facets(mesh.cells)

@@ -302,7 +302,7 @@ def surface_off_cage(binding):
     corners = domain.vertices[boundary_facets(domain.cells)]  # (K, 3, 3)
     samples = np.concatenate([corners.mean(axis=1), ((corners + np.roll(corners, 1, axis=1)) / 2).reshape(-1, 3)])
     nearest = np.full(len(samples), np.inf)
-    for facet in cage.vertices[cage.facets]:
+    for facet in cage.surface_vertices[cage.facets]:
         squared = closest_on_facets(samples, np.broadcast_to(facet, (len(samples), 3, 3)).copy())[0]
         nearest = np.minimum(nearest, squared)
     return float(np.sqrt(nearest.max()) / median_edge(domain.vertices, domain.cells))

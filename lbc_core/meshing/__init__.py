@@ -33,7 +33,7 @@ follow the cage edges, so boundary values could not be exactly linear on the fac
 for 11k to 19k tetrahedra on one thread, against 0.5 to 1.5 s here), and has no macOS wheels.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -68,7 +68,8 @@ class DomainMesh:
     boundary_vertices : (B,) int array
         Every mesh vertex lying on the cage boundary, control vertices included.
     boundary_facet : (B,) int array
-        Index into ``cage.facets`` of a facet that each boundary vertex lies on.
+        Index into ``cage.facets`` of a facet that each boundary vertex lies on (its corners index
+        ``cage.surface_vertices``).
     boundary_bary : (B, d) float array
         Barycentric coordinates of each boundary vertex in that facet: non-negative, summing to 1.
     control_vertices : (n,) int array
@@ -156,8 +157,10 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
     if not cells >= 10:
         raise ValueError(f"the target cell count must be at least 10, got {cells}")
     steps = Progress.of(progress, cancel)
-    frame = MeshingFrame(cage.vertices)
-    local = frame.cage(cage)
+    # The backends mesh the surface: a poked n-gon's centre is a vertex of it like the control points.
+    surface = cage.surface()
+    frame = MeshingFrame(surface.vertices)
+    local = frame.cage(surface)
     try:
         if dim == 3:
             mesh = tetrahedra.mesh(local, int(cells), steps.part(0.0, 0.95))
@@ -166,8 +169,9 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
         else:
             mesh = polygon.mesh_delaunay(local, int(cells), steps.part(0.0, 0.95))
         steps(0.95, "checking the mesh")
-        mesh = finish(cage, frame.to_world(mesh.vertices), mesh.cells, mesh.boundary_vertices, mesh.boundary_facet,
+        mesh = finish(surface, frame.to_world(mesh.vertices), mesh.cells, mesh.boundary_vertices, mesh.boundary_facet,
                       mesh.boundary_bary)
+        mesh = replace(mesh, control_vertices=mesh.control_vertices[:cage.n_control_points])
     except CageError as error:
         # A gap far below the cells is no matter of a fine cage: twice the cells fail there too (a vertex of Blender's
         # UV sphere moved past its neighbours near a pole, refused at 8000 and 16,000 cells).
