@@ -1,5 +1,6 @@
 """A new user's first cage: Blender's Cylinder as it comes (32 sides, n-gon caps) around a mesh, bound with the
-add-on's operator at the default resolution. This cage used to hang the 3D mesher (issue 11)."""
+add-on's operator at the default resolution. This cage used to hang the 3D mesher (issue 11), and one vertex of each
+cap used to move the whole cap (its fan's apex)."""
 
 import bpy
 import numpy as np
@@ -18,6 +19,16 @@ def test_blender_cylinder_cage_binds_and_deforms():
     assert mesh.lbc.is_bound
     rest = positions(mesh.data)
     np.testing.assert_allclose(evaluated_positions(mesh), rest, atol=1e-5)
+    # Each top rim vertex raised by 0.3 in turn: each moves the sphere about as far (0.012-0.018; the cap split into
+    # a fan from vertex 5, as it was, that vertex moved it by 0.104 and others by as little as 0.0001).
+    moves = []
+    for vertex in cage.data.vertices:
+        if vertex.co.z > 0:
+            vertex.co.z += 0.3
+            cage.data.update()
+            moves.append(np.abs(evaluated_positions(mesh) - rest).max())
+            vertex.co.z -= 0.3
+    assert len(moves) == 32 and 0.005 < min(moves) and max(moves) < 3 * min(moves)
     for vertex in cage.data.vertices:  # move the cage up by 0.5: the mesh follows
         vertex.co.z += 0.5
     cage.data.update()

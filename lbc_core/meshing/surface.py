@@ -4,9 +4,9 @@ each region's 2D Delaunay triangulation.
 A planar region is a connected set of cage facets whose normals agree within
 :data:`~lbc_core.meshing.COPLANAR_ANGLE` across their shared edges: the triangles an n-gon or a quad was split into,
 a grid-subdivided side of a box, a plane nudged by round-off. The edges between facets of different regions are the
-*feature edges*; only they are sampled as edges. Inside a region the split lines of n-gons are no features: an
-ear-clipped cap's skinny triangles and their small angles never reach the tetrahedraliser, which meets only the
-angles between feature edges. Every sample still keeps the facet it lies on and its barycentric coordinates there,
+*feature edges*; only they are sampled as edges. Inside a region the split lines of n-gons are no features: a
+cap's skinny triangles and their small angles never reach the tetrahedraliser, which meets only the angles between
+feature edges. Every sample still keeps the facet it lies on and its barycentric coordinates there,
 so boundary values stay exact at every sample.
 
 A quad whose two triangles are well shaped for the spacing (:func:`split_facets`) is the exception: each of its
