@@ -508,7 +508,8 @@ def _seconds_left(elapsed, fraction, checks, max_iterations):
     if reference >= iteration or not reference_distance > distance > 1:
         return by_share
     power = np.log(reference_distance / distance) / np.log(iteration / reference)
-    iterations_left = min(iteration * (distance ** (1 / power) - 1), max_iterations - iteration)
+    with np.errstate(over="ignore"):  # a residual that hardly fell: no end in sight, the iteration limit bounds it
+        iterations_left = min(iteration * (distance ** (1 / power) - 1), max_iterations - iteration)
     return float(np.sqrt(by_share * iterations_left * elapsed / iteration))
 
 

@@ -1,5 +1,6 @@
 """solve_on_mesh against the authors' reference packs, and the solver's guarantees."""
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -273,6 +274,11 @@ def test_the_time_left_blends_the_share_of_the_way_and_the_residuals_power_law()
     assert _seconds_left(elapsed, fraction, checks, max_iterations=150) == pytest.approx(np.sqrt(by_share * 0.5))
     flat = [(10, 5.0), (20, 5.0)]  # no fall yet: the share of the way alone
     assert _seconds_left(elapsed, 0.2, flat, 10000) == pytest.approx(4.0)
+    # A residual that hardly fell (a new user's CLI printed an overflow warning here): the iteration limit bounds it.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        crawling = [(100, 900.0), (200, 899.0)]
+        assert _seconds_left(2.0, 0.5, crawling, 10000) == pytest.approx(np.sqrt(2.0 * 9800 * 2.0 / 200))
 
 
 def test_the_penalty_is_balanced_against_the_residuals_early_on(monkeypatch):
