@@ -22,6 +22,7 @@ from .binding import Binding
 from .boundary import boundary_weights
 from .fem import stiffness_matrix
 from .frame import UnitFrame
+from .geometry import polygon_mean_value_coordinates
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain
 from .pipeline import check_cage_and_points
@@ -66,44 +67,18 @@ def mean_value_coordinates(cage, points, progress=None, cancel=None):
     scatter = sp.csr_matrix(
         (np.ones(facets.size), (np.arange(facets.size), facets.ravel())), shape=(facets.size, len(vertices))
     )
-    evaluate = _mvc_2d if cage.dim == 2 else _mvc_3d
     weights = np.empty((len(points), len(vertices)))
     for start in range(0, len(points), chunk):
         progress(start / len(points), "mean value coordinates")
         stop = min(start + chunk, len(points))
-        weights[start:stop] = evaluate(vertices, facets, scatter, points[start:stop], tolerance)
+        if cage.dim == 2:  # the control points run around the polygon (facets (i, i + 1) or (i + 1, i))
+            weights[start:stop] = polygon_mean_value_coordinates(vertices, points[start:stop], tolerance)
+        else:
+            weights[start:stop] = _mvc_3d(vertices, facets, scatter, points[start:stop], tolerance)
     progress(1.0, "mean value coordinates: done")
     if cage.centres:
         n = cage.n_control_points
         weights = weights[:, :n] + (cage.centre_values.T @ weights[:, n:].T).T
-    return weights
-
-
-def _mvc_2d(vertices, facets, scatter, x, tolerance):
-    """Mean value coordinates of a chunk of points x (k, 2) for the polygon's edges ``facets`` (E, 2)."""
-    s = vertices[None, :, :] - x[:, None, :]  # (k, n, 2)
-    r = np.linalg.norm(s, axis=2)  # (k, n)
-    sa, sb = s[:, facets[:, 0]], s[:, facets[:, 1]]  # (k, E, 2)
-    ra, rb = r[:, facets[:, 0]], r[:, facets[:, 1]]
-    cross = sa[..., 0] * sb[..., 1] - sa[..., 1] * sb[..., 0]
-    dot = np.einsum("kei,kei->ke", sa, sb)
-    # tan(α/2) = cross / (ra rb + dot) = (ra rb - dot) / cross; the first cancels when α → π, the second when α → 0.
-    rr = ra * rb
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tan_half = np.where(dot >= 0, cross / (rr + dot), (rr - dot) / cross)
-        per_corner = np.stack([tan_half / ra, tan_half / rb], axis=2)  # (k, E, 2)
-    weights = np.asarray(per_corner.reshape(len(x), -1) @ scatter)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        weights /= weights.sum(axis=1, keepdims=True)
-
-    edge_length = np.linalg.norm(vertices[facets[:, 1]] - vertices[facets[:, 0]], axis=1)
-    on_edge = (np.abs(cross) <= tolerance * edge_length) & (dot < 0)
-    for k, e in zip(*np.nonzero(on_edge)):
-        a, b = facets[e]
-        weights[k] = 0.0
-        weights[k, a] = rb[k, e] / (ra[k, e] + rb[k, e])
-        weights[k, b] = ra[k, e] / (ra[k, e] + rb[k, e])
-    _snap_to_vertices(weights, r, tolerance)
     return weights
 
 

@@ -11,8 +11,9 @@ keeps the Lagrange and linearity properties on every edge of the input:
 * an n-gon of :data:`POKE_SIDES` sides or more is poked: split into triangles from a centre, the mean of its
   vertices, when that centre sees each of its sides from at least :data:`POKE_HEIGHT` of its reach (any convex
   n-gon, a star). The centre is no control point: it is a surface vertex whose boundary values are 1/k for each of
-  the face's k control points, so values and surface are one linear construction (partition of unity and
-  reproduction hold on the face), and no vertex of the face is favoured. The cage's surface vertices
+  the face's k control points, so values linear on the poke's triangles and the surface are one linear construction
+  (partition of unity and reproduction hold on the face), and no vertex of the face is favoured (a convex n-gon
+  takes its outline's smooth mean value coordinates instead, :mod:`lbc_core.boundary`). The cage's surface vertices
   (``surface_vertices``) are its control points followed by these centres;
 * any other n-gon is ear-clipped in the plane of its Newell normal, always cutting the first ear in the face's vertex
   order.
@@ -41,7 +42,8 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
 from .errors import CageError
-from .geometry import cross2, enclosed_measure, in_triangle_2d, triangle_normals, unit
+from .geometry import (cross2, enclosed_measure, in_triangle_2d, newell_normal, plane_axes, triangle_normals,
+                       unit)
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
@@ -606,7 +608,7 @@ def _reversed(triangle, face):
 def _sees_every_side(points):
     """Whether the mean of an n-gon's points (k, 3), in outward order, stands at least POKE_HEIGHT of its largest
     distance to them inside the line of each side, in the plane of the n-gon's Newell normal."""
-    normal = np.sum(np.cross(points, np.roll(points, -1, axis=0)), axis=0)
+    normal = newell_normal(points)
     centre = points.mean(axis=0)
     if not np.linalg.norm(normal) > 0:
         return False
@@ -767,14 +769,10 @@ def _split_quad(vertices, quad, zero):
 def _ear_clip(vertices, face, index, zero):
     """(k - 2, 3) int array: ear clipping of an n-gon in the plane of its Newell normal, first ear in face order."""
     points = vertices[face]
-    normal = np.sum(np.cross(points, np.roll(points, -1, axis=0)), axis=0)  # Newell: twice the vector area
+    normal = newell_normal(points)
     if np.linalg.norm(normal) <= zero * np.max(np.linalg.norm(points - points[0], axis=1)):
         raise CageError(f"cage face {index} has zero area: delete it or dissolve it into its neighbours")
-    normal /= np.linalg.norm(normal)
-    # (u, v, normal) is right-handed, so the face is counter-clockwise in (u, v).
-    u = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
-    u /= np.linalg.norm(u)
-    flat = np.stack([points @ u, points @ np.cross(normal, u)], axis=1)
+    flat = points @ plane_axes(unit(normal)).T  # the face counter-clockwise
     remaining = np.arange(len(face))
     triangles = []
     while len(remaining) > 3:

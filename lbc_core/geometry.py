@@ -27,6 +27,19 @@ def unit(vectors):
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
 
 
+def newell_normal(points):
+    """(3,) float array: the Newell normal of a polygon (k, 3) in order, twice its vector area (outward for a
+    counter-clockwise polygon seen from outside); exact for planar polygons, a least-squares normal for others."""
+    return np.sum(np.cross(points, np.roll(points, -1, axis=0)), axis=0)
+
+
+def plane_axes(normal):
+    """(2, 3) float array: unit vectors u, v spanning the plane of a unit ``normal`` (3,), with (u, v, normal)
+    right-handed, so that a polygon counter-clockwise about the normal is counter-clockwise in (u, v)."""
+    u = unit(np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))]))
+    return np.stack([u, np.cross(normal, u)])
+
+
 def triangle_normals(corners):
     """(..., 3): area-weighted (twice the area) normals of 3D triangles given by their corners (..., 3, 3)."""
     return np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
@@ -152,6 +165,46 @@ def distance_to_segments(points, starts, ends):
 
 
 # -------------------------------------------------------------------------------------------------- winding numbers
+
+
+def polygon_mean_value_coordinates(polygon, points, tolerance):
+    """Mean value coordinates of 2D points with respect to a simple polygon (Hormann & Floater 2006).
+
+    tan(α/2) is taken from whichever of its two equivalent forms does not cancel. Points within ``tolerance`` of an
+    edge get the linear interpolant on it, within it of a vertex that vertex's unit row (the continuous limits).
+
+    Parameters
+    ----------
+    polygon : (k, 2) float array
+        The vertices in order around it, either way.
+    points : (m, 2) float array
+    tolerance : float, a length
+
+    Returns
+    -------
+    (m, k) float array; rows sum to 1 and reproduce their point
+    """
+    spokes = polygon[None, :, :] - points[:, None, :]  # (m, k, 2): from each point to each vertex
+    lengths = np.linalg.norm(spokes, axis=2)
+    following, following_lengths = np.roll(spokes, -1, axis=1), np.roll(lengths, -1, axis=1)
+    cross = cross2(spokes, following)  # the angle at the point from vertex j to j + 1
+    dot = np.einsum("mkd,mkd->mk", spokes, following)
+    product = lengths * following_lengths
+    # tan(α/2) = cross / (r r' + dot) = (r r' - dot) / cross; the first cancels when α → π, the second when α → 0.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        half_tangents = np.where(dot >= 0, cross / (product + dot), (product - dot) / cross)
+        weights = (np.roll(half_tangents, 1, axis=1) + half_tangents) / lengths
+        weights /= weights.sum(axis=1, keepdims=True)
+    edge_lengths = np.linalg.norm(np.roll(polygon, -1, axis=0) - polygon, axis=1)
+    on_edge = (np.abs(cross) <= tolerance * edge_lengths) & (dot < 0)
+    for row, edge in zip(*np.nonzero(on_edge)):
+        a, b = lengths[row, edge], following_lengths[row, edge]
+        weights[row] = 0.0
+        weights[row, edge], weights[row, (edge + 1) % len(polygon)] = b / (a + b), a / (a + b)
+    rows, vertices = np.nonzero(lengths <= tolerance)
+    weights[rows] = 0.0
+    weights[rows, vertices] = 1.0
+    return weights
 
 
 def winding_numbers(vertices, facets, points, check=None):

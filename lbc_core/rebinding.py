@@ -33,6 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from .boundary import boundary_weights
 from .cage import ZERO_LENGTH, edge_pairing, make_cage
 from .constraints import padded_rows
 from .errors import CageError
@@ -258,11 +259,16 @@ def _solve_near(previous, carried, unit_cage, moved, touched, progress):
     free[carried.boundary_vertices] = False
     cells = np.any(free[carried.cells], axis=1)
     fixed = np.flatnonzero(~free)
+    # The boundary values of the edited cage: a convex poked n-gon's follow its outline's shape (boundary.py), so
+    # those of an n-gon the edit moved differ from the previous ones; they have weight on a moved control point, and
+    # so does the interior around them, which is solved again.
+    held = previous.domain_weights.copy()
+    held[carried.boundary_vertices] = boundary_weights(carried, unit_cage)
     if not free.any():  # nothing moved, or only where no coordinate reaches the interior
-        result = SolveResult(previous.domain_weights, 0, True, float("nan"), tv_weights)
+        result = SolveResult(held, 0, True, float("nan"), tv_weights)
         return result, tv_objective(carried.vertices, carried.cells, result.weights, tv_weights), state, 0, free
     result = solve_on_mesh(
-        carried.vertices, carried.cells[cells], fixed, previous.domain_weights[fixed], unit_cage.vertices,
+        carried.vertices, carried.cells[cells], fixed, held[fixed], unit_cage.vertices,
         tv_weights[cells], start=state.restricted(cells, np.flatnonzero(free)), progress=progress.part(0.1, 0.95),
         **{key: options[key] for key in ("epsilon", "max_iterations", "tolerance") if key in options},
     )

@@ -31,3 +31,47 @@ def test_polygon_boundary_values():
 def test_quad_cage_boundary_values():
     cage = make_cage(CUBE, CUBE_QUADS)
     check(cage, mesh_domain(cage, cells=800))
+
+
+def hexagonal_prism(lift=0.0):
+    """A prism over an irregular convex hexagon (z 0 and 1), its top vertex 7 lifted by ``lift``: (vertices, faces)."""
+    angles = np.radians([0, 50, 120, 180, 230, 300])
+    radii = np.array([1.0, 0.8, 1.1, 0.9, 1.0, 0.7])
+    outline = np.c_[radii * np.cos(angles), radii * np.sin(angles)]
+    vertices = np.concatenate([np.c_[outline, np.zeros(6)], np.c_[outline, np.ones(6)]])
+    vertices[7, 2] += lift
+    faces = [list(range(6))[::-1], list(range(6, 12))] + [[i, (i + 1) % 6, 6 + (i + 1) % 6, 6 + i] for i in range(6)]
+    return vertices, faces
+
+
+def test_a_flat_convex_n_gon_takes_its_outlines_mean_value_coordinates():
+    """Smooth across the face, where values linear on the poke's triangles crease along each spoke; linear on the
+    edges, 1 at each vertex, and every guarantee kept."""
+    from lbc_core.geometry import polygon_mean_value_coordinates
+
+    cage = make_cage(*hexagonal_prism())
+    assert len(cage.centres) == 2
+    domain = mesh_domain(cage, cells=1500)
+    weights = boundary_weights(domain, cage)
+    positions = domain.vertices[domain.boundary_vertices]
+    assert np.abs(weights.sum(axis=1) - 1).max() < 1e-12
+    assert np.abs(weights @ cage.vertices - positions).max() < 1e-12
+    assert weights.min() >= 0
+    top = np.flatnonzero(np.abs(positions[:, 2] - 1.0) < 1e-12)
+    ring = np.arange(6, 12)
+    expected = polygon_mean_value_coordinates(cage.vertices[ring, :2], positions[top, :2], 1e-12)
+    np.testing.assert_allclose(weights[np.ix_(top, ring)], expected, atol=1e-12)
+    inside = top[(weights[top][:, ring] > 1e-9).sum(axis=1) > 2]  # off the outline: every vertex feels it
+    assert len(inside) > 20 and np.all(weights[inside][:, ring] > 0)
+
+
+def test_a_bent_convex_n_gon_keeps_values_that_reproduce_the_poked_surface():
+    """One top vertex lifted: the outline's mean value coordinates, corrected on their support, reproduce the points
+    of the poke's triangles (or the poke's own linear values do), non-negative."""
+    cage = make_cage(*hexagonal_prism(lift=0.15))
+    domain = mesh_domain(cage, cells=1500)
+    weights = boundary_weights(domain, cage)
+    positions = domain.vertices[domain.boundary_vertices]
+    assert np.abs(weights.sum(axis=1) - 1).max() < 1e-12
+    assert np.abs(weights @ cage.vertices - positions).max() < 1e-12
+    assert weights.min() >= 0

@@ -89,3 +89,16 @@ def test_circumspheres_pass_through_every_corner_in_the_triangles_plane():
         np.testing.assert_allclose(np.linalg.norm(points[triangles[:, k]] - centres, axis=1), radii, rtol=1e-8)
     a, b, c = (points[triangles[:, k]] for k in range(3))
     np.testing.assert_allclose(np.einsum("ij,ij->i", centres - a, np.cross(b - a, c - a)), 0.0, atol=1e-8)
+
+
+def test_polygon_mean_value_coordinates_reproduce_points_and_are_linear_on_edges_either_way_round():
+    from lbc_core.geometry import polygon_mean_value_coordinates
+
+    square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    points = np.random.default_rng(4).uniform(0.05, 1.95, (50, 2))
+    for polygon in (square, square[::-1]):
+        weights = polygon_mean_value_coordinates(polygon, points, 1e-12)
+        assert np.abs(weights.sum(axis=1) - 1).max() < 1e-12 and weights.min() > 0
+        assert np.abs(weights @ polygon - points).max() < 1e-12
+    centre_edge_corner = polygon_mean_value_coordinates(square, np.array([[1.0, 1.0], [0.5, 0.0], [2.0, 2.0]]), 1e-12)
+    np.testing.assert_allclose(centre_edge_corner, [[0.25] * 4, [0.75, 0.25, 0, 0], [0, 0, 1, 0]], atol=1e-15)
