@@ -206,10 +206,12 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
     if cage_vertices is not None:
         given = make_cage(cage_vertices, cage_faces)
         # The faces, not their split: a file of a version that split n-gons otherwise serves the same cage.
-        if not np.array_equal(given.vertex_map, cage.vertex_map) or given.face_corners() != cage.face_corners():
+        bound_faces, given_faces = cage.face_corners(), given.face_corners()
+        if not np.array_equal(given.vertex_map, cage.vertex_map) or given_faces != bound_faces:
+            differ = next((f" (face {a[0]} differs)" for a, b in zip(bound_faces, given_faces) if a != b), "")
             raise CageError(
-                f"{path} was bound to another cage ({len(cage.vertex_map)} vertices, {len(cage.facets)} facets; "
-                f"this one has {len(given.vertex_map)} vertices, {len(given.facets)} facets): bind this cage again"
+                f"{path} was bound to another cage ({len(cage.vertex_map)} vertices, {len(bound_faces)} faces; this "
+                f"one has {len(given.vertex_map)} vertices, {len(given_faces)} faces{differ}): bind this cage again"
             )
     return Binding(
         cage=cage,

@@ -642,10 +642,10 @@ def _fans(triangles, triangle_face, faces, names):
     else:
         said = (f"cage faces {which} (n-gons of {size}) are split into fans of triangles from vertices {apexes}, "
                 "which move most of their faces while the other vertices barely do")
+    # Triangulating in Blender does not help: its Beauty split of such a face is a fan as well (a new user's check).
     them, whose = ("it", "its") if len(fans) == 1 else ("them", "their")
-    return [f"{said}: {whose} middle lies too near a side to poke {them}; triangulate {them} (in Blender, select "
-            f"{them} with Select > Select All by Trait > Faces by Sides, greater than {FAN_NOTICE_SIDES - 1}, then "
-            f"Face > Triangulate Faces), or split {them} into rounder faces"]
+    return [f"{said}, and {whose} middle lies too near a side to split {them} from there: split {them} into rounder "
+            f"faces (in Blender, select two vertices across such a face and press J, Connect Vertex Path)"]
 
 
 def _face_list(faces, n_vertices):

@@ -58,7 +58,8 @@ def test_load_against_another_3d_cage_of_the_same_size_is_refused(tmp_path, clot
     binding.save(tmp_path / "clothing.npz")
     # The gargoyle's L13 cage has as many vertices (18) and triangles (32) as the clothing cage, but other faces.
     other, other_faces = read_mesh(DATA / "cages-3d" / "gargoyle" / "cage_L13.obj")
-    with pytest.raises(CageError, match="bound to another cage"):
+    with pytest.raises(CageError, match=r"bound to another cage \(18 vertices, 32 faces; this one has 18 vertices, "
+                                        r"32 faces \(face \d+ differs\)\): bind this cage again"):
         lbc_core.load_binding(tmp_path / "clothing.npz", other, other_faces)
 
 

@@ -737,9 +737,9 @@ def test_an_n_gon_its_mean_cannot_poke_is_ear_clipped_and_named_if_it_fans_out()
     assert cage.centres == ()
     assert cage.warnings == [
         "cage faces 0 and 1 (n-gons of 9 sides) are split into fans of triangles from vertices 0 and 17, which move "
-        "most of their faces while the other vertices barely do: their middle lies too near a side to poke them; "
-        "triangulate them (in Blender, select them with Select > Select All by Trait > Faces by Sides, greater than 7, "
-        "then Face > Triangulate Faces), or split them into rounder faces"]
+        "most of their faces while the other vertices barely do, and their middle lies too near a side to split them "
+        "from there: split them into rounder faces (in Blender, select two vertices across such a face and press J, "
+        "Connect Vertex Path)"]
 
 
 @pytest.mark.parametrize("cuts", [3, 9])
