@@ -3,7 +3,7 @@
 import numpy as np
 
 from .constraints import constraint_residuals, restore_constraints
-from .geometry import cross2, newell_normal, plane_axes, polygon_mean_value_coordinates, unit
+from .geometry import is_convex_polygon, newell_normal, plane_axes, polygon_mean_value_coordinates, unit
 
 # Rows on a poked n-gon take its outline's mean value coordinates when corrected to reproduce their point within this
 # share of the cage's diagonal (and to sum to 1 within it); the others keep the values linear on the poke's triangles.
@@ -61,7 +61,7 @@ def _outlines_mean_values(weights, domain, cage, corners):
         rows = np.flatnonzero(np.any(corners == n + centre, axis=1))
         outline = cage.vertices[ring]
         flat_outline, flat_points = _in_plane(outline, positions[rows])
-        if not len(rows) or not _convex(flat_outline):
+        if not len(rows) or not is_convex_polygon(flat_outline):
             continue
         values = restore_constraints(polygon_mean_value_coordinates(flat_outline, flat_points, tolerance), outline,
                                      positions[rows])
@@ -76,9 +76,3 @@ def _in_plane(outline, points):
     axes = plane_axes(unit(newell_normal(outline)))
     return outline @ axes.T, points @ axes.T
 
-
-def _convex(outline):
-    """Whether a polygon (k, 2) turns the same way at every vertex (collinear vertices allowed)."""
-    turns = cross2(outline - np.roll(outline, 1, axis=0), np.roll(outline, -1, axis=0) - outline)
-    slack = EXACT * np.ptp(outline, axis=0).max() ** 2
-    return bool(np.all(turns >= -slack) or np.all(turns <= slack))

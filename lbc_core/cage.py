@@ -42,8 +42,8 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
 from .errors import CageError
-from .geometry import (cross2, enclosed_measure, in_triangle_2d, newell_normal, plane_axes, triangle_normals,
-                       unit)
+from .geometry import (cross2, enclosed_measure, in_triangle_2d, is_convex_polygon, newell_normal, plane_axes,
+                       triangle_normals, unit)
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
@@ -53,8 +53,11 @@ ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
 POKE_SIDES = 5
 # An n-gon is poked only when its centre's distance to the line of each of its sides (in the plane of its Newell
 # normal) is at least this share of the centre's largest distance to a vertex: regular polygons have cos(pi / k)
-# (0.81 and more), a five-pointed star 0.31; below it a triangle of the poke would be a sliver or fold.
+# (0.81 and more), a five-pointed star 0.31; below it a triangle of the poke would be a sliver or fold. A convex
+# n-gon needs less: its values are its outline's mean value coordinates (boundary.py), whatever the triangles' shape,
+# and its mean lies inside; thin circle segments, lenses and a rectangle with one side cut many times stand 0.07-0.09.
 POKE_HEIGHT = 0.1
+POKE_HEIGHT_CONVEX = 0.02
 # n-gons from this many sides that could not be poked and whose ear clipping fans out from one vertex are named in the
 # cage's warnings.
 FAN_NOTICE_SIDES = 8
@@ -606,8 +609,9 @@ def _reversed(triangle, face):
 
 
 def _sees_every_side(points):
-    """Whether the mean of an n-gon's points (k, 3), in outward order, stands at least POKE_HEIGHT of its largest
-    distance to them inside the line of each side, in the plane of the n-gon's Newell normal."""
+    """Whether the mean of an n-gon's points (k, 3), in outward order, stands at least POKE_HEIGHT (a convex n-gon:
+    POKE_HEIGHT_CONVEX) of its largest distance to them inside the line of each side, in the plane of the n-gon's
+    Newell normal."""
     normal = newell_normal(points)
     centre = points.mean(axis=0)
     if not np.linalg.norm(normal) > 0:
@@ -617,7 +621,8 @@ def _sees_every_side(points):
     lengths = np.linalg.norm(sides, axis=1)
     heights = np.einsum("ij,j->i", np.cross(sides, centre - points), normal) / np.maximum(lengths, np.finfo(float).tiny)
     reach = np.max(np.linalg.norm(points - centre, axis=1))
-    return bool(np.all(lengths > 0) and np.all(heights >= POKE_HEIGHT * reach))
+    least = POKE_HEIGHT_CONVEX if is_convex_polygon(points @ plane_axes(normal).T) else POKE_HEIGHT
+    return bool(np.all(lengths > 0) and np.all(heights >= least * reach))
 
 
 def _fans(triangles, triangle_face, faces, names):

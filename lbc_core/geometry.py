@@ -27,6 +27,14 @@ def unit(vectors):
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
 
 
+def is_convex_polygon(points, slack=1e-12):
+    """Whether a 2D polygon (k, 2) turns the same way at every vertex, either way round; collinear vertices (turns
+    within ``slack`` × its size squared of 0) are allowed."""
+    turns = cross2(points - np.roll(points, 1, axis=0), np.roll(points, -1, axis=0) - points)
+    tolerance = slack * np.ptp(points, axis=0).max() ** 2
+    return bool(np.all(turns >= -tolerance) or np.all(turns <= tolerance))
+
+
 def newell_normal(points):
     """(3,) float array: the Newell normal of a polygon (k, 3) in order, twice its vector area (outward for a
     counter-clockwise polygon seen from outside); exact for planar polygons, a least-squares normal for others."""
