@@ -61,7 +61,7 @@ def _outlines_mean_values(weights, domain, cage, corners):
         rows = np.flatnonzero(np.any(corners == n + centre, axis=1))
         outline = cage.vertices[ring]
         flat_outline, flat_points = _in_plane(outline, positions[rows])
-        if not len(rows) or not is_convex_polygon(flat_outline):
+        if not is_convex_polygon(flat_outline):  # a star: the outline's mean value coordinates would go negative
             continue
         values = restore_constraints(polygon_mean_value_coordinates(flat_outline, flat_points, tolerance), outline,
                                      positions[rows])

@@ -99,7 +99,7 @@ class Cage:
         Control points after welding, d = 2 or 3, in the input's units.
     facets : (E, d) int array
         2D: polygon edges (i, i+1) or (i+1, i), oriented counter-clockwise; every control point starts exactly one
-        edge. 3D: triangles, outward-oriented.
+        edge. 3D: triangles of ``surface_vertices`` (control points, then poked n-gons' centres), outward-oriented.
     facet_face : (E,) int array
         Index of the input face each facet comes from (2D: the edge index).
     vertex_map : (n_input,) int array
@@ -557,13 +557,13 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
                     "consistent and outward"
                 )
     triangles, triangle_face, clean, centres = _poke(welded, triangles, triangle_face, clean, faces)
-    surface = np.vstack([welded] + [welded[corners].mean(axis=0, keepdims=True) for corners in centres])
-    _check_self_intersection(surface, triangles[clean], triangle_face[clean], zero, defects)
+    cage = Cage(welded, triangles, triangle_face, vertex_map, warnings, tuple(centres))
+    _check_self_intersection(cage.surface_vertices, triangles[clean], triangle_face[clean], zero, defects)
     _raise_all(defects)
-    if enclosed_measure(surface, triangles) <= ZERO_LENGTH * diagonal**3:
+    if cage.measure <= ZERO_LENGTH * diagonal**3:
         raise CageError("the cage encloses zero volume: give it thickness, or bind in 2D with a polygon cage")
-    warnings += _fans(triangles, triangle_face, faces, names)
-    return Cage(welded, triangles, triangle_face, vertex_map, warnings, tuple(centres))
+    cage.warnings += _fans(triangles, triangle_face, faces, names)
+    return cage
 
 
 def _poke(vertices, triangles, triangle_face, clean, faces):
