@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .cage import Cage, make_cage
+from .cage import POKE_SIDES, Cage, make_cage
 from .errors import CageError
 from .io import writing
 from .meshing import DomainMesh
@@ -203,6 +203,13 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
     cage, domain, weights = _checked_parts(arrays, damaged)
     if str(arrays["fingerprint"]) != cage.fingerprint():
         damaged("its cage does not match its fingerprint")
+    ngons = np.flatnonzero(np.bincount(cage.facet_face) >= POKE_SIDES - 2)  # faces of POKE_SIDES sides or more
+    if arrays["before_pokes"] and len(ngons):
+        listed = ", ".join(map(str, ngons[:5])) + (", …" if len(ngons) > 5 else "")
+        cage.warnings.append(
+            f"{path} was bound by an earlier version, which split n-gon faces (face {listed}) into fans of triangles "
+            "from one of their vertices: that vertex moves most of the face while the others barely do; bind again "
+            "for every vertex to move its share")
     if cage_vertices is not None:
         given = make_cage(cage_vertices, cage_faces)
         # The faces, not their split: a file of a version that split n-gons otherwise serves the same cage.
@@ -273,6 +280,7 @@ def _read_archive(path):
             arrays = {key: data[key] for key in FILE_ARRAYS}
             arrays.update({key: data[key] if key in data.files else np.zeros(0, np.int64)
                            for key in OPTIONAL_FILE_ARRAYS})
+            arrays["before_pokes"] = "cage_centre_sizes" not in data.files
         except CageError:
             raise
         except Exception as error:  # a damaged member: bad CRC, truncated stream, bad header

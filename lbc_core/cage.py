@@ -649,8 +649,10 @@ def _fans(triangles, triangle_face, faces, names):
                 "which move most of their faces while the other vertices barely do")
     # Triangulating in Blender does not help: its Beauty split of such a face is a fan as well (a new user's check).
     them, whose = ("it", "its") if len(fans) == 1 else ("them", "their")
-    return [f"{said}, and {whose} middle lies too near a side to split {them} from there: split {them} into rounder "
-            f"faces (in Blender, select two vertices across such a face and press J, Connect Vertex Path)"]
+    return [f"{said}, and {whose} middle lies outside {them} or too near a side to split {them} from there: split "
+            f"{them} into rounder faces (in Blender, Select > Select All by Trait > Faces by Sides, greater than "
+            f"{FAN_NOTICE_SIDES - 1}, finds {them}; select two vertices across such a face and press J, Connect Vertex "
+            "Path)"]
 
 
 def _face_list(faces, n_vertices):

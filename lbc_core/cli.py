@@ -7,9 +7,9 @@
     lbc compare CAGE [MESH] --schemes lbc,mvc,harmonic [--plot pq.png]
     lbc table1 [DATA ...] [--pair CAGE MESH] [--min-control N] [--max-control N]
 
-Every command takes --quiet (no progress on stderr) and --json (figures as JSON on stdout). Bad input (unreadable
-files, invalid cages, points that do not fit the cage) exits with code 2 and one line on stderr; a cancelled run
-(Ctrl-C) exits with 130.
+Every command takes --quiet (no progress or warnings on stderr) and --json (figures as JSON on stdout). Bad input
+(unreadable files, invalid cages, points that do not fit the cage) exits with code 2 and one line on stderr; a
+cancelled run (Ctrl-C) exits with 130.
 """
 
 import argparse
@@ -50,7 +50,8 @@ def _parser():
     commands = parser.add_subparsers(required=True, metavar="COMMAND")
 
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    common.add_argument("--quiet", action="store_true", help="no progress or warnings on stderr (--json lists the "
+                        "cage's warnings)")
     common.add_argument("--json", action="store_true", help="print the figures as JSON on stdout")
 
     solving = argparse.ArgumentParser(add_help=False)
@@ -164,6 +165,7 @@ def _run_deform(args):
     if args.plot:
         _check_figure(args.plot)
     binding = load_binding(args.binding)
+    _warn(binding.cage.warnings, args.quiet)
     _check_2d_figure(binding, args.plot, "--plot")
     new_vertices, new_faces = read_mesh(args.new_cage)
     try:

@@ -742,8 +742,9 @@ def test_an_n_gon_its_mean_cannot_poke_is_ear_clipped_and_named_if_it_fans_out()
     assert cage.centres == ()
     assert cage.warnings == [
         "cage face 1 (an n-gon of 14 sides) is split into a fan of triangles from vertex 17, which moves most of the "
-        "face while its other vertices barely do, and its middle lies too near a side to split it from there: split it "
-        "into rounder faces (in Blender, select two vertices across such a face and press J, Connect Vertex Path)"]
+        "face while its other vertices barely do, and its middle lies outside it or too near a side to split it from "
+        "there: split it into rounder faces (in Blender, Select > Select All by Trait > Faces by Sides, greater than "
+        "7, finds it; select two vertices across such a face and press J, Connect Vertex Path)"]
     angles = np.radians(np.linspace(-10.0, 10.0, 9))
     lens = make_cage(*prism(np.c_[np.cos(angles), np.sin(angles)], height=0.05))
     assert len(lens.centres) == 2 and not lens.warnings
