@@ -517,7 +517,7 @@ def test_api_refuses_at_once_when_the_extension_is_not_enabled():
     ("mode", "3d", "mode must be one of 'AUTO', '2D', '3D', not '3d'"),
     ("influences", None, "influences must be a whole number of at least 0 .* not None"),
     ("influences", 2.5, "influences must be a whole number"),
-    ("thinning", -0.05, r"thinning must be a number of at least 0 \(0: the default, 0.005\), not -0.05"),
+    ("thinning", -0.05, r"thinning must be a number of at least 0 \(0: the default, 0.004\), not -0.05"),
     ("cells", -5, "cells"),
 ])
 def test_api_bind_refuses_bad_options_before_any_work(option, value, message, monkeypatch):
@@ -528,3 +528,25 @@ def test_api_bind_refuses_bad_options_before_any_work(option, value, message, mo
     with pytest.raises(api.CageError, match=message):
         api.bind(mesh, cage, **{option: value})
     assert not is_bound(mesh)
+
+
+def test_the_default_bind_creases_issue_12s_bent_capsule_less_than_mesh_deform():
+    """Issue 12, item 1, as an artist gets it: the add-on's default bind (thinned weights, its deformer) of the capsule
+    bent 90°, against Mesh Deform at precision 5 in the same process. Thinning 0.005 once met it and, on later meshes,
+    reached 3.48° at worst against Mesh Deform's 3.33° unnoticed; 0.004 gives p99 1.47°, max 2.53° (2.09°, 3.33°)."""
+    from blender_scenes import reset
+    from bench import capsule
+
+    reset()
+    mesh, faces = capsule.capsule()
+    cage, cage_faces = capsule.cage()
+    posed = capsule.bend(cage)
+    mesh_obj = capsule.blender_object(bpy, "Capsule", mesh, faces)
+    cage_obj = capsule.blender_object(bpy, "Cage", cage, cage_faces)
+    api.bind(mesh_obj, cage_obj)
+    cage_obj.data.vertices.foreach_set("co", posed.astype(np.float32).ravel())
+    cage_obj.data.update()
+    ours = capsule.kink_figures(mesh, evaluated_positions(mesh_obj), faces)
+    _, moved = capsule.mesh_deform(mesh, faces, cage, cage_faces, posed, precision=5)
+    theirs = capsule.kink_figures(mesh, moved, faces)
+    assert ours["p99"] <= theirs["p99"] and ours["max"] <= theirs["max"], (ours, theirs)
