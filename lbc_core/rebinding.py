@@ -589,9 +589,16 @@ def _split_as_before(old, new):
     """
     if old.fingerprint() == new.fingerprint():
         return new, None
-    if not (np.array_equal(old.vertex_map, new.vertex_map)
-            and np.array_equal(np.sort(old.facet_face), np.sort(new.facet_face))):
+    if not np.array_equal(old.vertex_map, new.vertex_map) or old.face_corners() != new.face_corners():
         return new, "the cage's vertices, faces or welding changed"
+    if not np.array_equal(np.sort(old.facet_face), np.sort(new.facet_face)):
+        # The same faces, an n-gon split otherwise: its middle came too near a side (or left it) to split it from there.
+        old_counts, new_counts = (np.bincount(c.facet_face, minlength=len(old.face_corners())) for c in (old, new))
+        faces = np.flatnonzero(old_counts != new_counts)
+        its = "its" if len(faces) == 1 else "their"
+        return new, (f"{_named_faces(faces)} changed shape so far that {its} split into triangles changed (from the "
+                     "middle to one of the vertices, or back), which the cells the last bind filled the cage with do "
+                     "not follow")
     if new.dim == 3:
         normals = triangle_normals(new.surface_vertices[old.facets])
         face_normals = np.zeros((int(new.facet_face.max()) + 1, 3))

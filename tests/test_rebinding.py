@@ -501,3 +501,21 @@ def test_a_cage_moved_far_in_all_since_its_last_cold_bind_binds_from_scratch(gar
                                       "fresh one")
     assert "travel" not in back.options
     assert rebind(back, out, faces).options["start"] == "previous solution"  # counted again from the cold bind
+
+
+def test_an_n_gon_edited_out_of_its_poke_rebinds_from_scratch_and_says_so():
+    """An octagon prism's caps are split from their middle; one vertex of each pushed far in makes them non-convex with
+    the middle too near a side, so they are ear-clipped: other facets, which the carried mesh does not follow."""
+    octagon = np.c_[np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)]
+    prism = np.concatenate([np.c_[octagon, np.zeros(8)], np.c_[octagon, np.ones(8)]])
+    faces = [list(range(8))[::-1], list(range(8, 16))] + [[i, (i + 1) % 8, 8 + (i + 1) % 8, 8 + i] for i in range(8)]
+    points = np.array([[-0.2, 0.5, 0.5], [0.0, -0.5, 0.4]])
+    first = lbc_core.bind(prism, faces, points, cells=500)
+    edited = prism.copy()
+    edited[[0, 8], 0] = -0.6
+    assert len(first.cage.centres) == 2 and lbc_core.make_cage(edited, faces).centres == ()
+    again = rebind(first, edited, faces)
+    assert again.options["rebind"] == (
+        "bound from scratch: cage faces 0, 1 changed shape so far that their split into triangles changed (from the "
+        "middle to one of the vertices, or back), which the cells the last bind filled the cage with do not follow")
+    assert_guarantees(again, points)
