@@ -63,8 +63,9 @@ def mean_value_coordinates(cage, points, progress=None, cancel=None):
     vertices, facets = cage.surface_vertices, cage.facets
     tolerance = ON_CAGE_TOLERANCE * cage.bbox_diagonal
     chunk = max(1, CHUNK_ENTRIES // len(facets))
-    # Facet corner -> control point: scatters per-corner contributions (chunk, 3E) into (chunk, n) in one product.
-    scatter = sp.csr_matrix(
+    # 3D: facet corner -> surface vertex, scattering per-corner contributions (chunk, 3E) into (chunk, S) in one
+    # product (2D needs none: the polygon's vertices are in order).
+    scatter = None if cage.dim == 2 else sp.csr_matrix(
         (np.ones(facets.size), (np.arange(facets.size), facets.ravel())), shape=(facets.size, len(vertices))
     )
     weights = np.empty((len(points), len(vertices)))

@@ -35,7 +35,7 @@ def boundary_weights(domain, cage):
     (B, n) float array, rows in the order of ``domain.boundary_vertices``
     """
     n_boundary, n = len(domain.boundary_vertices), cage.n_control_points
-    weights = np.zeros((n_boundary, len(cage.surface_vertices)))
+    weights = np.zeros((n_boundary, n + len(cage.centres)))  # a column per surface vertex
     corners = cage.facets[domain.boundary_facet]  # (B, d)
     rows = np.repeat(np.arange(n_boundary), corners.shape[1])
     np.add.at(weights, (rows, corners.ravel()), domain.boundary_bary.ravel())

@@ -630,8 +630,9 @@ def _fans(triangles, triangle_face, faces, names):
     poked, whose triangles fan out from one vertex: its boundary values span the whole face, the others' slivers."""
     fans = []
     for index, face in faces:
-        if len(face) >= FAN_NOTICE_SIDES and np.all(triangles[triangle_face == index] < len(names)):
-            counts = np.bincount(triangles[triangle_face == index].ravel())
+        own = triangles[triangle_face == index]
+        if len(face) >= FAN_NOTICE_SIDES and np.all(own < len(names)):  # not poked: no centre among its corners
+            counts = np.bincount(own.ravel())
             apex = int(np.argmax(counts))
             if counts[apex] > (len(face) - 2) / 2:
                 fans.append((index, len(face), int(names[apex])))

@@ -591,9 +591,10 @@ def _split_as_before(old, new):
         return new, None
     if not np.array_equal(old.vertex_map, new.vertex_map) or old.face_corners() != new.face_corners():
         return new, "the cage's vertices, faces or welding changed"
-    if not np.array_equal(np.sort(old.facet_face), np.sort(new.facet_face)):
-        # The same faces, an n-gon split otherwise: its middle came too near a side (or left it) to split it from there.
-        old_counts, new_counts = (np.bincount(c.facet_face, minlength=len(old.face_corners())) for c in (old, new))
+    # The same faces (so the same face numbers), triangles per face differing: an n-gon split otherwise, its middle
+    # now too near a side (or no longer) to split it from there.
+    old_counts, new_counts = np.bincount(old.facet_face), np.bincount(new.facet_face)
+    if not np.array_equal(old_counts, new_counts):
         faces = np.flatnonzero(old_counts != new_counts)
         its = "its" if len(faces) == 1 else "their"
         return new, (f"{_named_faces(faces)} changed shape so far that {its} split into triangles changed (from the "
@@ -693,8 +694,9 @@ def _faces_off_cage(mesh, vertices, old_cage, cage):
     # shares a vertex with the facet the first corner is recorded on.
     within = np.zeros(len(triangles), dtype=bool)
     tolerance = (1e-9 * old_cage.bbox_diagonal) ** 2
+    old_surface = old_cage.surface_vertices
     for candidates in _facets_around(old_cage.facets, facets[:, 0]).T:
-        corners = old_cage.surface_vertices[old_cage.facets[np.maximum(candidates, 0)]]
+        corners = old_surface[old_cage.facets[np.maximum(candidates, 0)]]
         inside = candidates >= 0
         for k in range(3):
             inside &= closest_on_facets(mesh.vertices[triangles[:, k]], corners)[0] <= tolerance
@@ -716,9 +718,10 @@ def _chord_distances(corners, facets, cage):
     at its centroid and edge midpoints, against the facets around its corners' facets ``facets`` (K, 3)."""
     samples = np.stack([corners.mean(axis=1), *((corners[:, k] + corners[:, k - 1]) / 2 for k in range(3))], axis=1)
     nearest = np.full(samples.shape[:2], np.inf)
+    surface = cage.surface_vertices
     for k in range(3):
         for candidates in _facets_around(cage.facets, facets[:, k]).T:
-            facet_corners = cage.surface_vertices[cage.facets[np.maximum(candidates, 0)]]
+            facet_corners = surface[cage.facets[np.maximum(candidates, 0)]]
             for s in range(samples.shape[1]):
                 squared = closest_on_facets(samples[:, s], facet_corners)[0]
                 nearest[:, s] = np.minimum(nearest[:, s], np.where(candidates >= 0, squared, np.inf))
