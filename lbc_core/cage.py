@@ -46,6 +46,9 @@ from .geometry import (cross2, enclosed_measure, in_triangle_2d, is_convex_polyg
                        triangle_normals, unit)
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
+# A vertex a million times farther from the cage's middle than the rest of the cage is wide is no part of it: it would
+# set the welding tolerance (DEFAULT_WELD_TOLERANCE of the diagonal) and weld every other vertex into one.
+FAR_OFF = 1e6
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
 # n-gons from this many sides are poked at their vertices' mean (the module docstring). Ear-clipped, Blender's
 # Cylinder's 32-gon caps fanned out from one vertex, whose coordinate summed to 466 over the points inside against
@@ -225,7 +228,7 @@ class Cage:
             )
         if not np.all(np.isfinite(input_vertices)):
             bad = np.flatnonzero(~np.all(np.isfinite(input_vertices), axis=1))
-            raise CageError(f"NaN or infinite positions of cage vertex {_some(bad)}: fix or delete them")
+            raise CageError(f"NaN or infinite positions of cage vertex {some_indices(bad)}: fix or delete them")
         first = _first_inputs(self.vertex_map)
         points = input_vertices[first]
         if len(first) < len(self.vertex_map):
@@ -306,15 +309,49 @@ def make_cage(vertices, faces=None, weld_tolerance=DEFAULT_WELD_TOLERANCE, max_c
     if faces is not None and not hasattr(faces, "__len__"):
         faces = list(faces)
     _check_size(len(vertices), None if faces is None else len(faces), max_control_points)
-    if not np.all(np.isfinite(vertices)):
-        bad = np.flatnonzero(~np.all(np.isfinite(vertices), axis=1))
-        raise CageError(
-            f"NaN or infinite coordinates at {_count(len(bad), 'cage vertex', 'cage vertices')} ({_some(bad)}): "
-            "fix or delete them"
-        )
+    check_coordinates(vertices)
     if faces is None:
         return _make_polygon_cage(vertices, weld_tolerance, max_control_points)
     return _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points)
+
+
+def check_coordinates(vertices):
+    """Refuse cage vertices with NaN or infinite coordinates, or lying FAR_OFF times farther from the cage's middle
+    than the size of the rest of it (at most a quarter of the vertices).
+
+    Parameters
+    ----------
+    vertices : (n, d) float array
+        The cage's vertices, in any units.
+
+    Raises
+    ------
+    CageError
+        Naming the vertices and what to do.
+    """
+    finite = np.all(np.isfinite(vertices), axis=1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        raise CageError(
+            f"NaN or infinite coordinates at {_count(len(bad), 'cage vertex', 'cage vertices')} ({some_indices(bad)}): "
+            "fix or delete them"
+        )
+    distances = np.linalg.norm(vertices - np.median(vertices, axis=0), axis=1)
+    order = np.argsort(distances)
+    for count in range(len(vertices) // 4, 0, -1):  # the most far-off vertices first
+        rest = np.linalg.norm(np.ptp(vertices[order[:-count]], axis=0))
+        if rest > 0 and distances[order[-count]] > FAR_OFF * rest:
+            break
+    else:
+        return
+    far = np.sort(order[-count:])
+    which, verb, pronoun = (f"cage vertex {some_indices(far)}", "lies", "it") if len(far) == 1 else (
+        f"cage vertices {some_indices(far)}", "lie", "them")
+    raise CageError(
+        f"{which} {verb} {distances[far].max():.3g} from the cage's middle, over a million times the size of the "
+        "rest of it (a coordinate typed wrong, or an infinite one, which Blender stores as its largest number, "
+        f"3.4e+38): move {pronoun} back"
+    )
 
 
 def real_array(values, what, shape):
@@ -363,7 +400,7 @@ def _count(number, singular, plural=None):
     return f"{number} {singular if number == 1 else plural or singular + 's'}"
 
 
-def _some(indices):
+def some_indices(indices):
     """'3, 7, 9' or '3, 7, 9, 12, 15, ...': a few of the offending indices for a message."""
     return _listed([str(int(i)) for i in np.ravel(indices)])
 
@@ -444,8 +481,8 @@ def _make_polygon_cage(vertices, weld_tolerance, max_control_points):
         if len(np.unique(order)) != len(order):
             twice = np.flatnonzero(np.bincount(order) > 1)
             raise CageError(
-                f"the polygon cage passes twice through vertex {_some(_first_inputs(vertex_map)[twice])}: it touches "
-                "itself; separate the touching parts"
+                f"the polygon cage passes twice through vertex {some_indices(_first_inputs(vertex_map)[twice])}: it "
+                "touches itself; separate the touching parts"
             )
         welded, vertex_map = welded[order], np.argsort(order)[vertex_map]
     if len(welded) < 3:
@@ -486,8 +523,8 @@ def _check_polygon_simple(vertices, zero, names):
     if np.any(spike):
         corner = names[(np.flatnonzero(spike) + 1) % n]
         defects.append(
-            f"the polygon cage doubles back on itself at vertex {_some(corner)} (a zero-width spike): delete that "
-            "vertex or move it off the line of its neighbours"
+            f"the polygon cage doubles back on itself at vertex {some_indices(corner)} (a zero-width spike): delete "
+            "that vertex or move it off the line of its neighbours"
         )
     low, high = np.minimum(start, end) - zero, np.maximum(start, end) + zero
     i, j = _overlapping_boxes(low, high).T
@@ -540,7 +577,7 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     if len(unused):
         defects.append(
             f"the cage has {_count(len(unused), 'loose vertex', 'loose vertices')}, in no face (vertex "
-            f"{_some(names[unused])}): delete them from the cage (in Blender: Mesh > Clean Up > Delete Loose)"
+            f"{some_indices(names[unused])}): delete them from the cage (in Blender: Mesh > Clean Up > Delete Loose)"
         )
     triangles, triangle_face, clean = _triangulate(welded, faces, zero, defects)
     clean &= ~_report_degenerate(welded, triangles, triangle_face, zero, defects)
@@ -640,8 +677,8 @@ def _fans(triangles, triangle_face, faces, names):
         return []
     sides = sorted({count for _, count, _ in fans})
     size = f"{sides[0]} sides" if len(sides) == 1 else f"{sides[0]} to {sides[-1]} sides"
-    which = " and ".join(_some([index for index, _, _ in fans]).rsplit(", ", 1))
-    apexes = " and ".join(_some([apex for _, _, apex in fans]).rsplit(", ", 1))
+    which = " and ".join(some_indices([index for index, _, _ in fans]).rsplit(", ", 1))
+    apexes = " and ".join(some_indices([apex for _, _, apex in fans]).rsplit(", ", 1))
     if len(fans) == 1:
         said = (f"cage face {which} (an n-gon of {size}) is split into a fan of triangles from vertex {apexes}, which "
                 "moves most of the face while its other vertices barely do")
@@ -707,7 +744,8 @@ def _collapse_welded(faces, vertex_map, names, defects):
             continue
         kept.append((index, face))
     if twice:
-        listed = _listed([f"face {index} twice through vertex {_some(names[corners])}" for index, corners in twice])
+        listed = _listed([f"face {index} twice through vertex {some_indices(names[corners])}"
+                          for index, corners in twice])
         defects.append(
             f"{_count(len(twice), 'cage face passes', 'cage faces pass')} through a vertex twice ({listed}): split "
             "each into faces that visit a vertex once"
@@ -814,8 +852,8 @@ def _report_degenerate(vertices, triangles, triangle_face, zero, defects):
     if np.any(bad):
         faces = np.unique(triangle_face[bad])
         defects.append(
-            f"the cage has {_count(len(faces), 'face')} of zero area (face {_some(faces)}): delete or dissolve them "
-            "(in Blender: Mesh > Clean Up > Degenerate Dissolve)"
+            f"the cage has {_count(len(faces), 'face')} of zero area (face {some_indices(faces)}): delete or dissolve "
+            "them (in Blender: Mesh > Clean Up > Degenerate Dissolve)"
         )
     return bad
 
@@ -927,8 +965,8 @@ def _check_manifold_vertices(triangles, directed, first, second, names, defects)
     if len(pinched):
         defects.append(
             f"the cage has {_count(len(pinched), 'non-manifold vertex', 'non-manifold vertices')} where separate "
-            f"sheets of the surface touch at a point (vertex {_some(names[pinched])}): pull the sheets apart or merge "
-            "them along an edge"
+            f"sheets of the surface touch at a point (vertex {some_indices(names[pinched])}): pull the sheets apart or "
+            "merge them along an edge"
         )
 
 

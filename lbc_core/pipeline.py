@@ -15,7 +15,7 @@ import numpy as np
 
 from .binding import Binding
 from .boundary import boundary_weights
-from .cage import make_cage, real_array
+from .cage import make_cage, real_array, some_indices
 from .errors import CageError, PointsOutside
 from .frame import UnitFrame, principal_aspect
 from .geodesics import geodesic_distances, tv_weights
@@ -280,6 +280,9 @@ def check_points(cage, points, plane_z=None):
         points = points[:, :2]
     if points.shape[1] != cage.dim:
         raise CageError(f"the cage is {cage.dim}D but the points are {points.shape[1]}D")
-    if not np.all(np.isfinite(points)):
-        raise CageError("some points have NaN or infinite coordinates: fix or delete them")
+    finite = np.all(np.isfinite(points), axis=1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        raise CageError(f"{len(bad)} of the points ({some_indices(bad)}, counted from 0) have NaN or infinite "
+                        "coordinates: fix or delete them")
     return points

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .cage import check_coordinates
 from .errors import CageError
 
 # A cage is flat when its thickness is below this fraction of its bounding-box diagonal; points lie in the cage's
@@ -140,10 +141,12 @@ def flatten(cage_vertices, cage_faces, points, edges=None):
     Raises
     ------
     CageError
-        When the cage is flat but its outline is not one closed loop.
+        When the cage has NaN, infinite or far-off coordinates (:func:`~lbc_core.cage.check_coordinates`), or is flat
+        but its outline is not one closed loop.
     """
     cage_vertices = np.asarray(cage_vertices, dtype=float)
     points = np.asarray(points, dtype=float)
+    check_coordinates(cage_vertices)  # before the plane's fit, which NaN breaks and a far-off vertex fools
     frame = flat_frame(cage_vertices, points)
     if frame is None:
         return None

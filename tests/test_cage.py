@@ -96,6 +96,24 @@ def test_nan_or_inf_coordinates(bad):
     assert_refused(polygon, None, "nan or infinite")
 
 
+@pytest.mark.parametrize("far", [3.4028234663852886e38, 1e30, -1e12])
+def test_a_vertex_a_million_times_farther_than_the_others_is_named(far):
+    # Blender stores an infinite coordinate as its largest float; welding at 1e-9 of that diagonal merged the rest.
+    vertices = CUBE.copy()
+    vertices[2, 0] = far
+    assert_refused(vertices, CUBE_QUADS, "cage vertex 2 lies", "move it back")
+    vertices[5, 1] = far
+    assert_refused(vertices, CUBE_QUADS, "cage vertices 2, 5 lie", "move them back")
+    polygon = SQUARE.copy()
+    polygon[1, 1] = far
+    assert_refused(polygon, None, "cage vertex 1 lies")
+
+
+def test_a_long_thin_cage_is_no_far_off_vertex():
+    needle = CUBE * [1e4, 1.0, 1.0]
+    assert make_cage(needle, CUBE_QUADS).n_control_points == 8
+
+
 def test_polygon_not_in_a_plane_z_constant():
     assert_refused(np.c_[SQUARE, [0, 0, 1, 0]], None, "z = constant")
 

@@ -112,8 +112,8 @@ def test_progress_is_monotonic_and_cancel_stops():
 
 def test_bad_points_are_refused():
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-    with pytest.raises(lbc_core.CageError, match="NaN"):
-        lbc_core.bind(square, None, np.array([[np.nan, 0.5]]))
+    with pytest.raises(lbc_core.CageError, match=r"2 of the points \(1, 3, counted from 0\) have NaN or infinite"):
+        lbc_core.bind(square, None, np.array([[0.5, 0.5], [np.nan, 0.5], [0.5, 0.5], [0.5, np.inf]]))
     with pytest.raises(lbc_core.CageError, match="2D"):
         lbc_core.bind(square, None, np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.7]]))
     with pytest.raises(lbc_core.CageError, match="points must be real numbers"):

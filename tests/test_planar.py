@@ -61,6 +61,16 @@ def test_flatten_gives_the_outline_polygon_and_the_points_in_the_plane():
     assert flatten(vertices, quads, points + [0.0, 0.0, 0.1]) is None
 
 
+@pytest.mark.parametrize("bad", [np.nan, 3.4028234663852886e38])
+def test_flatten_names_a_nan_or_far_off_cage_vertex_before_fitting_the_plane(bad):
+    # A new user's NaN vertex broke the plane's SVD (LinAlgError); Blender's infinity (its largest float) made the
+    # other vertices look flat and asked for an outline.
+    vertices, quads = grid(3)
+    vertices[4, 2] = bad
+    with pytest.raises(CageError, match=r"cage vertex \(?4"):
+        flatten(vertices, quads, np.array([[1.0, 1.0, 0.0]]))
+
+
 def test_reframed_keeps_another_frame_of_the_plane_and_refuses_to_leave_it():
     square = np.array([[0, 0, 2], [1, 0, 2], [1, 1, 2], [0, 1, 2]], dtype=float)
     points = np.array([[0.5, 0.5, 2.0]])
