@@ -31,10 +31,10 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
     Returns
     -------
     dict
-        ``dimension``, ``control_points``, ``slots`` (K), ``mean_influences``, ``outside``, ``warnings``, ``seconds``,
-        and ``rebind``: for a mesh bound before in this session, how it went (from its previous binding, or from
-        scratch and why); "" for a first bind (unless ``from_scratch``). With no ``progress`` in background mode,
-        progress lines are printed.
+        ``dimension``, ``control_points``, ``slots`` (K), ``mean_influences``, ``outside``, ``warnings`` (the bind's,
+        and why the deformer is held off if the modifier stack holds it off), ``seconds``, and ``rebind``: for a mesh
+        bound before in this session, how it went (from its previous binding, or from scratch and why); "" for a first
+        bind (unless ``from_scratch``). With no ``progress`` in background mode, progress lines are printed.
 
     Raises
     ------
@@ -62,13 +62,14 @@ def _bind_request(request, progress, cancel, solved=None):
         solved.append((request, result))
     bound = writing.apply(request, result)
     settings = bound.lbc
+    held_off = deformer.held_off_warning(bound)
     return {
         "dimension": settings.dimension,
         "control_points": settings.control_points,
         "slots": settings.slots,
         "mean_influences": settings.mean_influences,
         "outside": settings.outside,
-        "warnings": list(result.warnings),
+        "warnings": list(result.warnings) + ([held_off] if held_off else []),
         "seconds": settings.bind_seconds,
         "rebind": result.rebind,
     }

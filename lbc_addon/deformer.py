@@ -701,6 +701,13 @@ def status(mesh_obj, depsgraph):
     return cause is None, message
 
 
+def held_off_warning(mesh_obj):
+    """After a bind: why its deformer cannot work as the stack stands (e.g. a Rebind below a modifier that changes the
+    vertex count, which Bind's own modifier, added at the top, never is), as a warning; None when it follows."""
+    ok, message = status(mesh_obj, bpy.context.evaluated_depsgraph_get())
+    return None if ok else f"bound, but the deformer is held off: {message[:1].lower()}{message[1:]}"
+
+
 def diagnose(mesh_obj, depsgraph, cages=None):
     """Why a bound object's deformer cannot work: (cause, message), cause None when it works.
 

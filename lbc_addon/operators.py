@@ -41,10 +41,11 @@ def _leftover_selection(context):
 
 
 def _report_result(operator, mesh_obj):
-    """Warnings about a finished bind: vertices outside the cage, repairs lbc_core made (:func:`jobs.solve`)."""
-    settings = mesh_obj.lbc
-    if settings.warnings:
-        operator.report({"WARNING"}, f"{mesh_obj.name}: {settings.warnings}")
+    """Warnings about a finished bind: vertices outside the cage, repairs lbc_core made (:func:`jobs.solve`), a
+    deformer the stack holds off."""
+    for warning in (mesh_obj.lbc.warnings, deformer.held_off_warning(mesh_obj)):
+        if warning:
+            operator.report({"WARNING"}, f"{mesh_obj.name}: {warning}")
 
 
 def _bound_summary(bound, named=5):

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from mathutils import Matrix
 
-from lbc_addon import deformer, storage
+from lbc_addon import api, deformer, storage
 from blender_scenes import (
+    CELLS,
     delete_with_x,
     diagonal,
     evaluated_positions,
@@ -454,6 +455,21 @@ def test_below_a_modifier_that_changes_the_vertex_count_the_deformer_stops_with_
     mesh.modifiers.move(0, 1)  # back below the deformer: it follows again
     bpy.context.evaluated_depsgraph_get()
     assert mesh.lbc.status == f"Following '{cage.name}'"
+
+
+def test_a_rebind_below_a_modifier_that_changes_the_vertex_count_says_the_deformer_is_held_off(bound_gargoyle):
+    """A new user's finding: Rebind with a Decimate moved above the deformer said only "Bound" over a mesh at rest
+    (Bind's own modifier goes to the top; a Rebind keeps the artist's stack)."""
+    mesh, cage = bound_gargoyle
+    mesh.modifiers.new("Decimate", "DECIMATE").ratio = 0.5
+    mesh.modifiers.move(len(mesh.modifiers) - 1, 0)
+    plain = mesh.modifiers[deformer.MODIFIER_NAME].name
+    summary = api.bind(mesh, cage, cells=CELLS)
+    assert summary["warnings"][-1] == (
+        f"bound, but the deformer is held off: the modifier 'Decimate' above '{plain}' changes the mesh's vertex "
+        f"count: the mesh stays undeformed. Move '{plain}' to the top of the stack")
+    mesh.modifiers.move(0, 1)
+    assert not any("held off" in warning for warning in api.bind(mesh, cage, cells=CELLS)["warnings"])
 
 
 def test_the_modifier_switched_off_in_the_viewport_is_said(bound_gargoyle, capsys):
