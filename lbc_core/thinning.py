@@ -38,9 +38,10 @@ ROWS_PER_CHUNK = 8192
 # gargoyle, Suzanne and the capsule, whose floor takes at most 0.09-0.12, keep theirs (bench/RESULTS.md).
 MOST_REMOVED = 0.1
 
-# Times a point's threshold is relaxed (floor / 4, cap + 1) where its kept weights cannot reproduce it, before it
-# keeps its whole row. With 6, a cap of 8 on Blender's 32-sided cylinder cage left 61 of 20k points their whole row,
-# so every vertex's deformer evaluated 53 slots; with 12, none (16 slots).
+# Times a point's threshold is relaxed (floor / 4; a cap K raised by 1, 2, 4, ...) where its kept weights cannot
+# reproduce it, before it keeps its whole row. With 6 raises by one, a cap of 8 on Blender's 32-sided cylinder cage left
+# 61 of 20k points their whole row, so every vertex's deformer evaluated 53 slots; with 12, none (16 slots); a cap of
+# 4 there still kept all 64 weights, where the raises by 1, 2, 4, ... and a bisection give about 23.
 RELAXATIONS = 12
 
 
@@ -68,8 +69,9 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     (m, n) scipy.sparse.csr_matrix
         Non-negative rows that sum to 1 and reproduce ``positions`` (to 1e-9 of the controls' extent), each a
         subset of its input row's support. Where a point's kept weights cannot reproduce it (it lies on the hull of
-        their control points), its threshold is relaxed (floor / 4, K + 1) until they can, and after
-        :data:`RELAXATIONS` times it keeps its input row.
+        their control points), its threshold is relaxed (floor / 4, K raised by 1, 2, 4, ..., then the least cap
+        between the last that failed and the one that did) until they can, and after :data:`RELAXATIONS` times it
+        keeps its input row. A cap too low for a point thus ends at the least that reproduces it.
     """
     weights = sp.csr_matrix(weights, dtype=float)
     controls = np.asarray(controls, dtype=float)
@@ -148,22 +150,43 @@ def _thin_rows(weights, controls, positions, floor, max_influences):
     columns = np.take_along_axis(columns, order, axis=1)
     extent = controls_extent(controls)
     thinned = values.copy()  # rows that never reproduce keep their input
-    pending = np.arange(len(values))
     slot_controls = controls[columns]  # (m, L, d)
     floors = np.full(len(values), float(floor))
     caps = np.full(len(values), int(max_influences))
+
+    def thin(rows):
+        """Thin ``rows`` at their floors and caps into ``thinned`` where they then reproduce; which did."""
+        prior = np.maximum(values[rows] - thresholds(values[rows], floors[rows], caps[rows])[:, None], 0.0)
+        # Rows are sorted, so the weights left are a prefix: the tilt (which keeps zeros at zero) skips the rest.
+        width = max(int(np.count_nonzero(prior, axis=1).max(initial=0)), 1)
+        tilted, done = tilt(prior[:, :width], slot_controls[rows, :width], positions[rows], extent)
+        thinned[rows[done]] = 0.0
+        thinned[rows[done], :width] = tilted[done]
+        return done
+
+    # A capped row that cannot reproduce its point raises its cap by 1, 2, 4, ... (one by one, a cap of 4 in Blender's
+    # Cylinder, whose points need about 20 of its 64 vertices, ran out of relaxations and kept all 64), then takes
+    # the least cap between the last that failed and the one that did.
+    raises = np.ones(len(values), dtype=int)
+    failed = np.zeros(len(values), dtype=int)  # the largest cap a row failed at
+    pending = np.arange(len(values))
     for _ in range(RELAXATIONS + 1):
         if not len(pending):
             break
-        prior = np.maximum(values[pending] - thresholds(values[pending], floors[pending], caps[pending])[:, None], 0.0)
-        # Rows are sorted, so the weights left are a prefix: the tilt (which keeps zeros at zero) skips the rest.
-        width = max(int(np.count_nonzero(prior, axis=1).max(initial=0)), 1)
-        tilted, done = tilt(prior[:, :width], slot_controls[pending, :width], positions[pending], extent)
-        thinned[pending[done]] = 0.0
-        thinned[pending[done], :width] = tilted[done]
-        pending = pending[~done]
+        pending = pending[~thin(pending)]
+        failed[pending] = caps[pending]
         floors[pending] /= 4
-        caps[pending] += caps[pending] > 0
+        caps[pending] += raises[pending] * (caps[pending] > 0)
+        raises[pending] *= 2
+    succeeded, succeeded[pending] = np.ones(len(values), dtype=bool), False
+    search = np.flatnonzero(succeeded & (failed > 0) & (caps > failed + 1))
+    while len(search):
+        reproduced = caps[search].copy()
+        caps[search] = (failed[search] + reproduced) // 2
+        done = thin(search)
+        failed[search[~done]] = caps[search[~done]]
+        caps[search[~done]] = reproduced[~done]
+        search = search[caps[search] > failed[search] + 1]
     return csr_from_padded(thinned, columns, weights.shape[1])
 
 
