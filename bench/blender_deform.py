@@ -16,7 +16,8 @@ the medians over the rounds, the lower and upper quartiles, and the load average
 
 Scenes: Suzanne subdivided to 48,612 vertices in a 56-vertex box cage, and the demo's gargoyle (two Catmull-Clark
 levels: 64,130 vertices) in its 67-vertex cage L10; "suzanne507", Suzanne as Blender makes her (507 vertices) in the
-same cage, shows the deformer's cost that does not grow with the vertices. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
+same cage, shows the deformer's cost that does not grow with the vertices; "cylinder", a 50,882-vertex UV sphere in
+Blender's default Cylinder. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
 the add-on's defaults, LBC with every weight (bound with a threshold of 1e-12: nothing thinned), LBC with every
 weight thinned by other thresholds and caps (``--thin floor:cap``; see :func:`lbc_core.thinning.thin_weights`),
 LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`), the default's weights with
@@ -46,6 +47,7 @@ from blender_scenes import (  # noqa: E402
     gargoyle_scene,
     positions,
     register_addon,
+    reset,
     suzanne_in_box_scene,
 )
 import scipy.sparse as sp  # noqa: E402
@@ -65,8 +67,18 @@ def gargoyle_subdivided():
     return mesh, cage
 
 
+def sphere_in_cylinder():
+    """A new user's scene: a 50,882-vertex UV sphere (radius 0.5) in Blender's default Cylinder, whose 32-gon caps
+    reach every point (each vertex feels all 64 cage vertices)."""
+    reset()
+    bpy.ops.mesh.primitive_cylinder_add()
+    cage = bpy.context.active_object
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=320, ring_count=160, radius=0.5)
+    return bpy.context.active_object, cage
+
+
 SCENES = {"suzanne": suzanne_in_box_scene, "gargoyle": gargoyle_subdivided,
-          "suzanne507": lambda: suzanne_in_box_scene(cuts=0)}
+          "suzanne507": lambda: suzanne_in_box_scene(cuts=0), "cylinder": sphere_in_cylinder}
 
 
 def pose(rest, phase):

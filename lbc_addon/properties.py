@@ -85,7 +85,8 @@ class BindOptionProperties:
         description="Every weight is lowered by this and those that reach 0 are dropped; the others are then made "
         f"to sum to 1 and reproduce the vertex again, so weights fade in and out without creases. 0 uses "
         f"{DEFAULT_FLOOR:g} (1e-9 keeps every weight). Larger: fewer influences per vertex, a faster deformer, a "
-        "less smooth deformation",
+        "less smooth deformation. It never takes more than a tenth of a vertex's weight, so where weights spread over "
+        "most of a small cage (Blender's Cylinder) it removes none: Max Influences does",
         default=0.0,
         min=0.0,
         soft_max=0.05,
@@ -94,8 +95,9 @@ class BindOptionProperties:
     influences: IntProperty(
         name="Max Influences",
         description="At most this many cage vertices move one mesh vertex (the weights are lowered by each vertex's "
-        "next largest one, then made to sum to 1 and reproduce the vertex again); the deformer's cost per frame grows "
-        "with it. 0: no limit (the default; a cap makes the deformer faster but can crease a bent smooth mesh)",
+        "next largest one, then made to sum to 1 and reproduce the vertex again; a vertex that needs more to stay in "
+        "place keeps the fewest that can); the deformer's cost per frame grows with it. 0: no limit (the default; a "
+        "cap makes the deformer faster but can crease a bent smooth mesh)",
         default=DEFAULT_INFLUENCES,
         min=0,
         soft_max=32,

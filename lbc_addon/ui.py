@@ -7,6 +7,12 @@ import bpy
 from . import deformer, geometry, storage
 from .properties import bound_to, is_bound
 
+# Above this mean the panel suggests Max Influences: where each vertex feels most of a small cage's vertices (a 50k
+# sphere in Blender's Cylinder: all 64, which Thinning leaves), a cap of 24 made a frame 7.5 → 4.1 ms, Mesh Deform's
+# 4.7 (bench/RESULTS.md); the gargoyle and Suzanne in their cages have 15-20.
+MANY_INFLUENCES = 32
+SUGGESTED_INFLUENCES = 24
+
 
 def _format_bytes(count):
     for unit in ("B", "KB", "MB", "GB"):
@@ -35,6 +41,10 @@ def draw_binding(layout, obj):
     column.label(text=f"{settings.dimension}D binding, {settings.control_points} control points")
     column.label(text=f"{len(obj.data.vertices)} mesh vertices, {settings.outside} outside the cage")
     column.label(text=f"Influences per vertex: mean {settings.mean_influences:.1f}, max {settings.slots}")
+    if settings.mean_influences > MANY_INFLUENCES and not settings.influences:
+        wrapped_label(column, f"Each vertex follows most of the cage's vertices here, which Thinning leaves: Bind "
+                      f"with Max Influences (e.g. {SUGGESTED_INFLUENCES}) for faster frames, if the deformation it "
+                      "gives suits (it follows fewer cage vertices, and a bent smooth mesh may crease)", icon="INFO")
     memory = storage.memory_bytes(len(obj.data.vertices), settings.slots)
     column.label(text=f"Cache in the .blend: {_format_bytes(memory)}")
     column.label(text=f"Bind time: {settings.bind_seconds:.1f} s")

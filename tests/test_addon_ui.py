@@ -6,7 +6,7 @@ records the labels and operators it is given.
 
 import bpy
 
-from lbc_addon import ui
+from lbc_addon import api, ui
 from blender_scenes import (
     delete_with_x,
     register_addon,
@@ -68,6 +68,7 @@ def test_bound_mesh_shows_state_figures_and_actions(bound_gargoyle):
     assert "67 control points" in text and "2674 mesh vertices, 0 outside" in text
     assert f"max {mesh.lbc.slots}" in text and "Cache in the .blend:" in text and "KB" in text
     assert {"object.lbc_rebind", "object.lbc_unbind", "object.lbc_show_influence"} <= set(layout.operators())
+    assert "Max Influences" not in text  # 15-16 influences: no hint
     # The modifier's inputs, drawn from the modifier itself (one source of truth, also in the modifier panel).
     assert layout.props() == ["Strength", "Vertex Group", ""]
 
@@ -85,6 +86,21 @@ def test_a_long_warning_is_shown_whole_over_several_lines(bound_gargoyle):
     shown = [line for line in lines if line in warning]
     assert len(shown) > 1 and all(len(line) <= 60 for line in shown)
     assert " ".join(shown) == warning.strip()
+
+
+def test_where_each_vertex_follows_most_of_the_cage_the_panel_suggests_max_influences():
+    """A new user's find: in Blender's default Cylinder every vertex of a sphere inside keeps all 64 weights, and
+    Thinning (which takes at most a tenth of a vertex's weight) leaves them, against what its tooltip said."""
+    register_addon()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_cylinder_add()
+    cage = bpy.context.active_object
+    bpy.ops.mesh.primitive_ico_sphere_add(radius=0.5)
+    sphere = bpy.context.active_object
+    assert api.bind(sphere, cage, cells=2000)["mean_influences"] > 60
+    assert "Bind with Max Influences (e.g. 24)" in " ".join(_draw(sphere, [sphere]).labels().split("\n"))
+    assert api.bind(sphere, cage, cells=2000, influences=24)["mean_influences"] < 30
+    assert "Max Influences" not in _draw(sphere, [sphere]).labels()
 
 
 def test_deleted_cage_shows_why_and_offers_bind(bound_gargoyle):
