@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 
 from . import storage
-from .core import CageError, flatten
+from .core import CageError, flatten, some_indices
 from .jobs import BindRequest, check_options, verb_for
 from .properties import DEFAULT_INFLUENCES, is_bound
 
@@ -310,6 +310,10 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     if not len(mesh_obj.data.vertices):
         raise CageError(f"'{mesh_obj.name}' has no vertices: there is nothing to bind")
     points = vertex_positions(mesh_obj.data)
+    bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
+    if len(bad):  # named here: lbc_core's message counts points, not which of the selected meshes holds them
+        raise CageError(f"'{mesh_obj.name}' has {len(bad)} {'vertex' if len(bad) == 1 else 'vertices'} with NaN or "
+                        f"infinite coordinates ({some_indices(bad)}): fix or delete them")
     cage_eval, mesh_eval = cage_obj.evaluated_get(depsgraph), mesh_obj.evaluated_get(depsgraph)
     changes = _evaluation_changes(cage_obj)
     if not cage_eval.is_evaluated and changes:

@@ -211,6 +211,17 @@ def _outside_warning(outside):
     return []
 
 
+def _cap_warning(weights, cap):
+    """A warning when Max Influences ``cap`` could not be kept everywhere: a vertex its ``cap`` largest weights cannot
+    hold in place keeps the fewest that can (lbc_core.thinning), and the panel would show more than the cap."""
+    counts = weights.getnnz(axis=1)
+    over = int(np.count_nonzero(counts > cap)) if cap else 0
+    if not over:
+        return []
+    return [f"Max Influences {cap}: {over} of {len(counts)} vertices keep more cage vertices (up to {counts.max()}, "
+            f"mean {counts.mean():.1f}), the fewest that can hold them in place"]
+
+
 def solve(request, progress=None, cancel=None, earlier=()):
     """Compute the weights (no ``bpy`` here: safe in a worker thread). Raises CageError or lbc_core.Cancelled.
 
@@ -262,7 +273,7 @@ def solve(request, progress=None, cancel=None, earlier=()):
         outside=int(np.count_nonzero(binding.outside)),
         core_fingerprint=binding.cage.fingerprint(),
         warnings=request.warnings + _outside_warning(binding.outside) + list(binding.cage.warnings)
-        + ([] if binding.converged else [_not_converged(binding.iterations)]),
+        + ([] if binding.converged else [_not_converged(binding.iterations)]) + _cap_warning(weights, thinning[1]),
         welded=welded_pairs(column_base, column_vertex[binding.cage.vertex_map]),
         seconds=time.perf_counter() - start,
         binding=binding,

@@ -62,7 +62,8 @@ def _bound_summary(bound, named=5):
 
 
 def _apply_all(operator, pairs):
-    """Write every solved binding; returns the bound objects. Reports what could not be written."""
+    """Write every solved binding; returns the bound objects. Reports what could not be written, what was bound, and
+    the bindings' warnings last: Blender's status bar shows only the last report, and "Bound" over a warning hid it."""
     bound = []
     for request, result in pairs:
         try:
@@ -72,11 +73,13 @@ def _apply_all(operator, pairs):
         except Exception as error:  # a write Blender refused: apply took everything back
             operator.report({"ERROR"}, f"'{request.mesh_name}': writing the binding failed "
                                        f"({type(error).__name__}: {error}); the scene was left as it was")
-    for mesh_obj in bound:
-        _report_result(operator, mesh_obj)
+    if bound:
+        operator.report({"INFO"}, f"{_bound_summary(bound)} in {sum(o.lbc.bind_seconds for o in bound):.1f} s")
     for request, result in pairs:
         if result.rebind:
             operator.report({"INFO"}, f"{request.mesh_name}: {result.rebind}")
+    for mesh_obj in bound:
+        _report_result(operator, mesh_obj)
     return bound
 
 
@@ -133,12 +136,7 @@ class _Binder:
         except CageError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        bound = _apply_all(self, pairs)
-        if not bound:
-            return {"CANCELLED"}
-        seconds = sum(obj.lbc.bind_seconds for obj in bound)
-        self.report({"INFO"}, f"{_bound_summary(bound)} in {seconds:.1f} s")
-        return {"FINISHED"}
+        return {"FINISHED"} if _apply_all(self, pairs) else {"CANCELLED"}
 
     def invoke(self, context, event):
         if bpy.app.background:
@@ -182,11 +180,7 @@ class _Binder:
         if worker.error is not None:
             self.report({"ERROR"}, str(worker.error))
             return {"CANCELLED"}
-        bound = _apply_all(self, worker.results)
-        if not bound:
-            return {"CANCELLED"}
-        self.report({"INFO"}, f"{_bound_summary(bound)} in {sum(o.lbc.bind_seconds for o in bound):.1f} s")
-        return {"FINISHED"}
+        return {"FINISHED"} if _apply_all(self, worker.results) else {"CANCELLED"}
 
     def cancel(self, context):
         """Blender ends the modal operator itself (its window closed, another file opened): stop the solve and let

@@ -283,6 +283,6 @@ def check_points(cage, points, plane_z=None):
     finite = np.all(np.isfinite(points), axis=1)
     if not finite.all():
         bad = np.flatnonzero(~finite)
-        raise CageError(f"{len(bad)} of the points ({some_indices(bad)}, counted from 0) have NaN or infinite "
-                        "coordinates: fix or delete them")
+        raise CageError(f"{len(bad)} of the points ({some_indices(bad)}, counted from 0) "
+                        f"{'has' if len(bad) == 1 else 'have'} NaN or infinite coordinates: fix or delete them")
     return points

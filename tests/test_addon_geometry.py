@@ -95,3 +95,16 @@ def test_snapshot_refuses_a_cage_of_edges_without_faces_and_says_so():
     mesh = mesh_object("Mesh", [[0.5, 0.5, 1.0]], [])
     with pytest.raises(CageError, match="the cage 'Wire' has no faces: a cage is a closed surface"):
         geometry.snapshot(mesh, wire, bpy.context.evaluated_depsgraph_get())
+
+
+def test_snapshot_names_the_mesh_and_its_nan_vertices_and_a_cage_vertex_at_infinity():
+    """A new user's finds: with two meshes selected, a NaN vertex was refused as "1 of the points (7) ..." with no
+    mesh named; a cage vertex at infinity (which Blender stores as 3.4e38) asked for a flat cage's outline."""
+    mesh, cage = sphere_in_box_scene()
+    mesh.data.vertices[7].co = (float("nan"), 0.0, 0.0)
+    with pytest.raises(CageError, match=r"'Sphere' has 1 vertex with NaN or infinite coordinates \(7\)"):
+        geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get())
+    mesh.data.vertices[7].co = (0.0, 0.0, 0.0)
+    cage.data.vertices[2].co = (float("inf"), 0.0, 0.0)
+    with pytest.raises(CageError, match=r"cage vertex 2 lies [0-9.]+e\+38 from the cage's middle"):
+        geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get())

@@ -357,6 +357,19 @@ def test_modal_bind_shows_progress_and_applies_when_the_worker_is_done():
     assert any(message.startswith("Bound 'Sphere' to 'Box' in ") for _, message in harness.reports)
 
 
+def test_a_bind_reports_its_warnings_last_where_the_status_bar_shows_them():
+    """A colleague's find: the warning that the stack holds the deformer off came before "Bound ...", and Blender's
+    status bar shows only the last report."""
+    mesh, cage = sphere_in_box_scene()
+    assert _ModalHarness(_requests(mesh, cage)).run() == {"FINISHED"}
+    mesh.modifiers.new("Decimate", "DECIMATE").ratio = 0.5
+    mesh.modifiers.move(len(mesh.modifiers) - 1, 0)
+    harness = _ModalHarness(_requests(mesh, cage))
+    assert harness.run() == {"FINISHED"}
+    assert harness.reports[-1][0] == {"WARNING"} and "the deformer is held off" in harness.reports[-1][1]
+    assert any(message.startswith("Bound 'Sphere' to 'Box' in ") for _, message in harness.reports[:-1])
+
+
 def test_esc_during_a_modal_bind_cancels_it_and_changes_nothing():
     mesh, cage = sphere_in_box_scene()
     before = mesh_state(mesh), sorted(bpy.data.node_groups.keys())
