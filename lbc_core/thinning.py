@@ -178,8 +178,9 @@ def _thin_rows(weights, controls, positions, floor, max_influences):
         floors[pending] /= 4
         caps[pending] += raises[pending] * (caps[pending] > 0)
         raises[pending] *= 2
-    succeeded, succeeded[pending] = np.ones(len(values), dtype=bool), False
-    search = np.flatnonzero(succeeded & (failed > 0) & (caps > failed + 1))
+    reproduces = np.ones(len(values), dtype=bool)
+    reproduces[pending] = False
+    search = np.flatnonzero(reproduces & (failed > 0) & (caps > failed + 1))
     while len(search):
         reproduced = caps[search].copy()
         caps[search] = (failed[search] + reproduced) // 2
