@@ -14,7 +14,9 @@ cancelled run (Ctrl-C) exits with 130.
 
 import argparse
 import json
+import shutil
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -121,9 +123,17 @@ def _run_bind(args):
     from .cage import make_cage
     from .io import check_output
 
-    check_output(args.output)
+    check_output(args.output, inputs=(args.cage, args.mesh))
     cage_vertices, cage_faces, points = _read_inputs(args.cage, args.mesh)
-    _warn(make_cage(cage_vertices, cage_faces).warnings, args.quiet)  # repairs are told before the long work
+    try:
+        cage = make_cage(cage_vertices, cage_faces)
+    except CageError as error:
+        if len(cage_vertices) > len(points):  # most often the two files given the wrong way round
+            raise CageError(f"{args.cage} is the cage here but has more vertices than {args.mesh} "
+                            f"({len(cage_vertices)} against {len(points)}): were they swapped? The cage comes first "
+                            f"(lbc bind CAGE MESH). As a cage, it is refused: {error}") from None
+        raise
+    _warn(cage.warnings, args.quiet)  # repairs are told before the long work
     with _Progress(f"bind ({args.scheme})", args.quiet) as progress:
         binding = _bind(args.scheme, cage_vertices, cage_faces, points, args, progress)
     binding.save(args.output)
@@ -161,19 +171,23 @@ def _run_deform(args):
     from .binding import load_binding
     from .io import FORMATS, check_output, planar, read_mesh, write_mesh, write_posed_obj
 
-    check_output(args.output, FORMATS)
+    inputs = (args.binding, args.new_cage, args.mesh)
+    check_output(args.output, FORMATS, inputs)
     if args.plot:
-        _check_figure(args.plot)
+        _check_figure(args.plot, inputs + (args.output,))
     binding = load_binding(args.binding)
     _warn(binding.cage.warnings, args.quiet)
     _check_2d_figure(binding, args.plot, "--plot")
     new_vertices, new_faces = read_mesh(args.new_cage)
     try:
-        binding.cage.check_faces(new_faces)
+        # The count first: another cage's faces would be told as corners out of range.
         binding.cage.control_points_from_input(new_vertices)
+        binding.cage.check_faces(new_faces)
     except CageError as error:
         raise CageError(f"{args.new_cage}: {error}") from None
+    plane_z = None
     if binding.cage.dim == 2:
+        plane_z = new_vertices[0, 2] if new_vertices.shape[1] == 3 else None
         new_vertices = planar(new_vertices, args.new_cage)
     faces = None
     if args.mesh:
@@ -183,9 +197,14 @@ def _run_deform(args):
                 f"{args.mesh} has {len(mesh_vertices)} vertices but the binding has {binding.weights.shape[0]} "
                 "points: give the mesh that was bound"
             )
+        if binding.cage.dim == 2 and mesh_vertices.shape[1] == 3 and len(mesh_vertices):
+            planar(mesh_vertices, args.mesh)  # refuses a mesh that left its plane
+            plane_z = mesh_vertices[0, 2]
     start = time.perf_counter()
     deformed = binding.deform(new_vertices)
     seconds = time.perf_counter() - start
+    if plane_z is not None:  # 2D data in a plane z = constant stays in it (it came out at z = 0)
+        deformed = np.column_stack([deformed, np.full(len(deformed), plane_z)])
     if args.mesh and Path(args.mesh).suffix.lower() == Path(args.output).suffix.lower() == ".obj":
         write_posed_obj(args.mesh, args.output, deformed)  # its UVs, groups and materials kept
     else:
@@ -205,7 +224,7 @@ def _run_stats(args):
     from .statistics import summary
 
     for path in ([args.plot] if args.plot else []) + ([args.coordinate[1]] if args.coordinate else []):
-        _check_figure(path)
+        _check_figure(path, (args.binding,))
     binding = load_binding(args.binding)
     _check_2d_figure(binding, args.coordinate, "--coordinate")
     if args.coordinate:
@@ -229,7 +248,8 @@ def _run_compare(args):
     from .cage import make_cage
 
     if args.plot:
-        _check_figure(args.plot)  # before binding: matplotlib missing, an unknown format, a missing folder
+        # Before binding: matplotlib missing, an unknown format, a missing folder, an input.
+        _check_figure(args.plot, (args.cage, args.mesh))
     cage_vertices, cage_faces, points = _read_inputs(args.cage, args.mesh)
     bindings, domain = {}, None
     if args.mesh:
@@ -356,14 +376,15 @@ def _plots():
     return plots
 
 
-def _check_figure(path):
-    """Refuse a figure path matplotlib cannot write (format, folder) before any work is done."""
+def _check_figure(path, inputs=()):
+    """Refuse a figure path matplotlib cannot write (format, folder), or one of the command's ``inputs``, before any
+    work is done."""
     from .io import check_output
 
     _plots()
     from matplotlib.backend_bases import FigureCanvasBase
 
-    check_output(path, sorted("." + suffix for suffix in FigureCanvasBase.get_supported_filetypes()))
+    check_output(path, sorted("." + suffix for suffix in FigureCanvasBase.get_supported_filetypes()), inputs)
 
 
 def _check_2d_figure(binding, wanted, option):
@@ -466,6 +487,9 @@ def _table(rows, columns):
     return "\n".join(text)
 
 
+BAR = 20  # characters of the progress bar: the message keeps most of an 80-column terminal
+
+
 class _Progress:
     """A progress bar on stderr for a terminal, a line per tenth of the work otherwise (logs); nothing when quiet.
 
@@ -476,6 +500,8 @@ class _Progress:
         self.label = label
         self.enabled = not quiet
         self.tty = sys.stderr.isatty()
+        # One line as wide as the terminal: a wider one wraps, and every redraw then scrolls a new line.
+        self.width = shutil.get_terminal_size().columns - 1
         self.last_draw = 0.0
         self.last_tenth = -1
         self.start = time.perf_counter()
@@ -485,12 +511,15 @@ class _Progress:
             return
         now = time.perf_counter()
         if self.tty:
+            if fraction == 0.0 and len(message) > self.width // 2:
+                # The forecast (memory and time) is told at 0: whole, on lines of its own, not cut to the bar's room.
+                sys.stderr.write("\r" + " " * self.width + "\r" + textwrap.fill(message, self.width) + "\n")
             if now - self.last_draw < 0.1 and fraction < 1.0:
                 return
-            filled = int(round(30 * min(max(fraction, 0.0), 1.0)))
-            bar = "#" * filled + "-" * (30 - filled)
-            line = f"\r{self.label} [{bar}] {fraction:4.0%} {message}"[:120]
-            sys.stderr.write(line.ljust(121))
+            filled = int(round(BAR * min(max(fraction, 0.0), 1.0)))
+            bar = "#" * filled + "-" * (BAR - filled)
+            line = f"\r{self.label} [{bar}] {fraction:4.0%} {message}"[:self.width + 1]
+            sys.stderr.write(line.ljust(self.width + 1))
             sys.stderr.flush()
             self.last_draw = now
         elif int(10 * fraction) > self.last_tenth:
@@ -505,8 +534,9 @@ class _Progress:
             return False
         if exc[0] is not None:  # the error message is the one line to read: only clear a drawn bar
             if self.tty:
-                sys.stderr.write("\r" + " " * 121 + "\r")
+                sys.stderr.write("\r" + " " * self.width + "\r")
             return False
         seconds = time.perf_counter() - self.start
-        sys.stderr.write(("\r" if self.tty else "") + f"{self.label}: done in {seconds:.1f} s".ljust(121 if self.tty else 0) + "\n")
+        done = f"{self.label}: done in {seconds:.1f} s"
+        sys.stderr.write(("\r" + done.ljust(self.width) if self.tty else done) + "\n")
         return False

@@ -191,21 +191,28 @@ def write_posed_obj(template, path, vertices):
         handle.write("".join(lines).encode("utf-8"))
 
 
-def check_output(path, formats=None):
-    """Refuse, before any long work, an output path that cannot be written.
+def check_output(path, formats=None, inputs=()):
+    """Refuse, before any long work, an output path that cannot be written, or that would overwrite an input.
 
     Parameters
     ----------
     path : str or Path
     formats : sequence of str, optional
         Accepted suffixes (".obj"), checked when given.
+    inputs : sequence of str or Path or None
+        The files the command reads (None entries are skipped).
 
     Raises
     ------
     CageError
-        Naming the path and what to do: an unknown suffix, a missing folder, a folder in the way, no permission.
+        Naming the path and what to do: an unknown suffix, a missing folder, a folder in the way, no permission, one
+        of ``inputs``.
     """
     path = Path(path)
+    for given in filter(None, inputs):
+        if path.resolve() == Path(given).resolve() or (path.exists() and os.path.samefile(path, given)):
+            raise CageError(f"{path} is also an input of this command: writing it would destroy it; give another "
+                            "output path")
     if formats is not None and path.suffix.lower() not in formats:
         raise CageError(f"{path}: unknown output format {path.suffix or '(none)'!r}; use one of {', '.join(formats)}")
     folder = path.parent

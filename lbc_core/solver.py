@@ -523,12 +523,17 @@ def check_memory(n_control_points, n_cells, dim):
     """Raise CageError, with the estimate, if a solve would need more memory than the machine has available."""
     needed = estimate_memory(n_control_points, n_cells, dim)
     available = _available_memory()
-    if available is not None and needed > 0.8 * available:
+    if available is not None and needed > MEMORY_SHARE * available:
         raise CageError(
             f"binding {n_control_points} control points on {n_cells} cells would need about {needed / 2**30:.1f} GB "
-            f"of memory and {available / 2**30:.1f} GB are available: lower the resolution (cells) or use a "
-            "cage with fewer vertices"
+            f"of memory, more than {MEMORY_SHARE:.0%} of the {available / 2**30:.1f} GB available now (the rest is "
+            "left to the system and the estimate's margin): lower the resolution (cells) or use a cage with fewer "
+            "vertices"
         )
+
+
+# The share of the memory available when a bind starts that its estimate may take.
+MEMORY_SHARE = 0.8
 
 
 def _available_memory():

@@ -364,3 +364,68 @@ def test_deform_of_an_obj_mesh_keeps_its_uvs(tmp_path, capsys):
         [line.split()[1].split("/")[:2] for line in rest_lines if line.startswith("f ")][:3]
     vertices, _ = read_mesh(posed)
     assert not np.allclose(vertices, read_mesh(clothing / "mesh.obj")[0])
+
+
+def test_a_2d_deform_stays_in_the_plane_of_its_files_and_writes_an_obj_mesh_as_obj(tmp_path, capsys):
+    """A new user's finds: a 2D binding's OBJ mesh written as OBJ crashed (2D positions where x, y, z were read), and
+    2D data in a plane z = 5 came out at z = 0, even at rest."""
+    square, mesh = tmp_path / "square.obj", tmp_path / "mesh.obj"
+    square.write_text("v 0 0 5\nv 10 0 5\nv 10 10 5\nv 0 10 5\n")
+    mesh.write_text("v 5 5 5\nv 2 3 5\nv 7 2 5\nvt 0.5 0.5\nf 1/1 2/1 3/1\n")
+    binding = tmp_path / "b.npz"
+    assert run(capsys, "bind", square, mesh, "-o", binding, "--quiet")[0] == 0
+    for output in (tmp_path / "rest.obj", tmp_path / "rest.off"):
+        assert run(capsys, "deform", binding, square, "--mesh", mesh, "-o", output, "--quiet")[0] == 0
+        np.testing.assert_allclose(read_mesh(output)[0], read_mesh(mesh)[0], atol=1e-12)
+    assert "f 1/1 2/1 3/1" in (tmp_path / "rest.obj").read_text()
+
+
+def test_an_output_that_is_one_of_the_inputs_is_refused(tmp_path, logo_mesh, logo_binding):
+    """A new user's find: -o naming the mesh turned it into the binding's zip archive."""
+    mesh = tmp_path / "mesh.obj"
+    mesh.write_bytes(logo_mesh.read_bytes())
+    code, _, err = lbc("bind", LOGO, mesh, "-o", mesh)
+    assert_one_line_error(code, err, "is also an input of this command: writing it would destroy it")
+    assert mesh.read_bytes() == logo_mesh.read_bytes()
+    posed = tmp_path / "posed.obj"
+    posed.write_bytes(LOGO.read_bytes())
+    code, _, err = lbc("deform", logo_binding, posed, "-o", tmp_path / "." / "posed.obj")
+    assert_one_line_error(code, err, "is also an input of this command")
+
+
+def test_a_posed_cage_of_another_size_is_told_by_its_vertex_count(tmp_path, capsys, gargoyle_points):
+    """A new user's find: another cage's faces were checked first and told as corners out of range."""
+    binding = tmp_path / "l16.npz"
+    assert run(capsys, "bind", GARGOYLE / "cage_L16.obj", gargoyle_points, "-o", binding, "--scheme", "mvc",
+               "--cells", 300, "--quiet")[0] == 0
+    code, _, err = run(capsys, "deform", binding, GARGOYLE / "cage_L12.obj", "-o", tmp_path / "x.obj")
+    assert code == 2 and "got positions of shape (27, 3)" in err
+
+
+def test_the_progress_bar_fits_an_80_column_terminal_and_shows_the_forecast_whole(monkeypatch, capsys, tmp_path,
+                                                                                   logo_mesh):
+    """A new user's find: a bar drawn 121 characters wide wrapped in an 80-column terminal, so every redraw scrolled,
+    and the forecast (memory and time) was cut."""
+    import io
+    import os
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    monkeypatch.setattr("shutil.get_terminal_size", lambda *args: os.terminal_size((80, 24)))
+    assert main(["bind", str(LOGO), str(logo_mesh), "-o", str(tmp_path / "b.npz"), "--cells", "400"]) == 0
+    drawn = terminal.getvalue().replace("\r", "\n").splitlines()
+    assert max(map(len, drawn)) <= 80
+    forecast = " ".join(line.strip() for line in drawn if not line.startswith("bind (lbc)"))
+    assert "solving 6 control points on about 400 cells: about" in forecast
+
+
+def test_a_mesh_given_as_the_cage_asks_whether_they_were_swapped(tmp_path):
+    """A new user's find: the gargoyle's mesh given first was refused for its 2674 vertices with advice to decimate
+    it; the hint about swapped files came only when every point fell outside."""
+    code, _, err = lbc("bind", GARGOYLE / "mesh.off", GARGOYLE / "cage_L12.obj", "-o", tmp_path / "b.npz")
+    assert_one_line_error(code, err, "has more vertices than")
+    assert "(2674 against 27): were they swapped? The cage comes first (lbc bind CAGE MESH)" in err
