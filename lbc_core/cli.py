@@ -24,6 +24,7 @@ import numpy as np
 
 from .errors import CageError, Cancelled
 from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
+from .version import __version__
 
 SCHEMES = ("lbc", "mvc", "harmonic", "bbw")
 EXIT_BAD_INPUT = 2
@@ -49,6 +50,7 @@ def main(argv=None):
 
 def _parser():
     parser = argparse.ArgumentParser(prog="lbc", description="Local Barycentric Coordinates for cage deformation.")
+    parser.add_argument("--version", action="version", version=f"lbc {__version__}")
     commands = parser.add_subparsers(required=True, metavar="COMMAND")
 
     common = argparse.ArgumentParser(add_help=False)

@@ -73,7 +73,7 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
     vertices, cells, points = _validated(vertices, cells, points)
     n_vertices, d = vertices.shape
     n_points = len(points)
-    progress(0.0, "Interpolation: indexing the cells")
+    progress(0.0, "interpolation: indexing the cells")
 
     corners = vertices[cells]  # (F, d+1, d)
     lo, hi = corners.min(axis=(0, 1)), corners.max(axis=(0, 1))
@@ -96,7 +96,7 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
     outside = np.zeros(n_points, dtype=bool)
     distance = np.zeros(n_points)
     for start in range(0, n_points, _CHUNK):
-        progress(0.05 + 0.95 * start / n_points, "Interpolation: locating points")
+        progress(0.05 + 0.95 * start / n_points, "interpolation: locating points")
         stop = min(start + _CHUNK, n_points)
         chunk = points[start:stop] - centre
         cell, signed = _locate(grid, planes, chunk, tol)
@@ -118,7 +118,7 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
             columns[start + lost, :d] = facet_search.facets[facet]
             outside[start + lost] = gap > tol
             distance[start + lost] = np.where(gap > tol, gap, 0.0)
-    progress(1.0, "Interpolation: done")
+    progress(1.0, "interpolation: done")
     return _csr(columns, values, n_vertices), outside, distance
 
 

@@ -127,6 +127,9 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
         raise CageError(f"a warm re-bind needs an LBC binding to start from, not a {previous.scheme!r} one: bind "
                         "with lbc_core.bind")
     request = _options_of(previous)
+    if cage_faces is None and previous.cage.dim == 3:
+        raise CageError("the previous binding is 3D: pass the edited cage's faces too, rebind(previous, vertices, "
+                        "faces), as given to lbc_core.bind")
     cage = make_cage(cage_vertices, cage_faces)
     points = previous.points if points is None else check_points(cage, points)
     cage, reason = _split_as_before(previous.cage, cage)

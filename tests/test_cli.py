@@ -429,3 +429,11 @@ def test_a_mesh_given_as_the_cage_asks_whether_they_were_swapped(tmp_path):
     code, _, err = lbc("bind", GARGOYLE / "mesh.off", GARGOYLE / "cage_L12.obj", "-o", tmp_path / "b.npz")
     assert_one_line_error(code, err, "has more vertices than")
     assert "(2674 against 27): were they swapped? The cage comes first (lbc bind CAGE MESH)" in err
+
+
+def test_version(capsys):
+    import lbc_core
+
+    with pytest.raises(SystemExit) as exit_status:
+        main(["--version"])
+    assert exit_status.value.code == 0 and capsys.readouterr().out == f"lbc {lbc_core.__version__}\n"

@@ -470,6 +470,13 @@ def test_a_baseline_binding_is_refused(gargoyle):
         rebind(mvc, cage, faces)
 
 
+def test_a_3d_binding_without_the_cages_faces_is_told_to_pass_them(gargoyle):
+    """A new user's find: rebind(binding, vertices) of a 3D binding said a 2D polygon must lie in a plane."""
+    cage, _, _, binding = gargoyle
+    with pytest.raises(lbc_core.CageError, match="the previous binding is 3D: pass the edited cage's faces too"):
+        rebind(binding, cage)
+
+
 def test_a_simplex_cage_binds_again_from_scratch_and_says_why():
     tetrahedron = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
     faces = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
