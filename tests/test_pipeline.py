@@ -229,7 +229,7 @@ STAGE_MESSAGES = {
     "factorisation": "factorising the solver's matrix",
     "ADMM": "ADMM iteration",
     "projection": "projecting onto the constraints",
-    "interpolation": "Interpolation",
+    "interpolation": "interpolation:",
     "reduction": "reducing the weights",
 }
 CANCEL_LATENCY = 0.5
