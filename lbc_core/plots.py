@@ -155,6 +155,9 @@ def _draw_cage(axes, vertices, facets):
 
 
 def _finish_2d(axes):
+    # A margin, so the cage's outermost vertices are not cut by the frame (filled contours pin the limits to the data).
+    axes.use_sticky_edges = False
+    axes.margins(0.03)
     axes.set_aspect("equal")
     axes.set_xticks([])
     axes.set_yticks([])
