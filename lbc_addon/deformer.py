@@ -35,6 +35,8 @@ LAYOUT_KEY = "lbc_layout"
 _DESIGN = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
 
 _COLUMN = 220  # node editor spacing, for a readable node group
+# Blender 4.3 and newer: the node group shows its reasons to stop as errors on the modifier.
+HAS_WARNING_NODE = hasattr(bpy.types, "GeometryNodeWarning")
 
 # Causes (see :func:`diagnose`) the node group cannot see, so the add-on clears its "Enabled" input.
 STOPPED_HERE = ("topology", "welded apart", "rest moved")
@@ -373,18 +375,20 @@ def _stop_condition(group, group_in, cage_geometry, cage_vertex_count, mesh_vert
         (disabled.outputs["Boolean"], "LBC: the cage's topology changed since binding (same vertex count); the mesh "
                                       "is left undeformed. Rebind in the LBC panel"),
     )
-    stop = None
+    # The raw conditions stop the deformer too, not only through the Warning nodes: Blender 4.2 loads those as
+    # undefined nodes whose outputs are false, and a group made in 4.3 or newer then never stopped there.
+    stops = []
     for row, (condition, message) in enumerate(causes):
-        condition = _warning(nodes, links, condition, message, (_COLUMN * 4, 500 + 150 * row))
-        if stop is None:
-            stop = condition
-        else:
-            either = nodes.new("FunctionNodeBooleanMath")
-            either.operation = "OR"
-            either.location = (_COLUMN * 5, 550 + 150 * row)
-            links.new(stop, _inputs(either, "Boolean")[0])
-            links.new(condition, _inputs(either, "Boolean")[1])
-            stop = either.outputs["Boolean"]
+        shown = _warning(nodes, links, condition, message, (_COLUMN * 4, 500 + 150 * row))
+        stops += [condition] if shown is condition else [condition, shown]
+    stop = stops[0]
+    for row, condition in enumerate(stops[1:]):
+        either = nodes.new("FunctionNodeBooleanMath")
+        either.operation = "OR"
+        either.location = (_COLUMN * 5, 550 + 100 * row)
+        links.new(stop, _inputs(either, "Boolean")[0])
+        links.new(condition, _inputs(either, "Boolean")[1])
+        stop = either.outputs["Boolean"]
     return stop
 
 
@@ -404,7 +408,7 @@ def _count_differs(group, geometry, expected, location):
 def _warning(nodes, links, condition, message, location):
     """``condition`` passed through a Warning node that shows ``message`` on the modifier while it is true; the
     condition itself where Blender has no Warning node (4.2)."""
-    if not hasattr(bpy.types, "GeometryNodeWarning"):
+    if not HAS_WARNING_NODE:
         return condition
     node = nodes.new("GeometryNodeWarning")
     node.warning_type = "ERROR"
@@ -437,8 +441,8 @@ def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count, shar
         modifier = mesh_obj.modifiers.new(MODIFIER_NAME, "NODES")
         mesh_obj.modifiers.move(len(mesh_obj.modifiers) - 1, 0)
     replaced, kept = modifier.node_group, inputs(modifier)
-    if replaced is not None and replaced.get(LAYOUT_KEY) == layout:
-        replaced = None  # made for the same counts by this build: kept as it is
+    if replaced is not None and replaced.get(LAYOUT_KEY) == layout and not outdated(replaced):
+        replaced = None  # made for the same counts by this build in this Blender line: kept as it is
     else:
         modifier.node_group = build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots)
         modifier.node_group[LAYOUT_KEY] = layout
@@ -451,11 +455,23 @@ def attach(mesh_obj, cage_obj, slots, cage_vertex_count, mesh_vertex_count, shar
 
 
 def _layout(slots, cage_vertex_count, mesh_vertex_count, shared_slots):
-    """What a node group is built for, as its :data:`LAYOUT_KEY` property stores it: the counts, and the add-on's
-    version and this module's digest (another build may make its groups otherwise)."""
+    """What a node group is built for, as its :data:`LAYOUT_KEY` property stores it: the counts, the add-on's version
+    and this module's digest (another build may make its groups otherwise), and whether it has Warning nodes."""
     shared = slots if shared_slots is None else min(shared_slots, slots)
     return (f"{lbc_core.__version__} {_DESIGN} slots {slots} shared {shared} cage {cage_vertex_count} "
-            f"mesh {mesh_vertex_count}")
+            f"mesh {mesh_vertex_count} warnings {int(HAS_WARNING_NODE)}")
+
+
+def _has_warning_nodes(group):
+    return any(node.bl_idname == "GeometryNodeWarning" for node in group.nodes)
+
+
+def outdated(group):
+    """Whether a node group of this add-on does not suit the running Blender: nodes it does not know (a group made in a
+    newer line, opened in 4.2), or no Warning nodes where Blender has them (made in 4.2), whose errors the modifier
+    and the panel's diagnosis rely on."""
+    return (any(node.bl_idname == "NodeUndefined" for node in group.nodes)
+            or (HAS_WARNING_NODE and not _has_warning_nodes(group)))
 
 
 def inputs(modifier):
@@ -776,7 +792,7 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     # Which modifier: one above that can change the count, as the modifier's error confirms (4.2 has no Warning node
     # to confirm it; there the modifier's type alone says so).
     above = _vertex_count_modifier_above(mesh_obj, modifier, depsgraph)
-    if above is not None and (messages or not hasattr(bpy.types, "GeometryNodeWarning")):
+    if above is not None and (messages or not _has_warning_nodes(modifier.node_group)):
         return "modifier above", (
             f"The modifier '{above.name}' above '{modifier.name}' changes the mesh's vertex count: the mesh stays "
             f"undeformed. Move '{modifier.name}' to the top of the stack"
@@ -905,9 +921,37 @@ def _on_load_or_undo(*_args):
     check_bindings(bpy.context.evaluated_depsgraph_get())
 
 
+@persistent
+def _on_load(*_args):
+    refresh_outdated_groups()
+    _on_load_or_undo()
+
+
+def refresh_outdated_groups():
+    """Rebuild, once a file is opened, the node groups of bound meshes that do not suit this Blender (:func:`outdated`:
+    a file moved between 4.2 and a newer line), for the same counts, the modifier's inputs kept. Linked data is left
+    to its own file. Returns the refreshed objects."""
+    refreshed = []
+    for obj in bpy.data.objects:
+        modifier = find_modifier(obj) if is_bound(obj) else None
+        group = None if modifier is None else modifier.node_group
+        if group is None or not outdated(group) or obj.library or group.library or obj.lbc.cage is None:
+            continue
+        _, weight = storage.read(obj.data)
+        enabled = inputs(modifier).get("Enabled", True)
+        modifier, replaced = attach(obj, obj.lbc.cage, weight.shape[1], obj.lbc.cage_vertex_count,
+                                    inputs(modifier).get("Mesh Vertices", len(obj.data.vertices)),
+                                    shared_slot_count(weight))
+        set_inputs(modifier, {"Enabled": enabled})  # the add-on's stop for a changed topology stays as it was
+        obj.lbc.node_group = modifier.node_group
+        release_group(replaced, modifier.node_group)
+        refreshed.append(obj)
+    return refreshed
+
+
 _HANDLERS = (
     (bpy.app.handlers.depsgraph_update_post, _on_depsgraph_update),
-    (bpy.app.handlers.load_post, _on_load_or_undo),
+    (bpy.app.handlers.load_post, _on_load),
     (bpy.app.handlers.undo_post, _on_load_or_undo),
     (bpy.app.handlers.redo_post, _on_load_or_undo),
 )

@@ -19,6 +19,7 @@ from blender_scenes import (
     evaluated_positions,
     gargoyle_alone,
     positions,
+    sphere_in_box_scene,
     undo_context,
 )
 
@@ -682,3 +683,40 @@ def test_the_displacement_computed_from_the_slots_is_what_the_modifier_adds(boun
     computed = deformer.displacement(mesh, bpy.context.evaluated_depsgraph_get())
     assert np.abs(moved).max() > 0.01 * diagonal(mesh)
     assert np.abs(computed - moved).max() < 1e-5 * diagonal(mesh)
+
+
+def test_a_group_whose_warning_nodes_read_false_still_stops(bound_gargoyle):
+    """A colleague's find: a file bound in 4.5 and opened in 4.2 loads the Warning nodes as undefined nodes whose
+    outputs read false, and the group, which stopped only through them, deformed the mesh with a wrong cage while
+    the panel said it stayed undeformed. Here their outputs are cut, which reads false the same way."""
+    mesh, cage = bound_gargoyle
+    group = mesh.modifiers[deformer.MODIFIER_NAME].node_group
+    for node in [node for node in group.nodes if node.bl_idname == "GeometryNodeWarning"]:
+        group.nodes.remove(node)
+    _delete_vertex(cage, 3)
+    assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
+
+
+def test_a_group_made_without_warning_nodes_is_rebuilt_when_the_file_is_opened(tmp_path, monkeypatch):
+    """A colleague's find: a file bound in 4.2 (no Warning node) kept its group in every newer Blender, even after a
+    Rebind, so the modifier showed no errors and the panel said "Following" below a Subdivision that stopped it."""
+    if not deformer.HAS_WARNING_NODE:
+        pytest.skip("Blender 4.2 makes every group without Warning nodes")
+    mesh, cage = sphere_in_box_scene()
+    with monkeypatch.context() as patched:
+        patched.setattr(deformer, "HAS_WARNING_NODE", False)
+        assert api.bind(mesh, cage, cells=CELLS)
+    assert deformer.outdated(mesh.modifiers[deformer.MODIFIER_NAME].node_group)
+    path = tmp_path / "bound_without_warnings.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    mesh, cage = bpy.data.objects["Sphere"], bpy.data.objects["Box"]
+    group = mesh.modifiers[deformer.MODIFIER_NAME].node_group
+    assert not deformer.outdated(group) and group[deformer.LAYOUT_KEY].endswith("warnings 1")
+    assert [g for g in bpy.data.node_groups if deformer.LAYOUT_KEY in g] == [group]  # the old one released
+    cage.location.x += 0.2
+    assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() > 0.1  # follows
+    subdivision = mesh.modifiers.new("Subdivision", "SUBSURF")
+    mesh.modifiers.move(len(mesh.modifiers) - 1, 0)
+    bpy.context.evaluated_depsgraph_get()
+    assert mesh.lbc.status.startswith("The modifier 'Subdivision' above") and subdivision.name == "Subdivision"
