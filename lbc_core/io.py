@@ -210,7 +210,8 @@ def check_output(path, formats=None, inputs=()):
     """
     path = Path(path)
     for given in filter(None, inputs):
-        if path.resolve() == Path(given).resolve() or (path.exists() and os.path.samefile(path, given)):
+        # The same file by any name (a link too); a missing input is the reader's to report.
+        if path.exists() and Path(given).exists() and os.path.samefile(path, given):
             raise CageError(f"{path} is also an input of this command: writing it would destroy it; give another "
                             "output path")
     if formats is not None and path.suffix.lower() not in formats:

@@ -392,6 +392,9 @@ def test_an_output_that_is_one_of_the_inputs_is_refused(tmp_path, logo_mesh, log
     posed.write_bytes(LOGO.read_bytes())
     code, _, err = lbc("deform", logo_binding, posed, "-o", tmp_path / "." / "posed.obj")
     assert_one_line_error(code, err, "is also an input of this command")
+    # A missing input beside an existing output is the reader's to report (the check once raised a traceback).
+    code, _, err = lbc("bind", LOGO, tmp_path / "missing.obj", "-o", mesh)
+    assert code == 2 and "missing.obj" in err and "Traceback" not in err
 
 
 def test_the_progress_bar_fits_an_80_column_terminal_and_shows_the_forecast_whole(monkeypatch, capsys, tmp_path,
