@@ -938,11 +938,11 @@ def refresh_outdated_groups():
         if group is None or not outdated(group) or obj.library or group.library or obj.lbc.cage is None:
             continue
         _, weight = storage.read(obj.data)
-        enabled = inputs(modifier).get("Enabled", True)
+        kept = inputs(modifier)
         modifier, replaced = attach(obj, obj.lbc.cage, weight.shape[1], obj.lbc.cage_vertex_count,
-                                    inputs(modifier).get("Mesh Vertices", len(obj.data.vertices)),
-                                    shared_slot_count(weight))
-        set_inputs(modifier, {"Enabled": enabled})  # the add-on's stop for a changed topology stays as it was
+                                    kept.get("Mesh Vertices", len(obj.data.vertices)), shared_slot_count(weight))
+        # The add-on's stop for a changed topology stays as it was (attach enables the new group).
+        set_inputs(modifier, {"Enabled": kept.get("Enabled", True)})
         obj.lbc.node_group = modifier.node_group
         release_group(replaced, modifier.node_group)
         refreshed.append(obj)

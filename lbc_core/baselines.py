@@ -78,8 +78,7 @@ def mean_value_coordinates(cage, points, progress=None, cancel=None):
             weights[start:stop] = _mvc_3d(vertices, facets, scatter, points[start:stop], tolerance)
     progress(1.0, "mean value coordinates: done")
     if cage.centres:
-        n = cage.n_control_points
-        weights = weights[:, :n] + (cage.centre_values.T @ weights[:, n:].T).T
+        weights = weights @ cage.surface_values  # a centre's column to its n-gon's control points
     return weights
 
 

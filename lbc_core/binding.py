@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .cage import POKE_SIDES, Cage, make_cage
+from .cage import POKE_SIDES, Cage, make_cage, some_indices
 from .errors import CageError
 from .io import writing
 from .meshing import DomainMesh
@@ -205,11 +205,10 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
         damaged("its cage does not match its fingerprint")
     ngons = np.flatnonzero(np.bincount(cage.facet_face) >= POKE_SIDES - 2)  # faces of POKE_SIDES sides or more
     if arrays["before_pokes"] and len(ngons):
-        listed = ", ".join(map(str, ngons[:5])) + (", …" if len(ngons) > 5 else "")
         cage.warnings.append(
-            f"{path} was bound by an earlier version, which split n-gon faces (face {listed}) into fans of triangles "
-            "from one of their vertices: that vertex moves most of the face while the others barely do; bind again "
-            "for every vertex to move its share")
+            f"{path} was bound by an earlier version, which split n-gon faces (face {some_indices(ngons)}) into "
+            "fans of triangles from one of their vertices: that vertex moves most of the face while the others barely "
+            "do; bind again for every vertex to move its share")
     if cage_vertices is not None:
         given = make_cage(cage_vertices, cage_faces)
         # The faces, not their split: a file of a version that split n-gons otherwise serves the same cage.

@@ -40,7 +40,7 @@ def boundary_weights(domain, cage):
     rows = np.repeat(np.arange(n_boundary), corners.shape[1])
     np.add.at(weights, (rows, corners.ravel()), domain.boundary_bary.ravel())
     if cage.centres:
-        weights = weights[:, :n] + (cage.centre_values.T @ weights[:, n:].T).T
+        weights = weights @ cage.surface_values  # a centre's column to its n-gon's control points
         _outlines_mean_values(weights, domain, cage, corners)
     # Control points are exact: snap their rows to unit vectors (bary may carry round-off there).
     position = {v: k for k, v in enumerate(domain.boundary_vertices)}

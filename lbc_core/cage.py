@@ -268,11 +268,8 @@ class Cage:
         if any(face.size and (face.min() < 0 or face.max() >= len(self.vertex_map)) for face in faces):
             raise CageError(f"this cage has faces with corners that are not among its {len(self.vertex_map)} "
                             "vertices: pose the cage that was bound")
-        corners = [set(self.vertex_map[faces[f]].tolist()) if f < len(faces) else set()
-                   for f in range(int(self.facet_face.max()) + 1)]
-        n = self.n_control_points
-        for facet, face in zip(self.facets.tolist(), self.facet_face.tolist()):
-            if not {corner for corner in facet if corner < n} <= corners[face]:
+        for face, bound in self.face_corners():
+            if face >= len(faces) or not bound <= set(self.vertex_map[faces[face]].tolist()):
                 raise CageError(
                     f"this cage's faces differ from the bound cage's (face {face} and on): same vertex count, other "
                     "faces; pose the cage that was bound, or bind this one again"
