@@ -72,10 +72,11 @@ def wrapped_label(layout, text, icon="NONE"):
 def edited_since_bind(settings):
     """Whether the cage's own vertex positions changed since the bind (``settings``: a bound mesh's ``Object.lbc``):
     an edit at rest, which the mesh follows as a pose until a Rebind makes it the rest (posing with bones, shape keys
-    or the object's transform leaves them as they were)."""
+    or the object's transform leaves them as they were). False while the deformer is stopped: an edit that stops it
+    (a loop cut) is not followed, and the status already says why."""
     cage = settings.cage
-    if cage is None or cage.type != "MESH" or not settings.cage_shape:  # bound before the shape was recorded
-        return False
+    if settings.state != "FOLLOWING" or cage is None or cage.type != "MESH" or not settings.cage_shape:
+        return False  # (no cage_shape: bound before the shape was recorded)
     shape = geometry.shape_fingerprint(cage.data)
     return bool(shape) and shape != settings.cage_shape
 

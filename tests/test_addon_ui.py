@@ -4,7 +4,8 @@ Panels need a UILayout, which only exists while Blender draws; the draw code is 
 records the labels and operators it is given.
 """
 
-import bpy
+import bpy  # noqa: I001  (first: importing bpy makes bmesh importable)
+import bmesh
 
 from lbc_addon import api, ui
 from blender_scenes import (
@@ -155,6 +156,23 @@ def test_a_cage_edited_at_rest_says_a_rebind_makes_the_edit_the_rest(bound_gargo
     mesh.lbc.cage_shape = ""  # bound by a version that did not record the shape: no hint either way
     cage.data.vertices[5].co.z -= 0.012
     assert hint not in _draw(mesh, [mesh]).labels()
+
+
+def test_a_loop_cut_on_the_cage_says_only_that_the_mesh_stays_undeformed(bound_gargoyle):
+    """A user's find: after a loop cut on the cage, its panel said both that the mesh stays undeformed and that the
+    meshes follow the edit."""
+    mesh, cage = bound_gargoyle
+    edit = bmesh.new()
+    edit.from_mesh(cage.data)
+    bmesh.ops.subdivide_edges(edit, edges=edit.edges[:1], cuts=1)
+    edit.to_mesh(cage.data)
+    edit.free()
+    cage.data.update()
+    bpy.context.evaluated_depsgraph_get()  # the depsgraph handler stops the deformer
+    text = _draw(cage, [cage]).labels()
+    assert "Gargoyle: The cage 'Cage' has 68 vertices, it was bound with 67: the mesh stays undeformed" in text
+    assert "Edited since the bind" not in text and "Rebind All makes it their rest shape" not in text
+    assert "The cage was edited since the bind," not in _draw(mesh, [mesh]).labels()
 
 
 def test_a_mesh_carrying_weights_of_no_binding_offers_to_remove_them():
