@@ -9,6 +9,7 @@ Example::
     bpy.ops.wm.save_mainfile()
 """
 
+import logging
 import warnings
 from dataclasses import replace
 
@@ -17,6 +18,11 @@ import bpy
 from . import deformer, geometry, jobs, writing
 from .core import CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
 from .properties import DEFAULT_INFLUENCES, is_bound
+
+# A bind's warnings go to this logger for pipelines; the NullHandler keeps Python's last-resort handler from printing
+# them a second time in background mode, where they are printed anyway.
+logger = logging.getLogger(__name__)
+logger.addHandler(logging.NullHandler())
 
 
 def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, thinning=0.0,
@@ -34,7 +40,9 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
         ``dimension``, ``control_points``, ``slots`` (K), ``mean_influences``, ``outside``, ``warnings`` (the bind's,
         and why the deformer is held off if the modifier stack holds it off), ``seconds``, and ``rebind``: for a mesh
         bound before in this session, how it went (from its previous binding, or from scratch and why); "" for a first
-        bind (unless ``from_scratch``). With no ``progress`` in background mode, progress lines are printed.
+        bind (unless ``from_scratch``). With no ``progress`` in background mode, progress lines are printed, and the
+        warnings after them ("LBC bind: warning: Body: ..."). The warnings are also logged, at level WARNING, to the
+        ``logging`` logger named after this module (e.g. "bl_ext.user_default.lbc.api"), for pipelines.
 
     Raises
     ------
@@ -55,7 +63,8 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
 def _bind_request(request, progress, cancel, solved=None):
     """Solve and write one :class:`jobs.BindRequest`; returns :func:`bind`'s summary. ``solved``: a list of the
     (request, result) pairs of the same call, which the solve may start from (:func:`jobs.solve`) and this one joins."""
-    if progress is None and bpy.app.background:
+    printing = progress is None and bpy.app.background
+    if printing:
         progress = jobs.printed_progress()
     result = jobs.solve(request, progress, cancel, earlier=() if solved is None else solved)
     if solved is not None:
@@ -63,16 +72,27 @@ def _bind_request(request, progress, cancel, solved=None):
     bound = writing.apply(request, result)
     settings = bound.lbc
     held_off = deformer.held_off_warning(bound)
+    found = list(result.warnings) + ([held_off] if held_off else [])
+    _tell(bound.name, found, printing)
     return {
         "dimension": settings.dimension,
         "control_points": settings.control_points,
         "slots": settings.slots,
         "mean_influences": settings.mean_influences,
         "outside": settings.outside,
-        "warnings": list(result.warnings) + ([held_off] if held_off else []),
+        "warnings": found,
         "seconds": settings.bind_seconds,
         "rebind": result.rebind,
     }
+
+
+def _tell(mesh_name, found, printing):
+    """Log a bind's warnings (a background script returns its summary, and nobody may read it), and print them when
+    ``printing``, among the progress lines."""
+    for warning in found:
+        logger.warning("%s: %s", mesh_name, warning)
+        if printing:
+            print(f"LBC bind: warning: {mesh_name}: {warning}", flush=True)
 
 
 def unbind(mesh_obj):
@@ -105,7 +125,7 @@ def rebind_all(cage_obj, *, from_scratch=False, progress=None, cancel=None):
 
     A mesh that cannot be bound before any work (e.g. its data shared by a linked duplicate, Alt+D) or whose LBC
     modifier was removed or applied is left as it was with a ``UserWarning`` saying why, as the Rebind All operator
-    does. Returns the summaries of :func:`bind`, one
+    does (and logs it, as :func:`bind` logs its warnings). Returns the summaries of :func:`bind`, one
     per mesh bound; raises as :func:`bind` does when every mesh is refused or a solve fails, the meshes bound before
     the error keeping their new binding.
     """
@@ -114,6 +134,7 @@ def rebind_all(cage_obj, *, from_scratch=False, progress=None, cancel=None):
     requests, refused = geometry.snapshots(targets, bpy.context.evaluated_depsgraph_get(), skip_refused=True,
                                            left_out=left_out)
     for message in refused:
+        logger.warning("%s", message)
         warnings.warn(message, stacklevel=2)
     solved = []
     return [_bind_request(replace(request, from_scratch=from_scratch), progress, cancel, solved)

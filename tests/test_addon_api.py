@@ -1,5 +1,7 @@
 """The script API, and a saved .blend reopened: the same deformation without any recompute."""
 
+import logging
+
 import bpy  # noqa: I001  (first: importing bpy makes bmesh and mathutils importable)
 import bmesh
 import numpy as np
@@ -165,7 +167,7 @@ def test_messages_about_a_cage_name_its_modifiers_when_they_make_it_another_cage
         "The cage 'Box' has 98 vertices (its modifier 'Subdivision' makes them), it was bound with 26")
 
 
-def test_api_rebind_all_leaves_linked_duplicates_as_they_were_with_a_warning():
+def test_api_rebind_all_leaves_linked_duplicates_as_they_were_with_a_warning(caplog):
     mesh, cage = sphere_in_box_scene()
     api.bind(mesh, cage, cells=1000)
     linked = mesh.copy()  # Alt+D: the same mesh data
@@ -173,12 +175,14 @@ def test_api_rebind_all_leaves_linked_duplicates_as_they_were_with_a_warning():
     single = mesh.copy()
     single.data = mesh.data.copy()  # Shift+D: its own data, the binding with it
     bpy.context.scene.collection.objects.link(single)
-    with pytest.warns(UserWarning) as caught:
+    with pytest.warns(UserWarning) as caught, caplog.at_level(logging.WARNING, logger=api.__name__):
         summaries = api.rebind_all(cage)
-    assert sorted(str(warning.message) for warning in caught) == [
+    expected = [
         f"'{name}' left as it was: the mesh data of '{name}' is shared by 2 objects and the weights are stored in "
         "it: make it single user first (Object > Relations > Make Single User)"
         for name in sorted((mesh.name, linked.name))]
+    assert sorted(str(warning.message) for warning in caught) == expected
+    assert sorted(record.getMessage() for record in caplog.records) == expected  # logged for pipelines too
     assert len(summaries) == 1 and summaries[0]["control_points"] == 8
     assert is_bound(mesh) and is_bound(linked) and is_bound(single)
 
@@ -335,6 +339,28 @@ def test_api_prints_progress_in_background_and_says_how_a_rebind_went(capsys):
     assert "LBC bind: 100% bound" in capsys.readouterr().out and first["rebind"] == ""
     again = api.bind(mesh, cage, cells=1000)
     assert again["rebind"].startswith("bound again from the previous binding")
+
+
+def test_api_prints_and_logs_the_warnings_of_bind_and_rebind_all(capsys, caplog):
+    """A pipeline's find: api.bind and api.rebind_all returned their warnings but neither printed nor logged them, so
+    a background script that did not read the summaries lost them."""
+    mesh, cage = sphere_in_box_scene()
+    mesh.data.vertices[0].co.z = 3.0  # pulled out through the top of the box
+    cage.shape_key_add(name="Basis")
+    key = cage.shape_key_add(name="Pose")
+    key.data[0].co.x -= 0.1
+    key.value = 1.0
+    bpy.context.view_layer.update()
+    with caplog.at_level(logging.WARNING, logger=api.__name__):
+        api.bind(mesh, cage, cells=1000)
+        api.rebind_all(cage)
+    logged = [record.getMessage() for record in caplog.records if record.name == api.__name__]
+    out = capsys.readouterr().out
+    for warning in ("Sphere: 1 vertex lies outside the cage; it follows the closest point inside it",
+                    "Sphere: the cage is bound with its shape key 'Pose' at 1: that shape is the rest"):
+        assert sum(message.startswith(warning) for message in logged) == 2, logged
+        assert out.count(f"LBC bind: warning: {warning}") == 2, out
+    assert out.index("LBC bind: 100% bound") < out.index("LBC bind: warning: ")  # after the progress lines
 
 
 def test_a_bind_from_scratch_of_a_mesh_bound_before_says_why(tmp_path):
