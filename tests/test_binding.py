@@ -1,6 +1,9 @@
 """The Binding record and its files: save and load give identical deformations, the path written is the path
 given, a damaged, edited or foreign file is refused as a whole (fuzzed), a cage of another size is refused."""
 
+import re
+import tracemalloc
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -228,6 +231,61 @@ def test_files_that_are_not_bindings_are_refused(tmp_path, content, message):
     with pytest.raises(lbc_core.CageError) as error:
         lbc_core.load_binding(path)
     assert message in str(error.value)
+
+
+def _declaring(source, target, declared):
+    """Copy a binding file, the members named in ``declared`` replaced by a header declaring {key: (shape, dtype)}
+    followed by 1 MB of deflated zeros: cheap to write, gigabytes to whoever reads what the header declares."""
+    with zipfile.ZipFile(source) as original, zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as copy:
+        for name in original.namelist():
+            key = name.removesuffix(".npy")
+            if key not in declared:
+                copy.writestr(name, original.read(name))
+                continue
+            shape, dtype = declared[key]
+            with copy.open(name, "w", force_zip64=True) as member:
+                header = {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)), "fortran_order": False,
+                          "shape": shape}
+                np.lib.format.write_array_header_1_0(member, header)
+                member.write(bytes(2**20))
+    return target
+
+
+def _refusal_and_peak_memory(path):
+    """The CageError load_binding raises on ``path``, and the most memory it held meanwhile (bytes)."""
+    tracemalloc.start()
+    try:
+        with pytest.raises(CageError, match="is damaged or was edited") as error:
+            lbc_core.load_binding(path)
+        return str(error.value), tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_a_file_declaring_far_more_weights_than_it_has_indices_is_refused_unread(square_file, tmp_path):
+    path = _declaring(square_file[0], tmp_path / "bomb.npz", {"weights_data": ((200_000_000,), np.float64)})
+    message, peak = _refusal_and_peak_memory(path)
+    assert "its weights declare 200000000 numbers and 18 indices, where 5 points of 4 control points hold at most 20" \
+        in message
+    assert peak < 20 * 2**20  # reading the declared weights would allocate 1.6 GB
+
+
+def test_a_file_declaring_huge_arrays_of_consistent_shapes_is_refused_unread(square_file, tmp_path):
+    m = 20_000_000  # points, each with one weight: 629 MB of arrays in a file of 16 KB
+    declared = {"points": ((m, 2), np.float64), "outside": ((m,), np.bool_), "weights_indptr": ((m + 1,), np.int32),
+                "weights_data": ((m,), np.float64), "weights_indices": ((m,), np.int32)}
+    message, peak = _refusal_and_peak_memory(_declaring(square_file[0], tmp_path / "bomb.npz", declared))
+    assert re.search(r"its arrays would take 629 MB, [\d,]+ times the file's \d+ KB", message)
+    assert peak < 20 * 2**20
+
+
+def test_a_member_that_is_not_an_array_is_refused_unread(square_file, tmp_path):
+    path = tmp_path / "raw.npz"
+    with zipfile.ZipFile(square_file[0]) as original, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as copy:
+        for name in original.namelist():
+            copy.writestr(name, bytes(2**20) if name == "points.npy" else original.read(name))
+    message, _ = _refusal_and_peak_memory(path)
+    assert "it cannot be read (ValueError" in message
 
 
 def _loads_to_a_sound_binding_or_is_refused(path):
