@@ -33,6 +33,10 @@ from .core import (DEFAULT_FLOOR, WARM, CageError, lbc_core, reframed, solved_ag
                    thin_weights)
 
 
+# Beyond this share of a mesh's vertices outside its cage, the cage is too small rather than grazed by a few stray
+# vertices (a tail's tip): the bind warns with the share and the fix, and the panel's state shows it.
+OUTSIDE_SHARE_WARNED = 0.05
+
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
 KEPT_BINDINGS = 4
 # The bind options that must match the previous binding's for a warm start (Thinning and Max Influences are applied
@@ -204,11 +208,22 @@ def _outside_warning(outside):
     """A warning about the mesh's points outside the cage (``outside``: (m,) bool; lbc_core refuses them all), since
     they follow the closest points inside rather than the cage itself."""
     count = int(np.count_nonzero(outside))
-    if count:
-        if count == 1:
-            return ["1 vertex lies outside the cage; it follows the closest point inside it"]
-        return [f"{count} vertices lie outside the cage; they follow the closest points inside it"]
-    return []
+    too_small = too_small_warning(count, len(outside))
+    if too_small:
+        return [too_small]
+    if count == 1:
+        return ["1 vertex lies outside the cage; it follows the closest point inside it"]
+    return [f"{count} vertices lie outside the cage; they follow the closest points inside it"] if count else []
+
+
+def too_small_warning(count, total):
+    """What to say when ``count`` of a mesh's ``total`` vertices lie outside its cage, more than
+    :data:`OUTSIDE_SHARE_WARNED` of them: the share and the fix; "" for fewer."""
+    if not total or count <= OUTSIDE_SHARE_WARNED * total:
+        return ""
+    return (f"{count} of {total} vertices ({count / total:.0%}) lie outside the cage, which is too small for the mesh: "
+            "they follow the closest points inside it, not the cage. Scale the cage up so it encloses the mesh, then "
+            "Rebind")
 
 
 def _cap_warning(weights, cap):

@@ -4,7 +4,7 @@ import textwrap
 
 import bpy
 
-from . import deformer, geometry, storage
+from . import deformer, geometry, jobs, storage
 from .properties import bound_to, is_bound
 
 # Above this mean the panel suggests Max Influences: where each vertex feels most of a small cage's vertices (a 50k
@@ -25,8 +25,12 @@ def draw_binding(layout, obj):
     """State, figures and actions of a bound mesh."""
     settings = obj.lbc
     ok = settings.state == "FOLLOWING"
+    total = settings.mesh_vertex_count or len(obj.data.vertices)  # 0: bound before the count was recorded
+    too_small = jobs.too_small_warning(settings.outside, total) if ok else ""
     box = layout.box()
-    box.label(text=settings.status or "Bound", icon="CHECKMARK" if ok else "ERROR")
+    box.label(text=settings.status or "Bound", icon="CHECKMARK" if ok and not too_small else "ERROR")
+    if too_small:  # following, but much of the mesh follows the closest points inside the cage instead
+        wrapped_label(box, too_small)
     if settings.cage is None:  # deleted: bind to another cage (Bind's poll says what to select)
         box.operator("object.lbc_bind", icon="MOD_MESHDEFORM")
     elif not ok:
@@ -50,13 +54,21 @@ def draw_binding(layout, obj):
     column.label(text=f"Bind time: {settings.bind_seconds:.1f} s")
     if settings.bind_report:  # warm (what was solved again) or from scratch (why)
         column.label(text=settings.bind_report[:1].upper() + settings.bind_report[1:])
-    if settings.warnings:
-        wrapped_label(layout, settings.warnings, icon="INFO")
+    others = _without(settings.warnings, too_small)  # said in the state's box already
+    if others:
+        wrapped_label(layout, others, icon="INFO")
     row = layout.row(align=True)
     row.operator("object.lbc_rebind", icon="FILE_REFRESH")
     row.operator("object.lbc_unbind", icon="X")
     layout.operator("object.lbc_save_shape_key", icon="SHAPEKEY_DATA")
     draw_influence(layout, obj)
+
+
+def _without(warnings, warning):
+    """The bind's warnings, joined by "; " (``Object.lbc.warnings``), without ``warning`` ("" leaves them whole)."""
+    if not warning:
+        return warnings
+    return "; ".join(part for part in warnings.replace(warning, "").split("; ") if part.strip())
 
 
 def wrapped_label(layout, text, icon="NONE"):

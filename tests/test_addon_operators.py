@@ -370,6 +370,20 @@ def test_a_bind_reports_its_warnings_last_where_the_status_bar_shows_them():
     assert any(message.startswith("Bound 'Sphere' to 'Box' in ") for _, message in harness.reports[:-1])
 
 
+def test_a_cage_far_too_small_is_reported_as_a_warning_with_the_share_outside_and_the_fix():
+    """A user's find: with most of the mesh outside a cage scaled too small, the bind said only how many vertices
+    follow the closest points inside it, never to enlarge the cage."""
+    mesh, cage = sphere_in_box_scene()
+    mesh.data.transform(Matrix.Scale(1.5, 4))  # the sphere now pokes out of the box on every side
+    harness = _ModalHarness(_requests(mesh, cage))
+    assert harness.run() == {"FINISHED"}
+    level, message = harness.reports[-1]
+    assert level == {"WARNING"}, harness.reports
+    assert message == (f"Sphere: {mesh.lbc.outside} of 42 vertices ({mesh.lbc.outside / 42:.0%}) lie outside the cage, "
+                       "which is too small for the mesh: they follow the closest points inside it, not the cage. Scale "
+                       "the cage up so it encloses the mesh, then Rebind")
+
+
 def test_esc_during_a_modal_bind_cancels_it_and_changes_nothing():
     mesh, cage = sphere_in_box_scene()
     before = mesh_state(mesh), sorted(bpy.data.node_groups.keys())

@@ -4,8 +4,9 @@ Panels need a UILayout, which only exists while Blender draws; the draw code is 
 records the labels and operators it is given.
 """
 
-import bpy  # noqa: I001  (first: importing bpy makes bmesh importable)
+import bpy  # noqa: I001  (first: importing bpy makes bmesh and mathutils importable)
 import bmesh
+from mathutils import Matrix
 
 from lbc_addon import api, ui
 from blender_scenes import (
@@ -18,12 +19,14 @@ from blender_scenes import (
 class Layout:
     """Records what a panel draws: label texts and operator ids, through nested boxes, rows and columns."""
 
-    def __init__(self, record=None):
+    def __init__(self, record=None, icons=None):
         self.record = record if record is not None else []
+        self.icons = icons if icons is not None else {}  # label text -> its icon
         self.use_property_split = False
 
     def label(self, text="", icon="NONE"):
         self.record.append(("label", text))
+        self.icons[text] = icon
 
     def operator(self, idname, icon="NONE", text=None):
         self.record.append(("operator", idname))
@@ -36,13 +39,13 @@ class Layout:
         self.record.append(("prop", kwargs.get("text", name)))
 
     def box(self):
-        return Layout(self.record)
+        return Layout(self.record, self.icons)
 
     def row(self, align=False):
-        return Layout(self.record)
+        return Layout(self.record, self.icons)
 
     def column(self, align=False):
-        return Layout(self.record)
+        return Layout(self.record, self.icons)
 
     def labels(self):
         return "\n".join(text for kind, text in self.record if kind == "label")
@@ -106,6 +109,28 @@ def test_where_each_vertex_follows_most_of_the_cage_the_panel_suggests_max_influ
     assert any(warning.startswith("Max Influences 24: ") and "the fewest that can hold them in place" in warning
                for warning in capped["warnings"])
     assert "Bind with Max Influences" not in " ".join(_draw(sphere, [sphere]).labels().split("\n"))
+
+
+def test_a_cage_far_too_small_warns_in_the_state_with_the_share_outside_and_the_fix():
+    """A user's find: with most of the mesh outside a cage scaled too small, the panel showed a green check and
+    "Following", and the share outside and the fix (enlarge the cage) nowhere."""
+    mesh, cage = sphere_in_box_scene()
+    mesh.data.vertices[0].co.z = 3.0  # one stray vertex: a note, the state stays a check
+    api.bind(mesh, cage, cells=1000)
+    layout = _draw(mesh, [mesh])
+    assert layout.icons["Following 'Box'"] == "CHECKMARK" and "Scale the cage up" not in layout.labels()
+    mesh.data.transform(Matrix.Scale(1.5, 4))  # the sphere now pokes out of the box on every side
+    summary = api.bind(mesh, cage, cells=1000)
+    outside = summary["outside"]
+    assert outside > 0.05 * 42
+    warning = (f"{outside} of 42 vertices ({outside / 42:.0%}) lie outside the cage, which is too small for the mesh: "
+               "they follow the closest points inside it, not the cage. Scale the cage up so it encloses the mesh, "
+               "then Rebind")
+    assert warning in summary["warnings"]
+    layout = _draw(mesh, [mesh])
+    assert layout.icons["Following 'Box'"] == "ERROR"
+    text = " ".join(layout.labels().split("\n"))
+    assert warning in text and text.count("lie outside the cage") == 1  # in the state's box, not again below
 
 
 def test_deleted_cage_shows_why_and_offers_bind(bound_gargoyle):
