@@ -25,6 +25,7 @@ DEFAULT_CELLS_3D = _options.DEFAULT_CELLS[3]
 DEFAULT_TOLERANCE = _solver.DEFAULT_TOLERANCE
 LOOSE_TOLERANCE, LOOSE_TOLERANCE_FROM = _solver.LOOSE_TOLERANCE, _solver.LOOSE_TOLERANCE_FROM
 POSED_APART = _cage.POSED_APART
+MAX_CONTROL_POINTS = _cage.MAX_CONTROL_POINTS
 some_indices = _cage.some_indices
 flatten = _planar.flatten
 reframed = _planar.reframed

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 
 from . import storage
-from .core import CageError, flatten, some_indices
+from .core import MAX_CONTROL_POINTS, CageError, flatten, some_indices
 from .jobs import BindRequest, check_options, verb_for
 from .properties import DEFAULT_INFLUENCES, is_bound
 
@@ -265,6 +265,19 @@ def not_a_mesh(obj, need, remedy):
     kind = CONVERTIBLE_TO_MESH.get(obj.type, obj.type.title())
     convert = "convert it (Object > Convert > Mesh), or " if obj.type in CONVERTIBLE_TO_MESH else ""
     return f"'{obj.name}' ({kind}) is not a mesh, and {need}: {convert}{remedy}"
+
+
+def swapped_selection(cage_obj, mesh_objs):
+    """What to say when the would-be cage is most likely a mesh to bind, made active by clicking it last, or None: it
+    has more vertices than any cage can have control points and than every selected mesh. Vertex counts alone, so the
+    panel and Bind's poll can say it before any long work (lbc_core's own refusal comes after the snapshot)."""
+    if cage_obj.type != "MESH":
+        return None
+    count = len(cage_obj.data.vertices)
+    if count <= MAX_CONTROL_POINTS or any(count <= len(obj.data.vertices) for obj in mesh_objs):
+        return None
+    return (f"'{cage_obj.name}' is active and would be the cage; make the cage active (click it last) and select the "
+            "meshes to bind")
 
 
 def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,

@@ -221,12 +221,13 @@ def _bind_poll_message(context):
         return "Select the mesh(es) to bind, then the cage mesh last so it is active"
     if cage.type != "MESH":
         return f"The active object {geometry.not_a_mesh(cage, 'the cage must be one', 'make the cage mesh active')}"
-    if not any(obj.type == "MESH" and obj != cage for obj in context.selected_objects):
+    meshes = [obj for obj in context.selected_objects if obj.type == "MESH" and obj != cage]
+    if not meshes:
         others = [obj for obj in context.selected_objects if obj != cage]
         if others:  # e.g. a Text to deform: say why it does not count
             return geometry.not_a_mesh(others[0], "only meshes can be bound", "select a mesh to bind")
         return "Select the mesh(es) to bind as well as the cage (active)"
-    return None
+    return geometry.swapped_selection(cage, meshes)
 
 
 class OBJECT_OT_lbc_bind(_Binder, BindOptionProperties, bpy.types.Operator):

@@ -147,8 +147,12 @@ def draw(layout, context):
             layout.label(text="Select a cage vertex, then:")
             draw_influence(layout, meshes[0])
     to_bind = [o for o in context.selected_objects if o.type == "MESH" and o != obj]
-    layout.label(text=f"Bind {len(to_bind)} selected mesh(es) to '{obj.name}':" if to_bind
-                 else "Select the mesh(es), then the cage (active)")
+    swapped = geometry.swapped_selection(obj, to_bind) if to_bind else None
+    if swapped:
+        wrapped_label(layout, swapped, icon="ERROR")
+    else:
+        layout.label(text=f"Bind {len(to_bind)} selected mesh(es) to '{obj.name}':" if to_bind
+                     else "Select the mesh(es), then the cage (active)")
     layout.operator("object.lbc_bind", icon="MOD_MESHDEFORM")
 
 

@@ -81,6 +81,27 @@ def test_poll_explains_what_to_select():
                 bpy.ops.object.lbc_bind()
 
 
+def test_a_dense_mesh_active_with_its_cage_selected_is_refused_at_once_as_swapped(monkeypatch):
+    """A user's find: Bind with a dense mesh active and its cage selected was refused after seconds, its message
+    mixing "were they swapped?" with the cage's size limit."""
+    from lbc_addon import geometry
+
+    _, box = sphere_in_box_scene()
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=5, radius=0.8)  # 10242 vertices
+    dense = bpy.context.active_object
+    dense.name = "Mesh"
+
+    def no_snapshot(*args, **kwargs):
+        raise AssertionError("the scene was read for a bind")
+
+    monkeypatch.setattr(geometry, "snapshot", no_snapshot)
+    with bpy.context.temp_override(active_object=dense, object=dense, selected_objects=[box, dense]):
+        with pytest.raises(RuntimeError, match=r"'Mesh' is active and would be the cage; make the cage active \(click "
+                                               r"it last\) and select the meshes to bind$"):
+            bpy.ops.object.lbc_bind()
+    assert not is_bound(box) and not is_bound(dense)
+
+
 def test_rebind_is_greyed_out_with_what_to_do_once_the_cage_is_deleted():
     """A new user's finding: Rebind stayed available and explained only when pressed."""
     from lbc_addon import deformer

@@ -153,6 +153,21 @@ def test_cage_lists_its_meshes_and_a_selection_offers_bind(bound_gargoyle):
     assert layout.operators() == ["object.lbc_bind"]
 
 
+def test_a_dense_mesh_active_with_its_cage_selected_is_called_swapped_before_any_click():
+    """A user's find: with a dense mesh active and its cage selected, the panel offered to bind the cage to the mesh,
+    and the refusal came seconds after the click, muddled with the cage's size limit."""
+    mesh, box = sphere_in_box_scene()
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=5, radius=0.8)  # 10242 vertices
+    dense = bpy.context.active_object
+    dense.name = "Mesh"
+    text = " ".join(_draw(dense, [box, dense]).labels().split("\n"))
+    assert text.endswith("'Mesh' is active and would be the cage; make the cage active (click it last) and select "
+                         "the meshes to bind"), text
+    assert "Bind 1 selected mesh(es)" not in text
+    assert "Bind 1 selected mesh(es) to 'Box'" in _draw(box, [dense, box]).labels()
+    assert "Bind 1 selected mesh(es) to 'Sphere'" in _draw(mesh, [box, mesh]).labels()  # a small "cage": its own errors
+
+
 def test_a_cage_edited_at_rest_says_a_rebind_makes_the_edit_the_rest(bound_gargoyle):
     mesh, cage = bound_gargoyle
     hint, cage_hint = "Rebind to make it the rest shape", "Rebind All makes it their rest shape"
