@@ -5,7 +5,8 @@ Stored as ID properties, so it is saved in the .blend; Unbind removes the whole 
 
 import bpy
 from bpy.app.handlers import persistent
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty,
+                       StringProperty)
 
 from .core import (
     DEFAULT_CELLS_2D,
@@ -126,6 +127,8 @@ class LBC_PG_binding(BindOptionProperties, bpy.types.PropertyGroup):
                                 "previous binding: what was solved again, or why it bound from scratch")
     cage_shape: StringProperty(name="Cage Shape", description="Fingerprint of the cage's own vertex positions (before "
                                "modifiers) at bind time: an edit at rest changes it, a pose does not")
+    mesh_transform: FloatVectorProperty(name="Mesh Transform", size=16, description="The mesh object's own transform "
+                                        "(location, rotation, scale) at bind time, row by row (all 0: not recorded)")
     core_fingerprint: StringProperty(name="Core Fingerprint", description="lbc_core's fingerprint of the welded cage")
     welded: StringProperty(name="Welded", description="Cage vertices that were one point at bind time, as copy:kept "
                            "pairs: the deformer reads the kept one, so the copies must stay with it")

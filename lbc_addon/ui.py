@@ -3,6 +3,7 @@
 import textwrap
 
 import bpy
+import numpy as np
 
 from . import deformer, geometry, jobs, storage
 from .properties import bound_to, is_bound
@@ -39,6 +40,10 @@ def draw_binding(layout, obj):
         box.label(text="The cage was edited since the bind,", icon="INFO")
         box.label(text="and the mesh follows the edit: Rebind to make it the rest shape")
         box.operator("object.lbc_rebind", icon="FILE_REFRESH")
+    if ok and moved_as_an_object(obj):  # Mesh Deform users expect the mesh to move with its object
+        wrapped_label(box, f"'{obj.name}' was moved as an object since the bind, which does not move it: its cage "
+                      "alone places it. Undo the move, then move the cage instead, or parent the mesh to the cage "
+                      "(Ctrl+P) to move both together; or Rebind to bind it where it is now", icon="INFO")
     draw_modifier_inputs(layout, obj)
     column = layout.column(align=True)
     column.label(text=f"Cage: {settings.cage.name if settings.cage else '(deleted)'}", icon="MESH_CUBE")
@@ -91,6 +96,16 @@ def edited_since_bind(settings):
         return False  # (no cage_shape: bound before the shape was recorded)
     shape = geometry.shape_fingerprint(cage.data)
     return bool(shape) and shape != settings.cage_shape
+
+
+def moved_as_an_object(obj):
+    """Whether a bound mesh's own transform (location, rotation, scale: what G, R, S and their keys change) differs
+    from the one at bind time: the deformer puts the mesh where its cage holds it, so the move shows nothing. Moves
+    that come from a parent (the cage, or a rig carrying both) leave it as it was."""
+    then = np.array(obj.lbc.mesh_transform).reshape(4, 4)
+    if not then.any():  # bound before the transform was recorded
+        return False
+    return not np.allclose(np.array(obj.matrix_basis), then, rtol=1e-5, atol=1e-5 * max(1.0, np.abs(then).max()))
 
 
 def draw_modifier_inputs(layout, obj):

@@ -54,6 +54,7 @@ def _write(mesh_obj, cage_obj, request, result):
     modifier, replaced_group = deformer.attach(mesh_obj, cage_obj, result.index.shape[1], len(request.cage_points),
                                               len(request.points), deformer.shared_slot_count(result.weight))
     _store_settings(settings, request, result, cage_obj, modifier.node_group)
+    settings.mesh_transform = _flat(mesh_obj.matrix_basis)
     if cage_obj.users_collection:  # from now on, leaving every collection means X deleted it
         deformer.note_cage_in_scene(cage_obj)
     if settings.show_influence:  # repainted with the new weights
@@ -82,6 +83,11 @@ def _store_settings(settings, request, result, cage_obj, group):
     settings.warnings = "; ".join(result.warnings)
     settings.state = "FOLLOWING"
     settings.status = f"Following '{cage_obj.name}'"
+
+
+def _flat(matrix):
+    """A 4×4 matrix as 16 numbers, row by row (a FloatVectorProperty's value)."""
+    return [value for row in matrix for value in row]
 
 
 class _SavedBinding:
@@ -130,9 +136,14 @@ class _SavedBinding:
 
 
 def _settings_values(settings):
-    """Every registered property of an ``Object.lbc`` group: {name: value}."""
-    return {prop.identifier: getattr(settings, prop.identifier) for prop in settings.bl_rna.properties
-            if prop.identifier != "rna_type"}
+    """Every registered property of an ``Object.lbc`` group: {name: value}, an array's values copied (Blender gives
+    a view of the stored array, which the writes would change)."""
+    values = {}
+    for prop in settings.bl_rna.properties:
+        if prop.identifier != "rna_type":
+            value = getattr(settings, prop.identifier)
+            values[prop.identifier] = tuple(value) if getattr(prop, "is_array", False) else value
+    return values
 
 
 def remove(mesh_obj):

@@ -215,6 +215,50 @@ def test_a_loop_cut_on_the_cage_says_only_that_the_mesh_stays_undeformed(bound_g
     assert "The cage was edited since the bind," not in _draw(mesh, [mesh]).labels()
 
 
+def test_moving_the_bound_mesh_alone_says_it_stays_with_its_cage_and_what_to_do():
+    """A user's find, used to Mesh Deform: moving the bound mesh's object did nothing, and nothing said why."""
+    mesh, cage = sphere_in_box_scene()
+    api.bind(mesh, cage, cells=1000)
+    hint = "'Sphere' was moved as an object since the bind, which does not move it"
+    fix = "Undo the move, then move the cage instead, or parent the mesh to the cage (Ctrl+P) to move both together"
+
+    def shown():
+        bpy.context.view_layer.update()  # the transforms, as Blender updates them before it draws
+        text = " ".join(_draw(mesh, [mesh]).labels().split("\n"))
+        assert (hint in text) == (fix in text)
+        return hint in text
+
+    def parent(child, new_parent):  # as Ctrl+P: the child's own transform kept, the parent's undone at first
+        child.parent = new_parent
+        bpy.context.view_layer.update()
+        child.matrix_parent_inverse = new_parent.matrix_world.inverted()
+
+    assert not shown()
+    rig = bpy.data.objects.new("Rig", None)
+    bpy.context.scene.collection.objects.link(rig)
+    parent(mesh, rig)
+    parent(cage, rig)
+    rig.location.y += 0.7  # both moved by one parent: the mesh follows its cage
+    assert not shown()
+    cage.location.x += 0.3  # the cage posed by its own transform
+    assert not shown()
+    mesh.location.x += 0.5
+    mesh.rotation_euler.z += 0.2
+    assert shown()
+    mesh.location.x -= 0.5
+    mesh.rotation_euler.z -= 0.2
+    assert not shown()
+    parent(mesh, cage)  # the fix: moved with its cage, nothing to say
+    cage.location.z += 0.4
+    cage.rotation_euler.x += 0.3
+    assert not shown()
+    mesh.parent = None
+    mesh.location.y += 0.2
+    assert shown()
+    api.bind(mesh, cage, cells=1000)  # bound where it is now
+    assert not shown()
+
+
 def test_a_mesh_carrying_weights_of_no_binding_offers_to_remove_them():
     mesh, _ = sphere_in_box_scene()
     carrier = bpy.data.objects.new("Carrier", mesh.data.copy())
