@@ -25,9 +25,10 @@ problem and what to do; repairs are reported in ``Cage.warnings``):
 * duplicates closer than ``weld_tolerance`` × bounding-box diagonal are welded (warning);
 * 2D: the polygon must not revisit a vertex, be collinear, double back on itself, or cross or touch itself;
 * 3D: the cage must not be flat; faces must have no repeated vertex or zero area, and not be twisted;
-  no loose vertices; no duplicated faces; closed; manifold at edges and vertices; one connected, orientable surface
-  (inconsistent orientation is fixed, with a warning); no two faces may cross or touch except along their shared
-  edge or vertex.
+  no loose vertices; no duplicated faces; closed; manifold at edges and vertices; orientable (inconsistent
+  orientation is fixed, with a warning); one connected surface, or an outer surface with cavities: inner surfaces
+  inside it, not inside each other, facing into the cavity (its faces pointing away from the region, as Solidify
+  makes them); no two faces may cross or touch except along their shared edge or vertex.
 
 Lengths below :data:`ZERO_LENGTH` × bounding-box diagonal count as zero in every geometric test.
 """
@@ -43,7 +44,7 @@ from scipy.spatial import cKDTree
 
 from .errors import CageError
 from .geometry import (cross2, enclosed_measure, in_triangle_2d, is_convex_polygon, newell_normal, plane_axes,
-                       triangle_normals, unit)
+                       triangle_normals, unit, winding_numbers)
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 # A vertex a million times farther from the cage's middle than the rest of the cage is wide is no part of it: it would
@@ -580,7 +581,7 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
     clean &= ~_report_degenerate(welded, triangles, triangle_face, zero, defects)
     pairing = _check_closed_manifold(triangles, names, defects, excused)
     if pairing is not None:
-        oriented = _orient_outward(welded, triangles, pairing, defects)
+        oriented = _orient_outward(welded, triangles, pairing, triangle_face, defects)
         if oriented is not None:
             triangles, flipped = oriented
             if np.all(flipped):
@@ -893,13 +894,15 @@ def edge_pairing(triangles):
 
 
 def _check_closed_manifold(triangles, names, defects, excused=()):
-    """Report open or non-manifold edges and vertices, and several parts, in ``defects``; open edges in
-    between corners of one set of ``excused`` are not reported.
+    """Report open or non-manifold edges and vertices in ``defects``, and several parts of such a surface (those of a
+    closed one may be cavities: :func:`_orient_outward` judges them); open edges in between corners of one set of
+    ``excused`` are not reported.
 
     Returns
     -------
-    (first, second) : two (3T / 2,) int arrays, or None when the surface is not closed and manifold
-        The two directed edges (rows of the ``directed`` array of :func:`edge_pairing`) of each undirected edge.
+    (first, second, part) : two (3T / 2,) int arrays and a (T,) one, or None when the surface is not closed and
+        manifold. The two directed edges (rows of the ``directed`` array of :func:`edge_pairing`) of each undirected
+        edge, and each triangle's connected part.
     """
     if not len(triangles):
         return None
@@ -929,18 +932,20 @@ def _check_closed_manifold(triangles, names, defects, excused=()):
     group_head = order[np.repeat(np.cumsum(counts) - counts, counts)]
     adjacency = sp.coo_matrix((np.ones(len(order)), (order % n_tri, group_head % n_tri)), shape=(n_tri, n_tri))
     parts, label = connected_components(adjacency, directed=False)
-    if parts > 1:
-        sizes = np.bincount(label)
-        defects.append(
-            f"the cage has {parts} separate parts ({', '.join(str(s) for s in sizes[:_LISTED])} triangles): LBC needs "
-            "one closed surface around one region; make the parts one surface (Bridge Edge Loops), or separate them "
-            "(Mesh > Separate > By Loose Parts) and bind each part's meshes to its own cage"
-        )
     if np.any(counts != 2):
+        if parts > 1:
+            defects.append(_separate_parts(label))
         return None
     first, second = order[0::2], order[1::2]
     _check_manifold_vertices(triangles, directed, first, second, names, defects)
-    return (first, second) if len(defects) == found else None
+    return (first, second, label) if len(defects) == found else None
+
+
+def _separate_parts(part):
+    sizes = np.bincount(part)
+    return (f"the cage has {len(sizes)} separate parts ({', '.join(str(s) for s in sizes[:_LISTED])} triangles): LBC "
+            "needs one closed surface around one region; make the parts one surface (Bridge Edge Loops), or separate "
+            "them (Mesh > Separate > By Loose Parts) and bind each part's meshes to its own cage")
 
 
 def _check_manifold_vertices(triangles, directed, first, second, names, defects):
@@ -967,24 +972,27 @@ def _check_manifold_vertices(triangles, directed, first, second, names, defects)
         )
 
 
-def _orient_outward(vertices, triangles, pairing, defects):
-    """Make neighbouring triangles agree in orientation, then point the surface outward.
+def _orient_outward(vertices, triangles, pairing, triangle_face, defects):
+    """Make neighbouring triangles agree in orientation, then point the surface outward (from the region it bounds:
+    into a cavity on an inner part).
 
     Parameters
     ----------
     vertices : (n, 3) float array
     triangles : (T, 3) int array
-        One connected, closed, edge-manifold surface.
-    pairing : (first, second)
+        A closed, edge-manifold surface of one or more connected parts.
+    pairing : (first, second, part)
         From :func:`_check_closed_manifold`.
+    triangle_face : (T,) int array
+        Named in the messages about parts.
 
     Returns
     -------
     (triangles (T, 3) int array, flipped (T,) bool array), or None
         The oriented triangles and which of them changed orientation; None, reported in ``defects``, when the
-        surface is not orientable.
+        surface is not orientable or its parts do not bound one region.
     """
-    first, second = pairing
+    first, second, part = pairing
     n_tri = len(triangles)
     directed = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     a, b = first % n_tri, second % n_tri
@@ -993,18 +1001,53 @@ def _orient_outward(vertices, triangles, pairing, defects):
     relation = dict(zip(zip(a.tolist(), b.tolist()), disagree.tolist()))
     relation.update(zip(zip(b.tolist(), a.tolist()), disagree.tolist()))
     adjacency = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n_tri, n_tri)).tocsr()
-    nodes, predecessors = breadth_first_order(adjacency, 0, directed=False)
     flip = np.zeros(n_tri, dtype=bool)
-    for node in nodes[1:].tolist():  # breadth-first order: a parent's flip is known before its children's
-        parent = predecessors[node]
-        flip[node] = flip[parent] ^ relation[(parent, node)]
+    for root in np.unique(part, return_index=True)[1]:  # each part from its first triangle
+        nodes, predecessors = breadth_first_order(adjacency, root, directed=False)
+        for node in nodes[1:].tolist():  # breadth-first order: a parent's flip is known before its children's
+            parent = predecessors[node]
+            flip[node] = flip[parent] ^ relation[(parent, node)]
     if np.any((flip[a] ^ flip[b]) != disagree):
         defects.append("the cage surface is not orientable (like a Möbius strip): it cannot enclose a volume")
         return None
     oriented = np.where(flip[:, None], triangles[:, ::-1], triangles)
-    if enclosed_measure(vertices, oriented) < 0:
+    outer = _outer_part(vertices, oriented, part, triangle_face, defects)
+    if outer is None:
+        return None
+    if enclosed_measure(vertices, oriented[part == outer]) < 0:
         oriented, flip = oriented[:, ::-1], ~flip
     return oriented, flip
+
+
+def _outer_part(vertices, triangles, part, triangle_face, defects):
+    """The part that holds the others, each a cavity: inside it, in no other part, and oriented against it (so that
+    the winding number is 1 in the region and 0 in the cavities and outside); None, reported in ``defects``, for
+    parts side by side or nested deeper, and for an inner part facing the same way as the outer one."""
+    parts = part.max() + 1
+    if parts == 1:
+        return 0
+    surfaces = [triangles[part == k] for k in range(parts)]
+    probes = vertices[[surface[0, 0] for surface in surfaces]]  # no two parts cross (else reported later)
+    inside = np.array([np.abs(winding_numbers(vertices, surface, probes)) > 0.5 for surface in surfaces]).T
+    np.fill_diagonal(inside, False)  # inside[k, j]: part k lies inside part j
+    depth = inside.sum(axis=1)
+    if np.count_nonzero(depth == 0) > 1 or np.any(depth > 1):
+        defects.append(_separate_parts(part))
+        return None
+    outer = int(np.argmin(depth))
+    volumes = np.array([enclosed_measure(vertices, surface) for surface in surfaces])
+    same_way = np.flatnonzero(np.sign(volumes) == np.sign(volumes[outer]))
+    same_way = same_way[same_way != outer]
+    if len(same_way):
+        faces = np.unique(triangle_face[np.isin(part, same_way)])
+        defects.append(
+            f"the cage has {_count(len(same_way), 'inner surface')} inside its outer one facing the same way (face "
+            f"{some_indices(faces)}): a cavity's faces point into it, away from the shell around it; flip the inner "
+            "surface's normals (in Blender: select it with L, then Mesh > Normals > Flip) to bind the shell between "
+            "them, or separate it (Mesh > Separate > By Loose Parts) and bind the meshes inside it to their own cage"
+        )
+        return None
+    return outer
 
 
 def _check_self_intersection(vertices, triangles, triangle_face, zero, defects):

@@ -245,6 +245,38 @@ def test_several_parts():
     assert_refused(vertices, faces, "2 separate parts", "own cage")
 
 
+def hollow_cube(inner_faces_into_cavity=True, inner_scale=0.4):
+    """A cube of side 2 with a cubic cavity at its middle (as Solidify makes a shell): vertices, quads."""
+    inner = [face[::-1] if inner_faces_into_cavity else face for face in CUBE_QUADS]
+    vertices = np.r_[2.0 * CUBE - 0.5, 0.5 + inner_scale * (CUBE - 0.5)]
+    return vertices, CUBE_QUADS + [[k + 8 for k in face] for face in inner]
+
+
+def test_a_cage_with_a_cavity_is_one_region():
+    """An outer surface and an inner one facing into the cavity bound one region (the pipeline binds it: see
+    test_pipeline); faces all reversed are turned round, the inner ones into the cavity again."""
+    vertices, faces = hollow_cube()
+    cage = make_cage(vertices, faces)
+    assert cage.warnings == [] and cage.measure == pytest.approx(8.0 - 0.4**3)
+    reversed_cage = make_cage(vertices, [face[::-1] for face in faces])
+    assert reversed_cage.warnings == ["reversed all cage faces: they pointed inward"]
+    assert reversed_cage.measure == pytest.approx(cage.measure)  # both outward: the outer part out, the inner in
+
+
+def test_an_inner_surface_facing_the_same_way_as_the_outer_one_is_refused_as_such():
+    vertices, faces = hollow_cube(inner_faces_into_cavity=False)
+    message = assert_refused(vertices, faces, "1 inner surface inside its outer one facing the same way",
+                             "(face 6, 7, 8, 9, 10, ...)", "Normals > Flip", "Separate > By Loose Parts")
+    assert "separate parts" not in message
+
+
+def test_a_part_inside_a_cavity_is_a_separate_part():
+    vertices, faces = hollow_cube()
+    island = 0.5 + 0.1 * (CUBE - 0.5)
+    assert_refused(np.r_[vertices, island], faces + [[k + 16 for k in face] for face in CUBE_QUADS],
+                   "3 separate parts", "own cage")
+
+
 def test_duplicated_face():
     message = assert_refused(CUBE, CUBE_QUADS + [CUBE_QUADS[2][::-1]], "1 duplicated face", "2 and 6",
                              "delete one face of each pair, not both")

@@ -100,6 +100,24 @@ def test_points_all_outside_are_refused_before_the_solve():
         lbc_core.rebind(inside, CUBE, CUBE_FACES, np.array([[0.5, 0.5, 3.0]]))
 
 
+def test_a_shell_cage_binds_its_region_and_points_in_its_cavity_are_outside():
+    """An outer cube and an inner one facing into the cavity (Solidify's shell): the region between them binds with
+    the constraints, and points in the cavity are outside, bound to its nearest point."""
+    inner = [face[::-1] for face in CUBE_FACES]
+    vertices = np.r_[2.0 * CUBE - 0.5, 0.3 + 0.4 * CUBE]
+    faces = CUBE_FACES + [[k + 8 for k in face] for face in inner]
+    points = np.random.default_rng(0).uniform(-0.5, 1.5, (600, 3))
+    in_cavity = np.all((points > 0.3) & (points < 0.7), axis=1)
+    binding = lbc_core.bind(vertices, faces, points, cells=2000)
+    assert np.array_equal(binding.outside, in_cavity) and 0 < np.count_nonzero(in_cavity) < 20
+    weights, inside = binding.weights, ~binding.outside
+    np.testing.assert_allclose(np.asarray(weights.sum(axis=1)).ravel(), 1.0, atol=1e-12)
+    np.testing.assert_allclose(weights[inside] @ vertices, points[inside], atol=1e-12)
+    assert weights.data.min() >= 0.0 and binding.domain_weights.min() >= 0.0
+    domain = binding.domain.vertices
+    assert not np.any(np.all((domain > 0.3 + 1e-9) & (domain < 0.7 - 1e-9), axis=1))  # nothing meshed in the cavity
+
+
 def test_progress_is_monotonic_and_cancel_stops():
     house = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.5, 1.5], [0.0, 1.0]])
     fractions = []
