@@ -28,33 +28,29 @@ Where this differs from the authors' reference, and why:
   after 50-400 iterations.
 """
 
-import os
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from . import fem
 from .objective import tv_objective
 from .parallel import thread_map, worker_count
 from .errors import CageError
 from .progress import Progress
+from .anderson import Anderson
 from .constraints import project_onto_constraints
-from .frame import MeshingFrame, principal_aspect
+from .factor import Factor
+from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
+from .frame import principal_aspect
+from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
+from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
 BETA = {2: 20.0, 3: 20.0}
 PENALTY_SCALE = {2: 1.3, 3: 1.3}
-# In 3D, 2e-4 stops where the deformation is within half of what remeshing alone changes (8000 against 9000 cells)
-# and the objective within 0.06 % of a tight solve, at 0.65-0.8 of the iterations of 1e-4 (see bench/RESULTS.md).
-DEFAULT_TOLERANCE = {2: 2.5e-4, 3: 2e-4}
-# From LOOSE_TOLERANCE_FROM control points on, remeshing changes more (the coordinates are narrower) and a 3D solve
-# stopped at LOOSE_TOLERANCE still stays within half of it (at most 0.32 of it on 13 cages of 42-168 control points,
-# against 0.34-0.44 at 2e-4 on cages of 11 and 27), in LOOSE_TOLERANCE_ITERATIONS of the iterations (bench/RESULTS.md).
-LOOSE_TOLERANCE, LOOSE_TOLERANCE_FROM, LOOSE_TOLERANCE_ITERATIONS = 3e-4, 40, 0.82
 # The dual residual is allowed this many times the primal tolerance: it lags, and the objective settles first.
 DUAL_TOLERANCE_FACTOR = 10.0
 # Anderson extrapolates the map of several steps: about as many steps in all as extrapolating every step (±10 %), at a
@@ -289,7 +285,7 @@ def solve_on_mesh(
     # that treats their steep and flat directions alike takes thousands of iterations. Past STRETCHED_SOLVE_FROM the
     # iterations run in the stretched frame, where the cells are round, the total variation's norm weighted per axis
     # so that the problem stays the cage's own.
-    stretch = _Stretch.of(unit_controls, epsilon)
+    stretch = Stretch.of(unit_controls, epsilon)
     solve_vertices, solve_controls = (unit_vertices, unit_controls) if stretch is None else (
         stretch.apply(unit_vertices), stretch.apply(unit_controls))
 
@@ -334,221 +330,6 @@ def solve_on_mesh(
 
 # Where each part of the solve ends on its progress range (the ADMM iterations take most of the time).
 _FACTORISATION_END, _ADMM_END = 0.06, 0.98
-
-
-# Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (107-115; float32 loop,
-# Anderson memory 5; a whole bind's peak is 1.05 (3D) to 1.2 (2D) times the estimate, as a test checks); and domain
-# vertices per cell of the meshes lbc makes.
-BYTES_PER_STATE_ENTRY = 120
-VERTICES_PER_CELL = {2: 0.53, 3: 0.23}
-
-
-def default_tolerance(dim, n_control_points):
-    """The stopping tolerance of a solve that is given none (see DEFAULT_TOLERANCE and LOOSE_TOLERANCE).
-
-    Parameters
-    ----------
-    dim, n_control_points : int
-
-    Returns
-    -------
-    float, a relative primal residual
-    """
-    if dim == 3 and n_control_points >= LOOSE_TOLERANCE_FROM:
-        return LOOSE_TOLERANCE
-    return DEFAULT_TOLERANCE[dim]
-
-
-def estimate_memory(n_control_points, n_cells, dim):
-    """Peak memory of a solve, estimated before it starts.
-
-    Parameters
-    ----------
-    n_control_points : int
-    n_cells : int
-        Triangles (dim 2) or tetrahedra (dim 3).
-    dim : int
-
-    Returns
-    -------
-    int, bytes
-    """
-    return int(BYTES_PER_STATE_ENTRY * _state_entries(n_control_points, n_cells, dim))
-
-
-def _state_entries(n_control_points, n_cells, dim):
-    """Entries of the (d F + N, n) ADMM state, the domain's N vertices estimated from its F cells."""
-    return n_control_points * (dim + VERTICES_PER_CELL[dim]) * n_cells
-
-
-# The solve's time, told before it starts: seconds per ADMM iteration and state entry at 8000 cells, iterations
-# about ITERATIONS_SCALE · n^ITERATIONS_POWER, and both growing as (cells / 8000)^CELLS_POWER (a step's cost per entry
-# grows as the state outgrows the caches, the iterations slowly). Fitted to the gargoyle's cages L12, L10, L08 and L09
-# split (27-418 control points) at 4000-32,000 cells on a 2-core x86_64 (bench/RESULTS.md), at the tolerance 2e-4:
-# within 25 % of each solve's time (LOOSE_TOLERANCE_ITERATIONS of those iterations where the tolerance is looser). The
-# cage's shape moves the iterations too (a UV sphere's 290 control points took 830), so this stays
-# rough; the solve itself then reports its time left from its own iterations.
-SECONDS_PER_STATE_ENTRY = 5.5e-9
-ITERATIONS_SCALE, ITERATIONS_POWER = 57, 0.28
-CELLS_POWER = 0.4
-# The work at the points after the solve (their location, smooth evaluation and reduction, and in the add-on their
-# thinning), told with the solve's: about 10 µs a point on a 2-core x86_64 (64k gargoyle points 0.69 s, 48k Suzanne
-# points 0.61 s; bench/RESULTS.md, "The bind outside the solve"); a new user was told "roughly 2 s" for a 3.7 s bind.
-SECONDS_PER_POINT = 1e-5
-# A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
-# (bench/RESULTS.md, bench/thin_cages.py).
-STRETCHED_ITERATIONS, STRETCHED_STEP_COST = 2, 5
-# A thin 3D cage solved in its own frame takes more iterations: about 1 + log10(aspect / THIN_FROM_ASPECT) times
-# those above, the aspect its largest extent over its smallest along its principal axes (five corpus cages of 32-66
-# control points squashed to aspects 5-1000: 1.4x at 20, 2.2-2.8x at 50-200, 3.2x at 1000, at the median).
-THIN_FROM_ASPECT = 5
-
-
-# From this busy factor on, the forecast says that the machine's load lengthens it.
-BUSY_TOLD_FROM = 1.5
-
-
-def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0):
-    """What a solve will take, told before it starts: its memory and roughly its time.
-
-    Parameters
-    ----------
-    n_control_points, n_cells, dim : int
-    stretched : bool
-        Whether the solve runs in a stretched frame (:func:`solves_stretched`).
-    aspect : float
-        The cage's largest extent over its smallest along its principal axes (:func:`frame.principal_aspect`).
-    busy : float
-        How many times an idle machine's time the work takes now (:func:`parallel.busy_factor`): a new user's
-        forecasts on a machine loaded 1.4-4 were half the time taken.
-    n_points : int
-        The points the bind evaluates after the solve (0: the solve alone is told).
-
-    Returns
-    -------
-    str, e.g. "solving 106 control points on about 8000 cells: about 313 MB of memory for the solve and roughly 3 s"
-    (the evaluation at the points after it may need more: a 314-vertex cage's 31,658 points 1.5 GB against the
-    solve's 1.1 GB)
-    """
-    entries = _state_entries(n_control_points, n_cells, dim)
-    iterations = forecast_iterations(n_control_points, dim, stretched, aspect)
-    seconds = SECONDS_PER_STATE_ENTRY * entries * iterations * (n_cells / 8000) ** CELLS_POWER * busy
-    if stretched:
-        seconds *= STRETCHED_STEP_COST
-    text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
-            f"{_size(estimate_memory(n_control_points, n_cells, dim))} of memory for the solve and "
-            f"{'' if seconds < 1 else 'roughly '}{_duration(seconds)}")
-    if n_points:
-        points_seconds = SECONDS_PER_POINT * n_points * busy
-        text += f", then {'' if points_seconds < 1 else 'about '}{_duration(points_seconds)} for the {n_points} points"
-    if busy >= BUSY_TOLD_FROM:
-        text += f" (the machine is busy: {busy:.1f} times the time it would take idle)"
-    if seconds > 3600:
-        text += " (beyond an hour on a 2-core machine: fewer cells or a coarser cage bind faster)"
-    return text
-
-
-def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0):
-    """About how many iterations a solve takes at the default tolerance (see :data:`ITERATIONS_SCALE`,
-    :data:`STRETCHED_ITERATIONS`, :data:`THIN_FROM_ASPECT`); the arguments as for :func:`solve_forecast`."""
-    iterations = ITERATIONS_SCALE * n_control_points ** ITERATIONS_POWER
-    if default_tolerance(dim, n_control_points) == LOOSE_TOLERANCE:
-        iterations *= LOOSE_TOLERANCE_ITERATIONS
-    if stretched:
-        iterations *= STRETCHED_ITERATIONS
-    elif dim == 3 and aspect > THIN_FROM_ASPECT:
-        iterations *= 1 + np.log10(aspect / THIN_FROM_ASPECT)
-    return float(iterations)
-
-
-def solves_stretched(control_points, epsilon=0.0):
-    """Whether a cage with these (n, d) control points is solved in its stretched frame with the C¹ relaxation
-    width ``epsilon`` (a 3D cage 1/200 as thick as wide or thinner with few control points, plain total variation; see
-    :data:`STRETCHED_SOLVE_FROM`)."""
-    return _Stretch.of(np.asarray(control_points, dtype=float), epsilon) is not None
-
-
-def _size(count):
-    """'12 MB', '3.1 GB' (of 2^20 and 2^30 bytes, as the add-on's panel counts): a byte count for messages."""
-    return f"{count / 2**20:.0f} MB" if count < 2**30 else f"{count / 2**30:.1f} GB"
-
-
-def _duration(seconds):
-    """'under 1 s', '7 s', '3 min', '2.5 h': a duration for messages."""
-    if seconds < 1:
-        return "under 1 s"
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.0f} min"
-    return f"{seconds / 3600:.1f} h"
-
-
-def _seconds_left(elapsed, fraction, checks, max_iterations):
-    """The time a solve has left, from two views of its residual, both read at its progress checks.
-
-    The share of the way done in log scale (``fraction``) says 0.4-0.5 of the time actually left: ADMM's residual falls
-    fast at first, then about as a power of the iteration count. That power, fitted between the check nearest half
-    the iterations so far and the last, says 1.1-2.4 of it (the fall steepens as Anderson acceleration takes hold).
-    Their geometric mean said 0.67-0.99 on the gargoyle cages L08-L12 (bench/RESULTS.md).
-
-    Parameters
-    ----------
-    elapsed : float
-        Seconds since the solve began.
-    fraction : float
-        The share of the way done, in (0, 1].
-    checks : list of (iteration, distance)
-        Each check's iteration and residual as a multiple of the tolerance, the last one now.
-    max_iterations : int
-    """
-    by_share = elapsed * (1 - fraction) / fraction
-    iteration, distance = checks[-1]
-    reference, reference_distance = min(checks, key=lambda check: abs(check[0] - iteration / 2))
-    if reference >= iteration or not reference_distance > distance > 1:
-        return by_share
-    power = np.log(reference_distance / distance) / np.log(iteration / reference)
-    with np.errstate(over="ignore"):  # a residual that hardly fell: no end in sight, the iteration limit bounds it
-        iterations_left = min(iteration * (distance ** (1 / power) - 1), max_iterations - iteration)
-    return float(np.sqrt(by_share * iterations_left * elapsed / iteration))
-
-
-def _remaining(seconds):
-    """'under 1 s left', 'about 7 s left': the time left, for progress messages."""
-    duration = _duration(seconds)
-    return f"{duration} left" if duration.startswith("under") else f"about {duration} left"
-
-
-def check_memory(n_control_points, n_cells, dim):
-    """Raise CageError, with the estimate, if a solve would need more memory than the machine has available."""
-    needed = estimate_memory(n_control_points, n_cells, dim)
-    available = _available_memory()
-    if available is not None and needed > MEMORY_SHARE * available:
-        raise CageError(
-            f"binding {n_control_points} control points on {n_cells} cells would need about {needed / 2**30:.1f} GB "
-            f"of memory, more than {MEMORY_SHARE:.0%} of the {available / 2**30:.1f} GB available now (the rest is "
-            "left to the system and the estimate's margin): lower the resolution (cells) or use a cage with fewer "
-            "vertices"
-        )
-
-
-# The share of the memory available when a bind starts that its estimate may take.
-MEMORY_SHARE = 0.8
-
-
-def _available_memory():
-    """Bytes of memory available now, or None where the system does not say."""
-    try:
-        with open("/proc/meminfo") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, ValueError, OSError):
-        return None
 
 
 def _starting_penalty(penalty, start, d, n):
@@ -641,7 +422,7 @@ class _Problem:
         system_lower = sp.coo_matrix((np.concatenate(entries), (np.concatenate(rows), np.concatenate(cols))),
                                      shape=(len(interior), len(interior)))
         progress.check()
-        self.factor = _Factor(system_lower, dtype)  # one uninterruptible call: 0.3-0.6 s at 64k tetrahedra
+        self.factor = Factor(system_lower, dtype)  # one uninterruptible call: 0.3-0.6 s at 64k tetrahedra
         progress.check()
         # √|c| of each cell, to turn scaled gradients back into ω |c| |∇w|.
         self.sqrt_cell = np.sqrt(measures)[:, None]
@@ -657,7 +438,7 @@ class _Problem:
             cells = np.arange(start, min(start + per_slice, self.n_cells))
             rows = (np.arange(self.d)[:, None] * self.n_cells + cells).ravel()  # component-major
             gradient = (self.G64[rows] @ interior_weights + self.E64[rows]).reshape(self.d, len(cells), n)
-            total += _scaled_tv(gradient, tv_weights[cells], self.sqrt_cell[cells], self.axis_scale)
+            total += scaled_tv(gradient, tv_weights[cells], self.sqrt_cell[cells], self.axis_scale)
         return total * self.tv_scale
 
 
@@ -689,31 +470,6 @@ def _rows_on_columns(values, columns, n_columns):
     indptr = np.r_[0, np.cumsum(counts)]
     return sp.csr_matrix((values.reshape(columns.shape)[kept], columns[kept], indptr),
                          shape=(len(columns), n_columns))
-
-
-class _Factor:
-    """A factorisation of the SPD Y-step matrix that solves for many right-hand sides in one call."""
-
-    def __init__(self, lower, dtype):
-        """``lower``: the matrix's lower triangle as a scipy COO matrix (duplicate entries are summed)."""
-        try:
-            import cholespy
-
-            solver_class = cholespy.CholeskySolverF if dtype == np.float32 else cholespy.CholeskySolverD
-            self._solver = solver_class(lower.shape[0], lower.row, lower.col, lower.data, cholespy.MatrixType.COO)
-            self._kind = "cholespy"
-        except ImportError:
-            lower = lower.tocsc()
-            self._solver = spla.splu((lower + sp.tril(lower, k=-1).T).tocsc(), permc_spec="MMD_AT_PLUS_A")
-            self._kind = "splu"
-        self.dtype = dtype
-
-    def solve(self, rhs):
-        if self._kind == "cholespy":
-            out = np.empty_like(rhs)
-            self._solver.solve(np.ascontiguousarray(rhs), out)
-            return out
-        return self._solver.solve(rhs).astype(self.dtype)
 
 
 class _DouglasRachford:
@@ -815,9 +571,9 @@ class _DouglasRachford:
         the norm weighted per axis. With ``cells`` (the steps' own calls) the weighted prox starts its Newton steps
         from the roots they found on those cells the step before."""
         if self.p.axis_scale is None:
-            return _shrink_factor(values, thresholds, self.epsilon)[None]
+            return shrink_factor(values, thresholds, self.epsilon)[None]
         guess = None if cells is None else self.secular_roots[cells]
-        factors, roots = _weighted_shrink_factors(values, thresholds, self.p.axis_scale, guess)
+        factors, roots = weighted_shrink_factors(values, thresholds, self.p.axis_scale, guess)
         if cells is not None:
             self.secular_roots[cells] = roots
         return factors
@@ -884,7 +640,7 @@ class _DouglasRachford:
 
     def objective(self, gradient):
         """Σ ω |c| |∇w| on the unit-diagonal cage, from a scaled gradient (d, F, n)."""
-        return _scaled_tv(gradient, self.tv_weights, self.p.sqrt_cell, self.p.axis_scale)
+        return scaled_tv(gradient, self.tv_weights, self.p.sqrt_cell, self.p.axis_scale)
 
 
 @dataclass
@@ -921,17 +677,6 @@ ENTRIES_PER_CHUNK = 4_000_000
 # Right-hand sides per call of the Y-step's solve, and entries per slice of a state's norm: cancel is checked between.
 SOLVE_COLUMNS = 32
 NORM_SLICE = 4_000_000
-# Newton steps of the weighted prox (a stretched frame) at most per entry; from the previous step's root most need few.
-NEWTON_STEPS = 30
-# The stretch (in the meshing frame: frame.ASPECT_FLOOR / the cage's thinnest aspect) from which the solve runs
-# stretched, and the most control points it does so for: the weighted prox costs 5-10 times a plain step, so only where
-# the cage's frame takes thousands of iterations (cages 1/200 as thick as wide and thinner, with up to 18 control points
-# measured; from 24 on the cage's frame converges, less than 1 % above the optimum on most, in less time;
-# bench/RESULTS.md).
-STRETCHED_SOLVE_FROM = 20.0
-STRETCHED_MOST_CONTROL_POINTS = 20
-
-
 def _cell_chunks(problem, size_x):
     """Split the cells into one chunk per core when the problem is large enough to gain from threads, and into more
     (a multiple of the cores) when a chunk would exceed ENTRIES_PER_CHUNK."""
@@ -951,61 +696,10 @@ def _cell_chunks(problem, size_x):
     return chunks
 
 
-class _Anderson:
-    """Anderson acceleration (type II) of a fixed-point map, with the residual safeguard of Zhang et al. 2019."""
-
-    def __init__(self, size, memory, dtype, check):
-        self.memory = memory
-        self.check = check  # called between passes over the history, which is several times the state's size
-        self.dF = np.zeros((memory, size), dtype=dtype)  # residual differences
-        self.dG = np.zeros((memory, size), dtype=dtype)  # map-value differences
-        self.gram = np.zeros((memory, memory))
-        self.count = 0
-        self._residual, self._products = None, None  # the last pushed residual r and ΔF · r
-
-    def reset(self):
-        self.count = 0
-        self._residual = None
-
-    def push(self, value, residual, previous_value, previous_residual):
-        slot = self.count % self.memory
-        np.subtract(residual, previous_residual, out=self.dF[slot])
-        self.check()
-        np.subtract(value, previous_value, out=self.dG[slot])
-        self.check()
-        self.count += 1
-        used = min(self.count, self.memory)
-        # BLAS in the history's own precision: mixing in float64 would copy the whole history each call.
-        products = (self.dF[:used] @ residual).astype(np.float64)
-        if previous_residual is self._residual:
-            # ΔF_j · ΔF_new = ΔF_j · r_new - ΔF_j · r_old: the history is read once per step, not twice.
-            row = products.copy()
-            row[:len(self._products)] -= self._products
-            row[slot] = float(self.dF[slot] @ self.dF[slot])
-        else:
-            row = (self.dF[:used] @ self.dF[slot]).astype(np.float64)
-        self.gram[slot, :used] = row
-        self.gram[:used, slot] = row
-        self._residual, self._products = residual, products
-
-    def extrapolate(self, value, residual):
-        """The extrapolated next state, or None without history."""
-        used = min(self.count, self.memory)
-        if used == 0:
-            return None
-        gram = self.gram[:used, :used] + 1e-10 * np.trace(self.gram[:used, :used]) / used * np.eye(used)
-        if residual is self._residual:
-            products = self._products
-        else:
-            products = (self.dF[:used] @ residual).astype(np.float64)
-        theta = np.linalg.solve(gram, products)
-        return value - (theta.astype(value.dtype) @ self.dG[:used])
-
-
 def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alpha, check_every, memory, period,
           progress, start=None, expected=None):
     step = _DouglasRachford(problem, tv_weights, epsilon, alpha, penalty, progress.check)
-    anderson = (_Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype, progress.check)
+    anderson = (Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype, progress.check)
                 if memory else None)
 
     def advance(start, last, count):
@@ -1097,12 +791,12 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         # alone said "10 min" for 2 s).
         elapsed = time.perf_counter() - started
         checks.append((iteration, distance))
-        seconds_left = _seconds_left(elapsed, fraction, checks, max_iterations)
+        time_left = seconds_left(elapsed, fraction, checks, max_iterations)
         if expected is not None and iteration < expected:
             # The residual's fall early on says up to 20 times the time left (a 314-vertex UV sphere: "2 min" with
             # 8 s to go); the iterations the forecast expects say about it (bench/RESULTS.md).
-            seconds_left = min(seconds_left, (expected - iteration) * elapsed / iteration)
-        left = f", {_remaining(seconds_left)}" if by_residual > 0 else ""
+            time_left = min(time_left, (expected - iteration) * elapsed / iteration)
+        left = f", {format_remaining(time_left)}" if by_residual > 0 else ""
         progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
         if iteration >= next_balance and iteration <= BALANCE_UNTIL:
             next_balance = iteration + BALANCE_SPACING
@@ -1165,155 +859,6 @@ def _balancing_factor(residuals, high):
     dual one does (beyond the band BALANCE_LOW-``high`` of their ratio), else 1."""
     ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
     return 2.0 if ratio > high else 0.5 if ratio < BALANCE_LOW else 1.0
-
-
-def _shrink_factor(values, thresholds, epsilon):
-    """Group soft-thresholding of each cell's gradient vector (prox of ω|g|, or of its Huber smoothing) as a factor.
-
-    Parameters
-    ----------
-    values : (d, F, n) float array
-        Gradient vectors, component-major.
-    thresholds : (F, n) float array
-    epsilon : float
-        Huber width (0: plain total variation).
-
-    Returns
-    -------
-    (F, n) float array s, with prox(values) = values · s.
-    """
-    norms = _group_norms(values)
-    np.maximum(norms, np.finfo(norms.dtype).tiny, out=norms)
-    factor = np.divide(thresholds, norms, out=norms)
-    np.subtract(1.0, factor, out=factor)
-    if epsilon > 0:
-        # prox of τ·huber_ε: shrink by τ beyond ε + τ, scale by ε / (ε + τ) inside.
-        inside = factor <= epsilon / (epsilon + thresholds)  # |g| <= ε + τ
-        factor[inside] = (epsilon / (epsilon + thresholds))[inside]
-    else:
-        np.maximum(factor, 0.0, out=factor)
-    return factor
-
-
-def _weighted_shrink_factors(values, thresholds, axis_scale, guess=None, steps=NEWTON_STEPS):
-    """The prox of τ|a ∘ g| (a norm weighted per axis) of each cell's gradient vector, as factors per component.
-
-    prox(v)_k = v_k s / (s + a_k²), where s > 0 solves |q(s)|² = Σ_k a_k² v_k² / (s + a_k²)² = τ², the trust-region
-    secular equation; no root (|v / a| ≤ τ) means the prox is 0, and τ = 0 leaves v as it is. 1 / |q(s)| is concave
-    in s, so Newton steps from the left rise monotonically to the root, and a step from the right lands left of it;
-    only the entries with a root are solved, each until its own root is found.
-
-    Parameters
-    ----------
-    values : (d, F, n) float array
-        Gradient vectors, component-major.
-    thresholds : (F, n) float array
-    axis_scale : (d,) float array
-        a, the weight of each component in the norm.
-    guess : (F, n) float array, optional
-        Roots s near these (the previous step's): the steps start there, or at the lower bound if it is larger.
-    steps : int
-        Newton steps at most per entry (each stops once its factors move by less than 1e-5).
-
-    Returns
-    -------
-    factors : (d, F, n) float array f, with prox(values) = values · f
-    roots : (F, n) float array s (0 where the prox is 0)
-    """
-    d = values.shape[0]
-    squared_threshold = np.square(thresholds).ravel()
-    dual_norm = np.square(values[0] / axis_scale[0])
-    for component, scale in zip(values[1:], axis_scale[1:]):
-        dual_norm += np.square(component / scale)
-    active = np.flatnonzero((dual_norm.ravel() > squared_threshold) & (squared_threshold > 0))
-    # In float64: near the root 1 / |q| - 1 / τ cancels to float32's resolution, and the steps would wander there.
-    # The components with the same a make one term of |q|².
-    squared_scale = np.square(np.asarray(axis_scale, dtype=np.float64))
-    poles, term_of = np.unique(squared_scale, return_inverse=True)
-    poles = poles[:, None]
-    numerators = np.zeros((len(poles), len(active)))
-    flat_values = values.reshape(d, -1)
-    for component in range(d):
-        numerators[term_of[component]] += squared_scale[component] * np.square(
-            flat_values[component, active].astype(np.float64))
-    squared_threshold = squared_threshold[active].astype(np.float64)
-    # |q(s)|² ≥ each term, so s ≥ a |v| / τ − a² for each: the largest of these bounds lies left of the root.
-    lower = np.max(np.sqrt(numerators / squared_threshold) - poles, axis=0)
-    np.maximum(lower, 0.0, out=lower)
-    roots = lower.copy() if guess is None else np.maximum(lower, guess.ravel()[active])
-    # The entries still moving, with their own copies of what the steps read (shrunk as entries settle).
-    pending, s, inverse_threshold = np.arange(len(roots)), roots.copy(), 1.0 / np.sqrt(squared_threshold)
-    for _ in range(steps):
-        denominators = s + poles
-        q_squared = numerators / np.square(denominators)
-        norm = np.sqrt(q_squared.sum(axis=0))
-        slope = np.sum(q_squared / denominators, axis=0) / norm ** 3
-        moved = np.maximum(s - (1.0 / norm - inverse_threshold) / slope, lower)
-        roots[pending] = moved
-        # The factors s / (s + a_k²) move by at most |Δs| / (s + 1) (min a = 1).
-        moving = np.abs(moved - s) > 1e-5 * (moved + 1.0)
-        if not moving.any():
-            break
-        pending, s, numerators = pending[moving], moved[moving], numerators[:, moving]
-        inverse_threshold, lower = inverse_threshold[moving], lower[moving]
-    factors = np.zeros_like(values)
-    factors.reshape(d, -1)[:, thresholds.ravel() == 0] = 1.0
-    factors.reshape(d, -1)[:, active] = roots / (roots + squared_scale[:, None])
-    all_roots = np.zeros_like(thresholds)
-    all_roots.ravel()[active] = roots
-    return factors, all_roots
-
-
-def _scaled_tv(gradient, tv_weights, sqrt_cell, axis_scale=None):
-    """Σ ω |c| |∇w| from gradients scaled by √|c| (d, F, n), TV weights (F, n) and √|c| (F, 1); ``axis_scale`` (d,)
-    weights the norm's components (a stretched frame)."""
-    if axis_scale is not None:
-        gradient = gradient * np.asarray(axis_scale)[:, None, None]
-    return float(np.sum(tv_weights * sqrt_cell * _group_norms(gradient)))
-
-
-def _group_norms(values):
-    """|g| of each cell's d-vector in a component-major (d, F, n) array; returns (F, n)."""
-    squared = np.square(values[0])
-    for component in values[1:]:
-        squared += np.square(component)
-    return np.sqrt(squared, out=squared)
-
-
-class _Stretch:
-    """The linear map into the frame a thin 3D cage was meshed in (:class:`lbc_core.frame.MeshingFrame`), where its
-    cells are round, and how the total variation reads there.
-
-    u = x A with A = R diag(σ) (R the cage's principal axes), so ∇ₓw = A ∇ᵤw and |∇ₓw| = |σ ∘ ∇ᵤw|, and
-    |c|ₓ = |c|ᵤ / Π σ. With a = σ / min σ: ω |c|ₓ |∇ₓw| = (ω min σ / Π σ) |c|ᵤ |a ∘ ∇ᵤw|.
-
-    Attributes
-    ----------
-    matrix : (3, 3) float array, A
-    axis_scale : (3,) float array, a (1 along the cage's long axes)
-    tv_scale : float, min σ / Π σ
-    """
-
-    def __init__(self, matrix):
-        self.matrix = matrix
-        sigma = np.linalg.norm(matrix, axis=0)
-        self.axis_scale = sigma / sigma.min()
-        self.tv_scale = float(sigma.min() / np.prod(sigma))
-
-    @classmethod
-    def of(cls, controls, epsilon):
-        """The stretch a solve uses for the cage with these (n, d) control points, or None: where it is not 3D, is
-        stretched less than STRETCHED_SOLVE_FROM times, has more than STRETCHED_MOST_CONTROL_POINTS, or the total
-        variation is Huber-relaxed (``epsilon`` > 0: its prox has no per-entry root form)."""
-        if controls.shape[1] != 3 or epsilon > 0 or len(controls) > STRETCHED_MOST_CONTROL_POINTS:
-            return None
-        frame = MeshingFrame(controls)
-        sigma = np.linalg.norm(frame.matrix, axis=0)
-        return None if sigma.max() < STRETCHED_SOLVE_FROM * sigma.min() else cls(frame.matrix)
-
-    def apply(self, points):
-        """(P, 3) points → the stretched frame (linear: the solve does not care where the origin is)."""
-        return points @ self.matrix
 
 
 class _Timer:

@@ -14,6 +14,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from . import fem
 from .progress import Progress
+from .factor import Factor
 
 # ρ of each weighting, by name; the paper's first (lbc_core.options.WEIGHTINGS lists these names for the options).
 WEIGHTINGS = {
@@ -131,7 +132,6 @@ def _heat_distances_triangles(vertices, cells, sources, progress):
 
 
 def _heat_distances_tetrahedra(vertices, cells, sources, progress):
-    from .solver import _Factor  # the solver's sparse Cholesky factorisation (cholespy, else SuperLU)
 
     progress(0.0, "geodesic distances: factorising")
     n_vertices = len(vertices)
@@ -143,13 +143,13 @@ def _heat_distances_tetrahedra(vertices, cells, sources, progress):
     stiffness = (G.T @ volume_weights @ G).tocsr()
     mass = sp.diags(fem.lumped_mass(cells, measures, n_vertices))
     progress.check()
-    heat_solver = _Factor(sp.tril(mass + h * h * stiffness).tocoo(), np.float64)
+    heat_solver = Factor(sp.tril(mass + h * h * stiffness).tocoo(), np.float64)
     progress.check()
     # The Poisson problem is singular (constants): pin vertex 0, then shift each column to 0 at its source.
     free = np.arange(1, n_vertices)
     poisson_lower = sp.tril(stiffness[free][:, free]).tocoo()
     progress.check()
-    poisson_solver = _Factor(poisson_lower, np.float64)
+    poisson_solver = Factor(poisson_lower, np.float64)
 
     sources = np.asarray(sources)
     distances = np.zeros((n_vertices, len(sources)))

@@ -26,7 +26,8 @@ from .parallel import busy_factor, counted_in_load
 from .progress import Progress
 from .reduction import interpolate_and_reduce
 from .smoothing import SmoothInterpolation
-from .solver import check_memory, solve_forecast, solve_on_mesh, solves_stretched
+from .forecast import check_memory, solve_forecast, solves_stretched
+from .solver import solve_on_mesh
 
 # Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
 REPRODUCTION_TOLERANCE = 1e-9

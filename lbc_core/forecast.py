@@ -1,0 +1,234 @@
+"""What a solve will cost, told before it starts (memory, time) and while it runs (time left), and the stopping
+tolerance that cost is measured at."""
+
+import os
+
+import numpy as np
+
+from .errors import CageError
+from .stretch import Stretch
+
+# In 3D, 2e-4 stops where the deformation is within half of what remeshing alone changes (8000 against 9000 cells)
+# and the objective within 0.06 % of a tight solve, at 0.65-0.8 of the iterations of 1e-4 (see bench/RESULTS.md).
+DEFAULT_TOLERANCE = {2: 2.5e-4, 3: 2e-4}
+# From LOOSE_TOLERANCE_FROM control points on, remeshing changes more (the coordinates are narrower) and a 3D solve
+# stopped at LOOSE_TOLERANCE still stays within half of it (at most 0.32 of it on 13 cages of 42-168 control points,
+# against 0.34-0.44 at 2e-4 on cages of 11 and 27), in LOOSE_TOLERANCE_ITERATIONS of the iterations (bench/RESULTS.md).
+LOOSE_TOLERANCE, LOOSE_TOLERANCE_FROM, LOOSE_TOLERANCE_ITERATIONS = 3e-4, 40, 0.82
+
+
+
+# Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (107-115; float32 loop,
+# Anderson memory 5; a whole bind's peak is 1.05 (3D) to 1.2 (2D) times the estimate, as a test checks); and domain
+# vertices per cell of the meshes lbc makes.
+BYTES_PER_STATE_ENTRY = 120
+VERTICES_PER_CELL = {2: 0.53, 3: 0.23}
+
+
+def default_tolerance(dim, n_control_points):
+    """The stopping tolerance of a solve that is given none (see DEFAULT_TOLERANCE and LOOSE_TOLERANCE).
+
+    Parameters
+    ----------
+    dim, n_control_points : int
+
+    Returns
+    -------
+    float, a relative primal residual
+    """
+    if dim == 3 and n_control_points >= LOOSE_TOLERANCE_FROM:
+        return LOOSE_TOLERANCE
+    return DEFAULT_TOLERANCE[dim]
+
+
+def estimate_memory(n_control_points, n_cells, dim):
+    """Peak memory of a solve, estimated before it starts.
+
+    Parameters
+    ----------
+    n_control_points : int
+    n_cells : int
+        Triangles (dim 2) or tetrahedra (dim 3).
+    dim : int
+
+    Returns
+    -------
+    int, bytes
+    """
+    return int(BYTES_PER_STATE_ENTRY * _state_entries(n_control_points, n_cells, dim))
+
+
+def _state_entries(n_control_points, n_cells, dim):
+    """Entries of the (d F + N, n) ADMM state, the domain's N vertices estimated from its F cells."""
+    return n_control_points * (dim + VERTICES_PER_CELL[dim]) * n_cells
+
+
+# The solve's time, told before it starts: seconds per ADMM iteration and state entry at 8000 cells, iterations
+# about ITERATIONS_SCALE · n^ITERATIONS_POWER, and both growing as (cells / 8000)^CELLS_POWER (a step's cost per entry
+# grows as the state outgrows the caches, the iterations slowly). Fitted to the gargoyle's cages L12, L10, L08 and L09
+# split (27-418 control points) at 4000-32,000 cells on a 2-core x86_64 (bench/RESULTS.md), at the tolerance 2e-4:
+# within 25 % of each solve's time (LOOSE_TOLERANCE_ITERATIONS of those iterations where the tolerance is looser). The
+# cage's shape moves the iterations too (a UV sphere's 290 control points took 830), so this stays
+# rough; the solve itself then reports its time left from its own iterations.
+SECONDS_PER_STATE_ENTRY = 5.5e-9
+ITERATIONS_SCALE, ITERATIONS_POWER = 57, 0.28
+CELLS_POWER = 0.4
+# The work at the points after the solve (their location, smooth evaluation and reduction, and in the add-on their
+# thinning), told with the solve's: about 10 µs a point on a 2-core x86_64 (64k gargoyle points 0.69 s, 48k Suzanne
+# points 0.61 s; bench/RESULTS.md, "The bind outside the solve"); a new user was told "roughly 2 s" for a 3.7 s bind.
+SECONDS_PER_POINT = 1e-5
+# A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
+# (bench/RESULTS.md, bench/thin_cages.py).
+STRETCHED_ITERATIONS, STRETCHED_STEP_COST = 2, 5
+# A thin 3D cage solved in its own frame takes more iterations: about 1 + log10(aspect / THIN_FROM_ASPECT) times
+# those above, the aspect its largest extent over its smallest along its principal axes (five corpus cages of 32-66
+# control points squashed to aspects 5-1000: 1.4x at 20, 2.2-2.8x at 50-200, 3.2x at 1000, at the median).
+THIN_FROM_ASPECT = 5
+
+
+# From this busy factor on, the forecast says that the machine's load lengthens it.
+BUSY_TOLD_FROM = 1.5
+
+
+def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0):
+    """What a solve will take, told before it starts: its memory and roughly its time.
+
+    Parameters
+    ----------
+    n_control_points, n_cells, dim : int
+    stretched : bool
+        Whether the solve runs in a stretched frame (:func:`solves_stretched`).
+    aspect : float
+        The cage's largest extent over its smallest along its principal axes (:func:`frame.principal_aspect`).
+    busy : float
+        How many times an idle machine's time the work takes now (:func:`parallel.busy_factor`): a new user's
+        forecasts on a machine loaded 1.4-4 were half the time taken.
+    n_points : int
+        The points the bind evaluates after the solve (0: the solve alone is told).
+
+    Returns
+    -------
+    str, e.g. "solving 106 control points on about 8000 cells: about 313 MB of memory for the solve and roughly 3 s"
+    (the evaluation at the points after it may need more: a 314-vertex cage's 31,658 points 1.5 GB against the
+    solve's 1.1 GB)
+    """
+    entries = _state_entries(n_control_points, n_cells, dim)
+    iterations = forecast_iterations(n_control_points, dim, stretched, aspect)
+    seconds = SECONDS_PER_STATE_ENTRY * entries * iterations * (n_cells / 8000) ** CELLS_POWER * busy
+    if stretched:
+        seconds *= STRETCHED_STEP_COST
+    text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
+            f"{format_size(estimate_memory(n_control_points, n_cells, dim))} of memory for the solve and "
+            f"{'' if seconds < 1 else 'roughly '}{format_duration(seconds)}")
+    if n_points:
+        points_seconds = SECONDS_PER_POINT * n_points * busy
+        text += f", then {'' if points_seconds < 1 else 'about '}{format_duration(points_seconds)} for the {n_points} points"
+    if busy >= BUSY_TOLD_FROM:
+        text += f" (the machine is busy: {busy:.1f} times the time it would take idle)"
+    if seconds > 3600:
+        text += " (beyond an hour on a 2-core machine: fewer cells or a coarser cage bind faster)"
+    return text
+
+
+def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0):
+    """About how many iterations a solve takes at the default tolerance (see :data:`ITERATIONS_SCALE`,
+    :data:`STRETCHED_ITERATIONS`, :data:`THIN_FROM_ASPECT`); the arguments as for :func:`solve_forecast`."""
+    iterations = ITERATIONS_SCALE * n_control_points ** ITERATIONS_POWER
+    if default_tolerance(dim, n_control_points) == LOOSE_TOLERANCE:
+        iterations *= LOOSE_TOLERANCE_ITERATIONS
+    if stretched:
+        iterations *= STRETCHED_ITERATIONS
+    elif dim == 3 and aspect > THIN_FROM_ASPECT:
+        iterations *= 1 + np.log10(aspect / THIN_FROM_ASPECT)
+    return float(iterations)
+
+
+def solves_stretched(control_points, epsilon=0.0):
+    """Whether a cage with these (n, d) control points is solved in its stretched frame with the C¹ relaxation
+    width ``epsilon`` (a 3D cage 1/200 as thick as wide or thinner with few control points, plain total variation; see
+    :data:`STRETCHED_SOLVE_FROM`)."""
+    return Stretch.of(np.asarray(control_points, dtype=float), epsilon) is not None
+
+
+def format_size(count):
+    """'12 MB', '3.1 GB' (of 2^20 and 2^30 bytes, as the add-on's panel counts): a byte count for messages."""
+    return f"{count / 2**20:.0f} MB" if count < 2**30 else f"{count / 2**30:.1f} GB"
+
+
+def format_duration(seconds):
+    """'under 1 s', '7 s', '3 min', '2.5 h': a duration for messages."""
+    if seconds < 1:
+        return "under 1 s"
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def seconds_left(elapsed, fraction, checks, max_iterations):
+    """The time a solve has left, from two views of its residual, both read at its progress checks.
+
+    The share of the way done in log scale (``fraction``) says 0.4-0.5 of the time actually left: ADMM's residual falls
+    fast at first, then about as a power of the iteration count. That power, fitted between the check nearest half
+    the iterations so far and the last, says 1.1-2.4 of it (the fall steepens as Anderson acceleration takes hold).
+    Their geometric mean said 0.67-0.99 on the gargoyle cages L08-L12 (bench/RESULTS.md).
+
+    Parameters
+    ----------
+    elapsed : float
+        Seconds since the solve began.
+    fraction : float
+        The share of the way done, in (0, 1].
+    checks : list of (iteration, distance)
+        Each check's iteration and residual as a multiple of the tolerance, the last one now.
+    max_iterations : int
+    """
+    by_share = elapsed * (1 - fraction) / fraction
+    iteration, distance = checks[-1]
+    reference, reference_distance = min(checks, key=lambda check: abs(check[0] - iteration / 2))
+    if reference >= iteration or not reference_distance > distance > 1:
+        return by_share
+    power = np.log(reference_distance / distance) / np.log(iteration / reference)
+    with np.errstate(over="ignore"):  # a residual that hardly fell: no end in sight, the iteration limit bounds it
+        iterations_left = min(iteration * (distance ** (1 / power) - 1), max_iterations - iteration)
+    return float(np.sqrt(by_share * iterations_left * elapsed / iteration))
+
+
+def format_remaining(seconds):
+    """'under 1 s left', 'about 7 s left': the time left, for progress messages."""
+    duration = format_duration(seconds)
+    return f"{duration} left" if duration.startswith("under") else f"about {duration} left"
+
+
+def check_memory(n_control_points, n_cells, dim):
+    """Raise CageError, with the estimate, if a solve would need more memory than the machine has available."""
+    needed = estimate_memory(n_control_points, n_cells, dim)
+    available = _available_memory()
+    if available is not None and needed > MEMORY_SHARE * available:
+        raise CageError(
+            f"binding {n_control_points} control points on {n_cells} cells would need about {needed / 2**30:.1f} GB "
+            f"of memory, more than {MEMORY_SHARE:.0%} of the {available / 2**30:.1f} GB available now (the rest is "
+            "left to the system and the estimate's margin): lower the resolution (cells) or use a cage with fewer "
+            "vertices"
+        )
+
+
+# The share of the memory available when a bind starts that its estimate may take.
+MEMORY_SHARE = 0.8
+
+
+def _available_memory():
+    """Bytes of memory available now, or None where the system does not say."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
