@@ -1,0 +1,653 @@
+"""The LBC optimisation (the paper's Eq. 6), solved by ADMM on working sets whose cost follows the supports.
+
+    minimise   Σ_i Σ_cells ω_ci |c| |∇w_i|           (weighted total variation)
+    subject to Σ_i w_i = 1, Σ_i w_i c_i = x        (partition of unity, reproduction)  at every vertex
+               w_i ≥ 0                              (non-negativity)
+               w = fixed boundary values on the cage
+
+The constraints are a per-vertex block: the split variable W = Z is projected, vertex by vertex, onto them
+(:mod:`lbc_core.projection`), so every iterate W is exactly feasible and no basis couples the coordinates. Each
+vertex holds only the coordinates of its working set (:mod:`lbc_core.working_sets`): they start from the harmonic
+coordinates' largest and grow where a coordinate turns positive next to a vertex that cannot hold it, so a
+step's cost follows the (cell, coordinate) pairs near the supports, not the number of control points. The step
+itself is :mod:`lbc_core.splitting`; Anderson extrapolation (:mod:`lbc_core.anderson`) with the safeguard of Zhang,
+Peng, Deng et al. (ACM TOG 2019) accelerates it; the penalty is balanced against the residuals early on (Boyd et al.
+2011, §3.4.1); the stopping rule is relative (§3.3.1). A very thin 3D cage with few control points iterates in the
+stretched frame it was meshed in (:mod:`lbc_core.stretch`). Measurements: bench/RESULTS.md, "The locality solver".
+"""
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import fem
+from .anderson import Anderson
+from .errors import CageError
+from .factor import Factor
+from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
+from .frame import principal_aspect
+from .objective import tv_objective
+from .progress import Progress
+from .splitting import DouglasRachford
+from .stretch import Stretch
+from .working_sets import MeshData, PairOperators, WorkingSets, first_working_sets
+
+# β: the weight of the W = Z block against the gradient block, on the unit-diagonal cage.
+BETA = {2: 20.0, 3: 1280.0}
+# The starting penalty c_d / n^(1/(d-1)) for n control points: c_d.
+PENALTY_SCALE = {2: 1.3, 3: 1.3}
+# The dual residual's tolerance as a multiple of the primal one (it lags; the objective settles first).
+DUAL_TOLERANCE_FACTOR = 10.0
+# Steps per Anderson extrapolation, and the over-relaxation α of each step.
+ANDERSON_PERIOD = {2: 3, 3: 5}
+RELAXATION = {2: 1.6, 3: 1.9}
+# Penalty balancing: up to BALANCE_UNTIL iterations, every BALANCE_SPACING, double the penalty when the primal
+# residual exceeds BALANCE_HIGH times the dual, halve it below BALANCE_LOW times (bench/RESULTS.md, "Penalty").
+BALANCE_UNTIL, BALANCE_SPACING = 300, 30
+BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
+# The working sets grow by a ring around the weights above GROWTH_FLOOR at iterations GROWTH_FIRST_CHECK, twice
+# that, four times..., and around those above GROWTH_FLOOR_AT_END before the solve may stop (bench/RESULTS.md,
+# "The locality solver").
+GROWTH_FIRST_CHECK, GROWTH_FLOOR, GROWTH_FLOOR_AT_END = 10, 1e-3, 1e-4
+# Where each part of the solve ends on its progress range.
+_SETUP_END, _ADMM_END = 0.06, 0.98
+
+
+@dataclass
+class SolveResult:
+    """Result of :func:`solve_on_mesh`.
+
+    Attributes
+    ----------
+    weights : (N, n) float array
+        Coordinates at every mesh vertex.
+    iterations : int
+    converged : bool
+        Whether the stopping rule was met before ``max_iterations``.
+    objective : float
+        Σ_cells Σ_i ω A |∇w_i| of ``weights``, in the input's units (length^(d-1)).
+    tv_weights : (F, n) float array
+        The ω the solve was given.
+    history : list of dict
+        At each scheduled check the iteration and the relative primal residual; where the primal test passed, the
+        relative dual residual and the objective of the iterate (input's units). Where the penalty was balanced,
+        the iteration and the new penalty; where the working sets grew, the iteration and the slots.
+    seconds : dict
+        Time per stage.
+    state : SolverState or None
+        The solver's final state, to warm-start a solve on the same mesh carried onto an edited cage (None when
+        there was nothing to iterate).
+    """
+
+    weights: np.ndarray
+    iterations: int
+    converged: bool
+    objective: float
+    tv_weights: np.ndarray
+    history: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+    state: "SolverState" = None
+
+
+def solve_on_mesh(
+    vertices,
+    cells,
+    boundary_vertices,
+    boundary_weights,
+    control_points,
+    tv_weights,
+    *,
+    epsilon=0.0,
+    tolerance=None,
+    max_iterations=10000,
+    penalty=None,
+    relaxation=None,
+    check_every=10,
+    anderson_memory=5,
+    anderson_period=None,
+    single_precision=True,
+    start=None,
+    progress=None,
+    cancel=None,
+):
+    """Local barycentric coordinates on a given mesh of the cage's interior.
+
+    Parameters
+    ----------
+    vertices : (N, d) float array
+    cells : (F, d+1) int array, triangles (d = 2) or tetrahedra (d = 3)
+    boundary_vertices : (B,) int array
+        Vertices whose weights are fixed (all vertices on the cage).
+    boundary_weights : (B, n) float array
+        Their weights; each row sums to 1 and reproduces the vertex's position.
+    control_points : (n, d) float array
+    tv_weights : (F, n) float array
+        ω per cell and coordinate (:func:`lbc_core.geodesics.tv_weights` of the geodesic distances).
+    epsilon : float
+        C¹ relaxation width: |∇w| is replaced by its Huber smoothing (quadratic below ε, in 1/length units of the
+        unit-diagonal cage, linear above), smoother coordinates at the cost of some locality. 0 is the paper's plain
+        total variation.
+    tolerance : float, optional
+        Relative primal residual tolerance of the stopping rule (the dual one is DUAL_TOLERANCE_FACTOR times larger);
+        None: :func:`lbc_core.forecast.default_tolerance`.
+    max_iterations : int
+    penalty : float, optional
+        The starting ADMM penalty ρ on the unit-diagonal cage; None picks the one ``start`` ended with, else
+        c_d / n^(1/(d-1)). It is balanced against the residuals in the first BALANCE_UNTIL iterations.
+    relaxation : float, optional
+        Over-relaxation α in (0, 2); None picks RELAXATION[d].
+    check_every : int
+        Iterations between progress reports and checks of the working sets (cancel is checked within every
+        iteration).
+    anderson_memory : int
+        Extrapolations remembered by Anderson acceleration (0: plain ADMM).
+    anderson_period : int, optional
+        Steps per Anderson extrapolation (None: ANDERSON_PERIOD of the dimension).
+    single_precision : bool
+        Kept for callers of the earlier solver; the iterations run in float64 (their arrays follow the supports).
+    start : SolverState, optional
+        A previous solve's final state (``SolveResult.state``) on the same cells and interior vertices, whose
+        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.rebinding`).
+    progress : callable(fraction, message) or Progress, optional
+    cancel : callable() -> bool, optional
+        Polled between the steps of every stage; when it returns True the solve raises :class:`lbc_core.Cancelled`.
+
+    Returns
+    -------
+    SolveResult
+    """
+    del single_precision
+    clock = _Clock()
+    progress = Progress.of(progress, cancel)
+    vertices = np.asarray(vertices, dtype=float)
+    cells = np.asarray(cells, dtype=np.int64)
+    boundary_vertices = np.asarray(boundary_vertices, dtype=np.int64)
+    boundary_weights = np.asarray(boundary_weights, dtype=float)
+    control_points = np.asarray(control_points, dtype=float)
+    tv_weights = np.asarray(tv_weights, dtype=float)
+    n_vertices, d = vertices.shape
+    n = len(control_points)
+    _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
+    if start is not None:
+        _check_start(start, cells, n, n_vertices - len(boundary_vertices))
+    tolerance = default_tolerance(d, n) if tolerance is None else tolerance
+    settings = _Settings(epsilon, tolerance, max_iterations, relaxation or RELAXATION[d], check_every,
+                         anderson_memory, anderson_period or ANDERSON_PERIOD[d])
+
+    # Work on the cage scaled to unit diagonal, so that penalty and tolerances are scale-free.
+    centre = vertices.mean(axis=0)
+    scale = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
+    unit_vertices, unit_controls = (vertices - centre) / scale, (control_points - centre) / scale
+    _check_affine(unit_controls)
+    stretch = Stretch.of(unit_controls, epsilon)
+    solve_vertices = unit_vertices if stretch is None else stretch.apply(unit_vertices)
+
+    weights = np.zeros((n_vertices, n))
+    weights[boundary_vertices] = boundary_weights
+    iterations, converged, history, state = 0, True, [], None
+    mesh = MeshData.of(solve_vertices, cells, boundary_vertices, boundary_weights, BETA[d], unit_controls,
+                       unit_vertices)
+    if len(mesh.interior):
+        progress(0.0, "finding where each coordinate may reach")
+        sets, first, duals, carried = _starting_point(mesh, start, progress)
+        clock.lap("factorisation")
+        expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls))
+                    if start is None and tolerance == default_tolerance(d, n) else None)
+        run = _Run(mesh, tv_weights, settings, stretch, _starting_penalty(penalty, start, d, n),
+                   progress.part(_SETUP_END, _ADMM_END), expected)
+        solution = run.solve(sets, first, duals, carried)
+        iterations, converged, history, state = run.iteration, run.converged, run.history, solution.state
+        for record in history:  # objectives in the input's units
+            if "objective" in record:
+                record["objective"] *= scale ** (d - 1)
+        weights[mesh.interior] = solution.sets.matrix(solution.weights).toarray()
+        clock.lap("solve")
+    objective = tv_objective(vertices, cells, weights, tv_weights)
+    progress(1.0, "solved")
+    return SolveResult(weights, iterations, converged, objective, tv_weights, history, clock.seconds, state)
+
+
+@dataclass
+class _Settings:
+    epsilon: float
+    tolerance: float
+    max_iterations: int
+    relaxation: float
+    check_every: int
+    anderson_memory: int
+    anderson_period: int
+
+
+@dataclass
+class _Solution:
+    sets: WorkingSets
+    weights: np.ndarray
+    state: "SolverState"
+
+
+def _starting_point(mesh, start, progress):
+    """The first working sets, weights on them, projection duals, and the carried split state (or None)."""
+    if start is None:
+        harmonic = _harmonic(mesh, progress.check)
+        sets, weights, duals = first_working_sets(mesh, harmonic, progress.check)
+        return sets, weights, duals, None
+    sets, carried = start.sets, start
+    weights = carried.slot_state / carried.sqrt_mass[sets.vertex_of_slot]
+    return sets, weights, carried.duals.copy(), carried
+
+
+def _harmonic(mesh, check):
+    """The harmonic coordinates at the interior vertices: the P1 Laplacian's solve with the boundary values."""
+    stiffness = fem.stiffness_matrix(mesh.vertices, mesh.cells)
+    interior = mesh.interior
+    check()
+    lower = sp.tril(stiffness[interior][:, interior]).tocoo()
+    rhs = -(stiffness[interior] @ mesh.fixed).toarray()
+    check()
+    return Factor(lower, np.float64).solve(rhs)
+
+
+class _Run:
+    """One solve's iterations: steps, Anderson, checks, penalty balancing and growth of the working sets."""
+
+    def __init__(self, mesh, tv_weights, settings, stretch, penalty, progress, expected):
+        self.mesh, self.tv_weights, self.settings, self.stretch = mesh, tv_weights, settings, stretch
+        self.penalty, self.progress, self.expected = penalty, progress, expected
+        self.iteration, self.converged, self.history = 0, False, []
+        self.next_growth_check = GROWTH_FIRST_CHECK
+
+    def _step_map(self, ops, duals):
+        axis_scale = None if self.stretch is None else self.stretch.axis_scale
+        tv_scale = 1.0 if self.stretch is None else self.stretch.tv_scale
+        return DouglasRachford(ops, self.tv_weights, self.settings.epsilon, self.settings.relaxation, self.penalty,
+                               axis_scale, tv_scale, duals)
+
+    def solve(self, sets, weights, duals, carried):
+        check = self.progress.check
+        grown = sets.grown(self.mesh.required(sets, weights))
+        if grown is not None:
+            weights = _moved(weights, sets.slot_positions(grown), grown.n_slots)
+            sets = grown
+        check()
+        ops = PairOperators(self.mesh, sets)
+        check()
+        step = self._step_map(ops, duals)
+        state = step.state_of(weights) if carried is None else carried.state_for(step, sets)
+        self.started = time.perf_counter()
+        self.checks, self.fraction, self.first_distance = [], 0.0, None
+        state, out, step = self._iterate(step, state)
+        final = SolverState.of(step, state, self.mesh)
+        if out is None:  # the limit came right after the sets grew: the weights of the state as it is
+            weights = step.projected(step.split(state)[1]) / step.ops.slot_mass
+        else:
+            weights = step.weights(out)
+        return _Solution(step.ops.sets, weights, final)
+
+    def _iterate(self, step, state):
+        """Steps from ``state`` until convergence, the iteration limit, or growth of the working sets (which
+        returns the state carried onto the grown layout)."""
+        settings, check = self.settings, self.progress.check
+        anderson = Anderson(len(state), settings.anderson_memory, state.dtype, check) \
+            if settings.anderson_memory else None
+        alpha, period = settings.relaxation, settings.anderson_period
+        value, residual, norm, out, previous = state, None, np.inf, None, None
+        next_check = self.iteration + settings.check_every
+        primal_scale = None
+        while self.iteration < settings.max_iterations:
+            candidate = anderson.extrapolate(value, residual) if anderson and residual is not None else None
+            check()
+            start_value = value if candidate is None else candidate
+            count = min(period, settings.max_iterations - self.iteration)
+            new_value, new_out, new_previous, last_norm = self._advance(step, start_value, count, out)
+            self.iteration += count
+            new_residual = new_value - value if candidate is None else new_value - start_value
+            new_norm = float(np.linalg.norm(new_value - start_value))
+            if candidate is not None and new_norm > norm:
+                # Safeguard: the extrapolation did not reduce the residual; take the plain steps instead.
+                anderson.reset()
+                retry = min(count, settings.max_iterations - self.iteration)
+                if retry:
+                    new_value, new_out, new_previous, last_norm = self._advance(step, value, retry, out)
+                    self.iteration += retry
+                    new_residual = new_value - value
+                    new_norm = float(np.linalg.norm(new_residual))
+            elif anderson and residual is not None:
+                anderson.push(new_value, new_residual, value, residual)
+            value, residual, norm, out, previous = new_value, new_residual, new_norm, new_out, new_previous
+            if self.iteration < next_check and self.iteration < settings.max_iterations:
+                continue
+            next_check = self.iteration + settings.check_every
+            primal_scale = _primal_scale(step, out)
+            verdict = self._check(step, value, out, previous, last_norm / (alpha * primal_scale), primal_scale)
+            if verdict == "converged":
+                self.converged = True
+                return value, out, step
+            if verdict == "grown":
+                step, positions = self._grow(step)
+                value = _moved(value, positions, step.size_x + step.ops.sets.n_slots)
+                residual = None if residual is None else _moved(residual, positions, len(value))
+                if anderson:
+                    anderson.embed(positions, len(value), residual)
+                out = previous = None
+                next_check = self.iteration + settings.check_every
+            if verdict == "rescaled":
+                if anderson:
+                    anderson.reset()
+                residual, norm = None, np.inf
+        return value, out, step
+
+    def _advance(self, step, state, count, last):
+        """``count`` steps from ``state``: the final state, the last two steps' records and the norm of the last
+        step's own residual (α times its primal residual)."""
+        previous = last
+        for k in range(count):
+            before = state
+            state, record = step(state)
+            previous, last = last, record
+            self.progress.check()
+        return state, last, previous, float(np.linalg.norm(state - before))
+
+    def _check(self, step, value, out, previous, primal, primal_scale):
+        """A scheduled check: progress, convergence, growth of the working sets, penalty balancing."""
+        settings = self.settings
+        tolerance = settings.tolerance
+        self.pending_growth = None
+        if primal <= tolerance and previous is not None:
+            record = dict(iteration=self.iteration, **_residuals(step, out, previous, primal_scale))
+            self.history.append(record)
+            distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
+            if distance <= 1:
+                self.pending_growth = self._growth(step, out, GROWTH_FLOOR_AT_END)
+                if self.pending_growth is None:
+                    return "converged"
+        else:
+            self.history.append(dict(iteration=self.iteration, primal=float(primal)))
+            distance = primal / tolerance
+        self._report(distance)
+        if self.pending_growth is None and self.iteration >= self.next_growth_check:
+            self.next_growth_check = 2 * self.iteration
+            self.pending_growth = self._growth(step, out, GROWTH_FLOOR)
+        if self.pending_growth is not None:
+            return "grown"
+        if self.iteration <= BALANCE_UNTIL and previous is not None and \
+                self.iteration % BALANCE_SPACING < settings.check_every:
+            factor = _balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
+                                       BALANCE_HIGH[step.ops.d])
+            if factor != 1.0:
+                step.rescale_penalty(value, factor)
+                self.penalty = step.penalty
+                self.history.append(dict(iteration=self.iteration, penalty=step.penalty))
+                self.checks = self.checks[-1:]
+                return "rescaled"
+        return None
+
+    def _growth(self, step, out, floor):
+        """The working sets grown by one ring around the weights above ``floor``, or None where they hold it."""
+        weights = step.weights(out)
+        return step.ops.sets.grown(self.mesh.required(step.ops.sets, np.where(weights > floor, weights, 0.0)))
+
+    def _grow(self, step):
+        """The step map on the grown working sets, and where each entry of the flat state goes there."""
+        grown = self.pending_growth
+        ops = PairOperators(self.mesh, grown)
+        self.progress.check()
+        new_step = self._step_map(ops, step.duals)
+        pair_positions = step.ops.pair_positions(ops)
+        x_positions = (np.arange(ops.d)[:, None] * ops.n_pairs + pair_positions[None, :]).ravel()
+        positions = np.concatenate([x_positions, new_step.size_x + step.ops.sets.slot_positions(grown)])
+        self.history.append(dict(iteration=self.iteration, slots=grown.n_slots, pairs=ops.n_pairs))
+        return new_step, positions
+
+    def _report(self, distance):
+        """Progress: the share of the way in log scale to the tolerance, and the time left."""
+        self.first_distance = self.first_distance or max(distance, 1.0 + 1e-9)
+        by_residual = min(0.99, np.log(self.first_distance / max(distance, 1e-300)) / np.log(self.first_distance))
+        self.fraction = max(self.fraction, self.iteration / self.settings.max_iterations, by_residual)
+        elapsed = time.perf_counter() - self.started
+        self.checks.append((self.iteration, distance))
+        left = seconds_left(elapsed, max(self.fraction, 1e-9), self.checks, self.settings.max_iterations)
+        if self.expected is not None and self.iteration < self.expected:
+            left = min(left, (self.expected - self.iteration) * elapsed / self.iteration)
+        told = f", {format_remaining(left)}" if by_residual > 0 else ""
+        self.progress(self.fraction, f"ADMM iteration {self.iteration}, residual {distance:.1f}× the tolerance{told}")
+
+
+def _moved(values, positions, size):
+    """``values`` placed at ``positions`` of a zero array of ``size``."""
+    out = np.zeros(size)
+    out[positions] = values
+    return out
+
+
+def _primal_scale(step, out):
+    """The primal residual's scale (Boyd et al. 2011, §3.3.1): max(|(g̃, √(βm) z)|, |(X̃, W̃)|) of one step."""
+    z_scaled = step.ops.slot_mass * out.z
+    return float(max(np.hypot(np.linalg.norm(out.gradient), np.linalg.norm(z_scaled)),
+                     np.hypot(np.linalg.norm(out.X), np.linalg.norm(out.W)), 1e-300))
+
+
+def _residuals(step, out, previous, primal_scale, objective=True):
+    """Relative primal and dual residuals (Boyd et al. 2011, §3.3.1) and the objective of the current iterate; the
+    dual residual measured in the (X, W) space against the scaled duals."""
+    X, W = out.X, out.W
+    primal = np.hypot(np.linalg.norm(out.gradient - X), np.linalg.norm(step.ops.slot_mass * out.z - W))
+    dual = np.hypot(np.linalg.norm(X - previous.X), np.linalg.norm(W - previous.W))
+    scale_dual = np.hypot(np.linalg.norm(out.v_x - X), np.linalg.norm(out.v_w - W))
+    record = {"primal": float(primal / primal_scale), "dual": float(dual / max(scale_dual, 1e-300))}
+    if objective:
+        record["objective"] = step.objective(out.gradient)
+    return record
+
+
+def _balancing_factor(residuals, high):
+    """2 when the primal residual lags (beyond ``high`` times the dual), 1/2 when the dual one does (below
+    BALANCE_LOW times), else 1."""
+    ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
+    return 2.0 if ratio > high else 0.5 if ratio < BALANCE_LOW else 1.0
+
+
+def _starting_penalty(penalty, start, d, n):
+    """The penalty asked for, else the one a warm start's solve ended with, else c_d / n^(1/(d-1))."""
+    if penalty is not None:
+        return penalty
+    if start is not None and start.penalty is not None:
+        return start.penalty
+    return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
+
+
+def _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights):
+    n_vertices, d = vertices.shape
+    if d not in (2, 3) or cells.ndim != 2 or cells.shape[1] != d + 1:
+        raise CageError(f"cells must be (F, {d + 1}) for {d}D vertices, got shape {cells.shape}")
+    if cells.min() < 0 or cells.max() >= n_vertices:
+        raise CageError("cells refer to vertices that do not exist")
+    n = len(control_points)
+    if boundary_weights.shape != (len(boundary_vertices), n):
+        raise CageError(
+            f"boundary_weights must be (B, n) = ({len(boundary_vertices)}, {n}), got {boundary_weights.shape}"
+        )
+    if n < d + 1:
+        raise CageError(f"a {d}D cage needs at least {d + 1} control points, got {n}")
+    if np.shape(tv_weights) != (len(cells), n):
+        raise CageError(f"tv_weights must be (F, n) = ({len(cells)}, {n}), got {np.shape(tv_weights)}")
+
+
+def _check_affine(controls):
+    """Refuse control points that are affinely dependent (all on a line or plane): no weights reproduce there."""
+    K = np.c_[controls, np.ones(len(controls))]
+    singular = np.linalg.svd(K, compute_uv=False)
+    if np.sum(singular > 1e-12 * singular[0]) < controls.shape[1] + 1:
+        raise CageError("the control points are affinely dependent (all on a line or plane): the cage is flat")
+
+
+def _check_start(start, cells, n, n_interior):
+    if start.n_cells != len(cells) or start.sets.n_controls != n or len(start.interior) != n_interior:
+        raise CageError(f"the start state is for {start.n_cells} cells, {start.sets.n_controls} control points and "
+                        f"{len(start.interior)} interior vertices, not {len(cells)}, {n} and {n_interior}: start "
+                        "from a solve on this mesh")
+
+
+@dataclass
+class SolverState:
+    """A solve's final state on its working sets, for a warm start on the same mesh carried onto an edited cage.
+
+    Measure-scaled as in :mod:`lbc_core.splitting`: per slot v_W = W̃ + Ṽ, per (cell, control point) pair
+    v_X = X̃ + Ũ; a solve on the same cells and vertices, moved, rescales each by its own measure.
+
+    Attributes
+    ----------
+    sets : WorkingSets
+        Over ``interior``.
+    slot_state : (S,) float array
+    duals : (N_in, d+1) float array
+        The projection's duals.
+    pair_indptr : (F + 1,) int array
+        The pairs of cell c: ``pair_indptr[c]:pair_indptr[c + 1]``.
+    pair_control : (P,) int array
+    pair_state : (P, d) float array
+    pair_threshold : (P,) float array
+        The shrink thresholds √|c| ω / ρ the state was computed with.
+    sqrt_cell : (F,) float array
+    sqrt_mass : (N_in,) float array
+    interior : (N_in,) int array
+    penalty : float
+    """
+
+    sets: WorkingSets
+    slot_state: np.ndarray
+    duals: np.ndarray
+    pair_indptr: np.ndarray
+    pair_control: np.ndarray
+    pair_state: np.ndarray
+    pair_threshold: np.ndarray
+    sqrt_cell: np.ndarray
+    sqrt_mass: np.ndarray
+    interior: np.ndarray
+    penalty: float = None
+
+    @classmethod
+    def of(cls, step, state, mesh):
+        ops = step.ops
+        v_x, v_w = step.split(state)
+        indptr = np.searchsorted(ops.pair_cell, np.arange(len(mesh.cells) + 1))
+        return cls(ops.sets, v_w.copy(), step.duals.copy(), indptr, ops.pair_control.copy(), v_x.T.copy(),
+                   step.thresholds.copy(), mesh.sqrt_cell.copy(), mesh.sqrt_mass.copy(), mesh.interior.copy(),
+                   step.penalty)
+
+    @property
+    def n_cells(self):
+        return len(self.pair_indptr) - 1
+
+    @property
+    def nbytes(self):
+        return sum(part.nbytes for part in (self.sets.indptr, self.sets.controls, self.slot_state, self.duals,
+                                            self.pair_indptr, self.pair_control, self.pair_state,
+                                            self.pair_threshold, self.sqrt_cell, self.sqrt_mass, self.interior))
+
+    def state_for(self, step, sets):
+        """The flat state of ``step`` (on ``sets``, grown from this state's) from this one, rescaled to the step's
+        measures: X̃ by the ratio of √|c|, Ũ by the ratio of the thresholds, v_W by the ratio of √(β m_v)."""
+        ops = step.ops
+        n = sets.n_controls
+        cells = np.repeat(np.arange(self.n_cells), np.diff(self.pair_indptr))
+        positions = np.searchsorted(ops.pair_cell * n + ops.pair_control, cells * n + self.pair_control)
+        found = positions < ops.n_pairs
+        found[found] = (ops.pair_cell[positions[found]] == cells[found]) & \
+            (ops.pair_control[positions[found]] == self.pair_control[found])
+        state = np.zeros(step.size_x + sets.n_slots)
+        v_x, v_w = step.split(state)
+        old = self.pair_state[found].T
+        thresholds = self.pair_threshold[found]
+        kept = step.shrink_factors(old, thresholds)
+        new_positions = positions[found]
+        cell_ratio = ops.pair_sqrt_cell[new_positions] / self.sqrt_cell[cells[found]]
+        threshold_ratio = np.divide(step.thresholds[new_positions], thresholds, out=np.ones_like(thresholds),
+                                    where=thresholds > 0)
+        v_x[:, new_positions] = old * (kept * cell_ratio + (1.0 - kept) * threshold_ratio)
+        mass_ratio = ops.slot_mass / self.sqrt_mass[sets.vertex_of_slot]
+        v_w[self.sets.slot_positions(sets)] = self.slot_state
+        v_w *= mass_ratio
+        return state
+
+    def restricted(self, cells, interior):
+        """The state of a sub-problem: the cells where ``cells`` (F,) is true and the interior vertices
+        ``interior`` (a subset of this state's, sorted), the others held fixed."""
+        rows = np.searchsorted(self.interior, interior)
+        sets, slots = _take_rows(self.sets, rows)
+        pair_rows = np.flatnonzero(cells)
+        pair_indptr, pairs = _row_ranges(self.pair_indptr, pair_rows)
+        return SolverState(sets, self.slot_state[slots], self.duals[rows], pair_indptr, self.pair_control[pairs],
+                           self.pair_state[pairs], self.pair_threshold[pairs], self.sqrt_cell[pair_rows],
+                           self.sqrt_mass[rows], np.asarray(interior), self.penalty)
+
+    def updated(self, sub, cells):
+        """This state with a sub-problem's final state (:meth:`restricted` with the same ``cells``) written in."""
+        rows = np.searchsorted(self.interior, sub.interior)
+        vertex_parts = _replace_rows(self.sets.indptr, [self.sets.controls, self.slot_state], rows, sub.sets.indptr,
+                                     [sub.sets.controls, sub.slot_state])
+        sets = WorkingSets(vertex_parts[0], vertex_parts[1], self.sets.n_controls)
+        duals, sqrt_mass = self.duals.copy(), self.sqrt_mass.copy()
+        duals[rows], sqrt_mass[rows] = sub.duals, sub.sqrt_mass
+        cell_rows = np.flatnonzero(cells)
+        pair_parts = _replace_rows(self.pair_indptr, [self.pair_control, self.pair_state, self.pair_threshold],
+                                   cell_rows, sub.pair_indptr, [sub.pair_control, sub.pair_state,
+                                                                sub.pair_threshold])
+        sqrt_cell = self.sqrt_cell.copy()
+        sqrt_cell[cell_rows] = sub.sqrt_cell
+        return SolverState(sets, vertex_parts[2], duals, pair_parts[0], pair_parts[1], pair_parts[2],
+                           pair_parts[3], sqrt_cell, sqrt_mass, self.interior, sub.penalty)
+
+    def for_cells(self, source):
+        """This state on another list of cells, cell i taking cell ``source[i]``'s part (a warm start's guess where
+        a re-bind replaced cells)."""
+        pair_indptr, pairs = _row_ranges(self.pair_indptr, np.asarray(source))
+        return SolverState(self.sets, self.slot_state, self.duals, pair_indptr, self.pair_control[pairs],
+                           self.pair_state[pairs], self.pair_threshold[pairs], self.sqrt_cell[source],
+                           self.sqrt_mass, self.interior, self.penalty)
+
+
+def _row_ranges(indptr, rows):
+    """The CSR rows ``rows`` of a layout: their new indptr and the entries they take, in order."""
+    counts = indptr[rows + 1] - indptr[rows]
+    new_indptr = np.r_[0, np.cumsum(counts)]
+    entries = np.repeat(indptr[rows] - new_indptr[:-1], counts) + np.arange(new_indptr[-1])
+    return new_indptr, entries
+
+
+def _take_rows(sets, rows):
+    """The working sets of the vertices ``rows``, and which slots they take."""
+    indptr, slots = _row_ranges(sets.indptr, rows)
+    return WorkingSets(indptr, sets.controls[slots], sets.n_controls), slots
+
+
+def _replace_rows(indptr, arrays, rows, sub_indptr, sub_arrays):
+    """A CSR layout with the rows ``rows`` replaced by those of a sub-layout: [indptr, *arrays]."""
+    counts = np.diff(indptr)
+    counts[rows] = np.diff(sub_indptr)
+    new_indptr = np.r_[0, np.cumsum(counts)]
+    replaced = np.zeros(len(counts), dtype=bool)
+    replaced[rows] = True
+    kept_rows = np.flatnonzero(~replaced)
+    _, old_entries = _row_ranges(indptr, kept_rows)
+    _, new_kept = _row_ranges(new_indptr, kept_rows)
+    _, new_sub = _row_ranges(new_indptr, rows)
+    results = [new_indptr]
+    for array, sub_array in zip(arrays, sub_arrays):
+        out = np.empty((new_indptr[-1],) + array.shape[1:], dtype=array.dtype)
+        out[new_kept] = array[old_entries]
+        out[new_sub] = sub_array
+        results.append(out)
+    return results
+
+
+class _Clock:
+    def __init__(self):
+        self.seconds = {}
+        self._last = time.perf_counter()
+
+    def lap(self, stage):
+        now = time.perf_counter()
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + now - self._last
+        self._last = now

@@ -1,0 +1,310 @@
+"""Which coordinates each interior vertex may hold, and the solver's operators restricted to them.
+
+A vertex's *working set* is the control points whose coordinates may be non-zero there; each (vertex, control point)
+of it is a *slot*. The coordinates outside the working sets are held at 0, so the problem on the working sets is the
+LBC problem with more zeros imposed: the same problem wherever the working sets cover the solution's support. The
+solver keeps one ring of mesh vertices of margin around the support, growing the sets (:meth:`WorkingSets.grown`)
+where a coordinate turns positive next to a vertex that cannot hold it.
+
+A coordinate's gradient is non-zero only on the cells that touch a vertex holding it (a slot or a fixed non-zero
+boundary value): the (cell, control point) *pairs*. :class:`PairOperators` holds, on the pairs, the gradient operator,
+the boundary values' part of it, the matrix of the least-squares step (P1 stiffness + β mass, block-diagonal over
+the control points, factorised once per layout), and the rows padded per vertex for the projection. Their sizes
+follow the slots and pairs, not the number of control points.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import fem
+from .factor import Factor
+from .projection import PADDING_VALUE, corner_products, project_rows
+
+# The harmonic coordinates' largest entries a vertex's first working set takes, then twice as many until the vertex's
+# position lies in their control points' hull (bench/RESULTS.md, "The locality solver").
+FIRST_SET_SIZE = 12
+
+
+@dataclass
+class WorkingSets:
+    """The slots: for each interior vertex (in ``interior`` order) the sorted control points it may hold.
+
+    Attributes
+    ----------
+    indptr : (N_in + 1,) int array
+        Slots of interior vertex k: ``indptr[k]:indptr[k + 1]``.
+    controls : (S,) int array
+        The control point of each slot.
+    n_controls : int
+    """
+
+    indptr: np.ndarray
+    controls: np.ndarray
+    n_controls: int
+
+    @property
+    def n_slots(self):
+        return len(self.controls)
+
+    @property
+    def vertex_of_slot(self):
+        """(S,) int array: the interior vertex (its position in ``interior``) of each slot."""
+        return np.repeat(np.arange(len(self.indptr) - 1), np.diff(self.indptr))
+
+    def matrix(self, values=None):
+        """The slots as an (N_in, n) CSR matrix holding ``values`` (1 by default)."""
+        data = np.ones(self.n_slots) if values is None else values
+        return sp.csr_matrix((data, self.controls, self.indptr), shape=(len(self.indptr) - 1, self.n_controls))
+
+    @classmethod
+    def from_matrix(cls, matrix):
+        """The working sets of an (N_in, n) sparse matrix's non-zero pattern."""
+        matrix = sp.csr_matrix(matrix)
+        matrix.sum_duplicates()
+        matrix.sort_indices()
+        return cls(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.shape[1])
+
+    def grown(self, required):
+        """These working sets with the pattern of ``required`` (an (N_in, n) sparse matrix) added; None when it adds
+        nothing."""
+        union = (self.matrix() + sp.csr_matrix(required, dtype=float)).astype(bool).astype(float)
+        if union.nnz == self.n_slots:
+            return None
+        return WorkingSets.from_matrix(union)
+
+    def slot_positions(self, other):
+        """Where each of this layout's slots sits in ``other``, a superset of it (grown from it)."""
+        keys = self.vertex_of_slot * self.n_controls + self.controls
+        other_keys = other.vertex_of_slot * other.n_controls + other.controls
+        return np.searchsorted(other_keys, keys)
+
+
+def first_working_sets(mesh, harmonic, check):
+    """The working sets a cold solve starts from, and its first weights on them.
+
+    Each vertex takes the FIRST_SET_SIZE control points of its largest harmonic coordinates, then twice as many until
+    its position lies in their control points' hull (the harmonic row itself is feasible, so this ends), and its
+    first weights are the harmonic row's projection onto its constraints on that set.
+
+    Parameters
+    ----------
+    mesh : MeshData
+    harmonic : (N_in, n) float array
+        The harmonic coordinates at the interior vertices.
+    check : callable() raising Cancelled
+
+    Returns
+    -------
+    WorkingSets, (S,) float array of weights, (N_in, d+1) float array of the projection's duals
+    """
+    n = harmonic.shape[1]
+    order = np.argsort(-harmonic, axis=1)
+    size = np.full(len(harmonic), min(FIRST_SET_SIZE, n))
+    while True:
+        check()
+        keep = np.arange(n)[None, :] < size[:, None]
+        rows = np.repeat(np.arange(len(harmonic)), size)
+        matrix = sp.csr_matrix((np.ones(len(rows)), (rows, order[keep])), shape=harmonic.shape)
+        sets = WorkingSets.from_matrix(matrix)
+        padded = PaddedRows(sets, mesh)
+        values = padded.gather(harmonic[sets.vertex_of_slot, sets.controls])
+        weights, duals, feasible = project_rows(values, padded.corners, padded.targets, products=padded.products)
+        if feasible.all() or (size >= n).all():
+            return sets, padded.scatter(weights), duals
+        size[~feasible] = np.minimum(2 * size[~feasible], n)
+
+
+@dataclass
+class MeshData:
+    """The mesh of one solve, in the frame it is solved in, with what every layout reads.
+
+    Attributes
+    ----------
+    vertices : (N, d) float array
+    cells : (F, d+1) int array
+    interior : (N_in,) int array
+        The vertices not on the cage, sorted.
+    interior_position : (N,) int array
+        Each vertex's position in ``interior``, -1 on the cage.
+    fixed : (N, n) CSR matrix
+        The boundary values on the cage's vertices (rows of interior vertices empty).
+    scaled_gradients : (F, d+1, d) float array
+        √|c| ∇φ of each cell's corners.
+    sqrt_cell : (F,) float array
+    sqrt_mass : (N_in,) float array
+        √(β m_v) of each interior vertex.
+    adjacency : (N, N) CSR matrix
+        Vertices sharing a cell (the diagonal included).
+    unit_controls : (n, d) float array
+        The control points in the frame of the constraints (the unit frame, even where the solve is stretched).
+    unit_interior : (N_in, d) float array
+        The interior vertices in that frame.
+    """
+
+    vertices: np.ndarray
+    cells: np.ndarray
+    interior: np.ndarray
+    interior_position: np.ndarray
+    fixed: sp.csr_matrix
+    scaled_gradients: np.ndarray
+    sqrt_cell: np.ndarray
+    sqrt_mass: np.ndarray
+    adjacency: sp.csr_matrix
+    unit_controls: np.ndarray
+    unit_interior: np.ndarray
+
+    @classmethod
+    def of(cls, vertices, cells, boundary_vertices, boundary_weights, beta, unit_controls, unit_vertices):
+        n_vertices, n = len(vertices), boundary_weights.shape[1]
+        gradients, measures = fem.cell_gradients(vertices, cells)
+        sqrt_cell = np.sqrt(measures)
+        interior = np.setdiff1d(np.arange(n_vertices), boundary_vertices)
+        position = np.full(n_vertices, -1)
+        position[interior] = np.arange(len(interior))
+        fixed = sp.csr_matrix(boundary_weights)
+        fixed.eliminate_zeros()
+        fixed = sp.csr_matrix((fixed.data, fixed.indices, fixed.indptr), shape=fixed.shape)
+        rows = boundary_vertices[np.repeat(np.arange(len(boundary_vertices)), np.diff(fixed.indptr))]
+        fixed = sp.csr_matrix((fixed.data, (rows, fixed.indices)), shape=(n_vertices, n))
+        mass = fem.lumped_mass(cells, measures, n_vertices)[interior]
+        corners = np.repeat(cells, cells.shape[1], axis=1).ravel()
+        others = np.tile(cells, (1, cells.shape[1])).ravel()
+        adjacency = sp.csr_matrix((np.ones(len(corners)), (corners, others)), shape=(n_vertices, n_vertices))
+        adjacency.data[:] = 1.0
+        return cls(vertices, cells, interior, position, fixed, gradients * sqrt_cell[:, None, None], sqrt_cell,
+                   np.sqrt(beta * mass), adjacency, unit_controls, unit_vertices[interior])
+
+    def required(self, sets, weights):
+        """The slots one ring of margin around the positive ``weights`` (S,) and the boundary values asks for, as an
+        (N_in, n) sparse matrix."""
+        positive = sets.matrix((weights > 0).astype(float))
+        positive.eliminate_zeros()
+        on_all = sp.csr_matrix((positive.data, positive.indices, positive.indptr), shape=positive.shape)
+        on_all = sp.vstack([on_all, sp.csr_matrix((1, on_all.shape[1]))]).tocsr()[
+            np.where(self.interior_position >= 0, self.interior_position, on_all.shape[0] - 1)]
+        support = (on_all + self.fixed).astype(bool).astype(float)
+        return (self.adjacency[self.interior] @ support).astype(bool).astype(float)
+
+
+class PaddedRows:
+    """The slots as rows padded to a common width, for the per-vertex projection."""
+
+    def __init__(self, sets, mesh):
+        counts = np.diff(sets.indptr)
+        self.width = max(int(counts.max()), 1)
+        self.vertex = sets.vertex_of_slot
+        self.column = np.arange(sets.n_slots) - sets.indptr[self.vertex]
+        d = mesh.unit_controls.shape[1]
+        self.corners = np.zeros((len(counts), self.width, d + 1))
+        self.corners[self.vertex, self.column, 0] = 1.0
+        self.corners[self.vertex, self.column, 1:] = mesh.unit_controls[sets.controls]
+        self.products = corner_products(self.corners)
+        self.targets = np.c_[np.ones(len(counts)), mesh.unit_interior]
+
+    def gather(self, slot_values):
+        """(S,) → (N_in, width), padding slots PADDING_VALUE."""
+        rows = np.full(self.corners.shape[:2], PADDING_VALUE)
+        rows[self.vertex, self.column] = slot_values
+        return rows
+
+    def scatter(self, rows):
+        """(N_in, width) → (S,)."""
+        return rows[self.vertex, self.column]
+
+
+class PairOperators:
+    """The solver's operators on one layout of working sets.
+
+    Attributes
+    ----------
+    sets : WorkingSets
+    pair_cell, pair_control : (P,) int arrays
+        The (cell, control point) pairs where a coordinate's gradient may be non-zero, sorted.
+    gradient : (d P, S) CSR matrix
+        Slot values → √|c| ∇w on the pairs, component-major rows (row k P + p).
+    gradient_t : (S, d P) CSR matrix
+    boundary_part : (d, P) float array
+        The boundary values' part of √|c| ∇w on the pairs.
+    slot_mass : (S,) float array
+        √(β m_v) of each slot's vertex.
+    factor : Factor
+        Of gradientᵀ gradient + diag(slot_mass²): the least-squares step's matrix.
+    padded : PaddedRows
+    """
+
+    def __init__(self, mesh, sets, dtype=np.float64):
+        self.sets = sets
+        slot_vertex = mesh.interior[sets.vertex_of_slot]
+        n = sets.n_controls
+        self.pair_cell, self.pair_control = self._pairs(mesh, sets, slot_vertex)
+        n_pairs = len(self.pair_cell)
+        d = mesh.vertices.shape[1]
+        # Each pair's corners: a slot (its index), or a boundary value, or nothing.
+        corner_vertex = mesh.cells[self.pair_cell]  # (P, d+1)
+        keys = corner_vertex * n + self.pair_control[:, None]
+        slot_keys = slot_vertex * n + sets.controls
+        found = np.minimum(np.searchsorted(slot_keys, keys), len(slot_keys) - 1)
+        corner_slot = np.where(slot_keys[found] == keys, found, -1)
+        fixed = mesh.fixed.tocoo()
+        fixed_keys = fixed.row.astype(np.int64) * n + fixed.col
+        order = np.argsort(fixed_keys)
+        fixed_keys, fixed_values = fixed_keys[order], fixed.data[order]
+        found = np.minimum(np.searchsorted(fixed_keys, keys), max(len(fixed_keys) - 1, 0))
+        corner_fixed = np.where(fixed_keys[found] == keys, fixed_values[found], 0.0) if len(fixed_keys) else \
+            np.zeros(keys.shape)
+        scaled = mesh.scaled_gradients[self.pair_cell]  # (P, d+1, d)
+        self.boundary_part = np.einsum("pc,pck->kp", corner_fixed, scaled)
+        kept = corner_slot >= 0
+        rows = (np.arange(d)[:, None, None] * n_pairs + np.arange(n_pairs)[None, :, None])  # (d, P, 1)
+        rows = np.broadcast_to(rows, (d,) + corner_slot.shape)[:, kept]
+        columns = np.broadcast_to(corner_slot, (d,) + corner_slot.shape)[:, kept]
+        values = np.transpose(scaled, (2, 0, 1))[:, kept]
+        self.gradient = sp.csr_matrix((values.ravel(), (rows.ravel(), columns.ravel())),
+                                      shape=(d * n_pairs, sets.n_slots), dtype=dtype)
+        self.gradient_t = self.gradient.T.tocsr()
+        self.slot_mass = mesh.sqrt_mass[sets.vertex_of_slot]
+        system = (self.gradient_t @ self.gradient).tocsr()
+        system = (system + sp.diags(self.slot_mass ** 2)).tocoo()
+        lower = system.row >= system.col
+        self.factor = Factor(sp.coo_matrix((system.data[lower], (system.row[lower], system.col[lower])),
+                                           shape=system.shape), dtype)
+        self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell]
+        self.padded = PaddedRows(sets, mesh)
+        self.d = d
+
+    @staticmethod
+    def _pairs(mesh, sets, slot_vertex):
+        """The (cell, control point) pairs touching a slot or a non-zero boundary value, sorted by cell."""
+        holds = sp.csr_matrix((np.ones(sets.n_slots), (slot_vertex, sets.controls)),
+                              shape=(len(mesh.vertices), sets.n_controls))
+        holds = (holds + mesh.fixed).astype(bool).astype(float)
+        n_cells, k = mesh.cells.shape
+        incidence = sp.csr_matrix((np.ones(n_cells * k), mesh.cells.ravel(), np.arange(0, n_cells * k + 1, k)),
+                                  shape=(n_cells, len(mesh.vertices)))
+        pairs = (incidence @ holds).tocoo()
+        order = np.lexsort((pairs.col, pairs.row))
+        return pairs.row[order].astype(np.int64), pairs.col[order].astype(np.int64)
+
+    @property
+    def n_pairs(self):
+        return len(self.pair_cell)
+
+    def gradients(self, slot_values):
+        """√|c| ∇w (d, P) on the pairs, boundary values included."""
+        return (self.gradient @ slot_values).reshape(self.d, -1) + self.boundary_part
+
+    def solve(self, rhs):
+        return self.factor.solve(rhs)
+
+    def project(self, slot_values, duals):
+        """Each vertex's slot values projected onto its constraints: (S,) weights, (N_in, d+1) duals, feasible."""
+        weights, duals, feasible = project_rows(self.padded.gather(slot_values), self.padded.corners,
+                                                self.padded.targets, duals, products=self.padded.products)
+        return self.padded.scatter(weights), duals, feasible
+
+    def pair_positions(self, other):
+        """Where each of this layout's pairs sits in ``other``, a layout grown from it."""
+        n = self.sets.n_controls
+        return np.searchsorted(other.pair_cell * n + other.pair_control, self.pair_cell * n + self.pair_control)
