@@ -13,7 +13,7 @@ PYTHON_5.1 = $(PYTHON313)
 PYTHON_5.2 = $(PYTHON313)
 LINE_VENVS := $(LINES:%=.venv-blender-%)
 
-.PHONY: demo blender-demo test bench extension clean
+.PHONY: demo blender-demo test bench docs extension clean
 
 $(BIN)/.installed: pyproject.toml
 	python=$(PYTHON311) && "$$python" -m venv $(VENV)
@@ -42,6 +42,10 @@ test: $(BIN)/.installed $(LINE_VENVS:%=%/.installed)
 bench: $(BIN)/.installed
 	$(BIN)/python bench/run.py
 	$(BIN)/python bench/bench_mesher.py
+
+# The API reference of lbc_core, from its docstrings (pdoc), into out/docs; it fails on a warning or a broken reference.
+docs: $(BIN)/.installed
+	$(BIN)/python tools/build_docs.py
 
 extension: $(BIN)/.installed
 	$(BIN)/python tools/build_extension.py
