@@ -12,6 +12,7 @@ _BUNDLED = f"{__package__}.lbc_core"
 
 lbc_core = importlib.import_module(_BUNDLED if importlib.util.find_spec(_BUNDLED) else "lbc_core")
 _cage = importlib.import_module(f"{lbc_core.__name__}.cage")
+_errors = importlib.import_module(f"{lbc_core.__name__}.errors")
 _options = importlib.import_module(f"{lbc_core.__name__}.options")
 _planar = importlib.import_module(f"{lbc_core.__name__}.planar")
 _rebinding = importlib.import_module(f"{lbc_core.__name__}.rebinding")
@@ -19,6 +20,7 @@ _forecast = importlib.import_module(f"{lbc_core.__name__}.forecast")
 _thinning = importlib.import_module(f"{lbc_core.__name__}.thinning")
 
 CageError = lbc_core.CageError
+CageVertexError = _errors.CageVertexError
 Cancelled = lbc_core.Cancelled
 DEFAULT_CELLS_2D = _options.DEFAULT_CELLS[2]
 DEFAULT_CELLS_3D = _options.DEFAULT_CELLS[3]

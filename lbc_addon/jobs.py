@@ -20,7 +20,6 @@ reopened file, or a mesh bound long ago, binds from scratch.
 """
 
 import numbers
-import re
 import threading
 import time
 from collections import OrderedDict
@@ -29,8 +28,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import storage
-from .core import (DEFAULT_FLOOR, WARM, CageError, lbc_core, reframed, solved_again_text, thin_changed_rows,
-                   thin_weights)
+from .core import (DEFAULT_FLOOR, WARM, CageError, CageVertexError, lbc_core, reframed, solved_again_text,
+                   thin_changed_rows, thin_weights)
 
 
 # Beyond this share of a mesh's vertices outside its cage, the cage is too small rather than grazed by a few stray
@@ -259,7 +258,7 @@ def solve(request, progress=None, cancel=None, earlier=()):
                         "must enclose the mesh. Is it the right cage? (Select the mesh, then the cage last so it is "
                         "active.)") from error
     except CageError as error:
-        cause, note = _cage_modifiers_notes(request, str(error))
+        cause, note = _cage_modifiers_notes(request, error)
         hint = _swapped_hint(request)
         if hint or cause or note:
             raise CageError(f"{hint}{cause}{error}{f' ({note})' if note else ''}") from error
@@ -331,8 +330,8 @@ def _swapped_hint(request):
             f"api.bind(mesh, cage). As a cage, '{request.cage_name}' is refused: ")
 
 
-def _cage_modifiers_notes(request, message):
-    """What to say, before and after lbc_core's ``message``, about a cage whose modifiers make it another cage than
+def _cage_modifiers_notes(request, error):
+    """What to say, before and after lbc_core's ``error``, about a cage whose modifiers make it another cage than
     the artist's mesh data (each "" for none). A modifier off in viewports is the likely cause (a Mirror off leaves a
     hole), so it leads; the others may be (Solidify makes two parts), and vertex numbers count the evaluated cage's
     vertices, which Edit Mode does not show, so they follow."""
@@ -345,7 +344,7 @@ def _cage_modifiers_notes(request, message):
     if request.cage_modifiers:
         verb = verb_for(request.cage_modifiers, "makes", "make")
         note = (f"vertex numbers of the cage with its {request.cage_modifiers} applied"
-                if re.search(r"\bvert(ex|ices) \(?\d", message)
+                if isinstance(error, CageVertexError)
                 else f"this is the cage as its {request.cage_modifiers} {verb} it")
     return cause, note
 

@@ -42,7 +42,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
-from .errors import CageError
+from .errors import CageError, CageVertexError
 from .geometry import (cross2, enclosed_measure, in_triangle_2d, is_convex_polygon, newell_normal, plane_axes,
                        triangle_normals, unit, winding_numbers)
 
@@ -229,7 +229,7 @@ class Cage:
             )
         if not np.all(np.isfinite(input_vertices)):
             bad = np.flatnonzero(~np.all(np.isfinite(input_vertices), axis=1))
-            raise CageError(f"NaN or infinite positions of cage vertex {some_indices(bad)}: fix or delete them")
+            raise CageVertexError(f"NaN or infinite positions of cage vertex {some_indices(bad)}: fix or delete them")
         first = _first_inputs(self.vertex_map)
         points = input_vertices[first]
         if len(first) < len(self.vertex_map):
@@ -238,7 +238,7 @@ class Cage:
             apart = np.flatnonzero(offset > POSED_APART * size)
             if len(apart):
                 pairs = _listed([f"{first[self.vertex_map[k]]}/{k}" for k in apart])
-                raise CageError(
+                raise CageVertexError(
                     f"cage vertices {pairs} coincided when bound and were welded into one control point, but are "
                     "posed apart: move each such pair together (in Blender: Mesh > Clean Up > Merge by Distance on "
                     "the cage), or separate them and bind again"
@@ -330,7 +330,7 @@ def check_coordinates(vertices):
     finite = np.all(np.isfinite(vertices), axis=1)
     if not finite.all():
         bad = np.flatnonzero(~finite)
-        raise CageError(
+        raise CageVertexError(
             f"NaN or infinite coordinates at {_count(len(bad), 'cage vertex', 'cage vertices')} ({some_indices(bad)}): "
             "fix or delete them"
         )
@@ -345,7 +345,7 @@ def check_coordinates(vertices):
     far = np.sort(order[-count:])
     which, verb, pronoun = (f"cage vertex {some_indices(far)}", "lies", "it") if len(far) == 1 else (
         f"cage vertices {some_indices(far)}", "lie", "them")
-    raise CageError(
+    raise CageVertexError(
         f"{which} {verb} {distances[far].max():.3g} from the cage's middle, over a million times the size of the "
         "rest of it (a coordinate typed wrong, or an infinite one, which Blender stores as its largest number, "
         f"3.4e+38): move {pronoun} back"
@@ -408,13 +408,20 @@ def _listed(items):
     return ", ".join(items[:_LISTED]) + (", ..." if len(items) > _LISTED else "")
 
 
+class _NamesVertices(str):
+    """A defect message that names cage vertices by their input numbers (:func:`_raise_all` raises it as a
+    CageVertexError)."""
+
+
 def _raise_all(defects):
-    """Raise one CageError listing every defect message found (nothing when there is none)."""
+    """Raise one CageError listing every defect message found (nothing when there is none); a CageVertexError when
+    one of them names cage vertices."""
+    error = CageVertexError if any(isinstance(defect, _NamesVertices) for defect in defects) else CageError
     if len(defects) == 1:
-        raise CageError(defects[0])
+        raise error(str(defects[0]))
     if defects:
-        raise CageError(f"the cage has {len(defects)} kinds of defect, all listed here: "
-                        + "; ".join(f"({k}) {defect}" for k, defect in enumerate(defects, 1)))
+        raise error(f"the cage has {len(defects)} kinds of defect, all listed here: "
+                    + "; ".join(f"({k}) {defect}" for k, defect in enumerate(defects, 1)))
 
 
 def _welded_warning(count):
@@ -478,7 +485,7 @@ def _make_polygon_cage(vertices, weld_tolerance, max_control_points):
             order = order[:-1]
         if len(np.unique(order)) != len(order):
             twice = np.flatnonzero(np.bincount(order) > 1)
-            raise CageError(
+            raise CageVertexError(
                 f"the polygon cage passes twice through vertex {some_indices(_first_inputs(vertex_map)[twice])}: it "
                 "touches itself; separate the touching parts"
             )
@@ -520,10 +527,10 @@ def _check_polygon_simple(vertices, zero, names):
     defects = []
     if np.any(spike):
         corner = names[(np.flatnonzero(spike) + 1) % n]
-        defects.append(
+        defects.append(_NamesVertices(
             f"the polygon cage doubles back on itself at vertex {some_indices(corner)} (a zero-width spike): delete "
             "that vertex or move it off the line of its neighbours"
-        )
+        ))
     low, high = np.minimum(start, end) - zero, np.maximum(start, end) + zero
     i, j = _overlapping_boxes(low, high).T
     distance = (j - i) % n
@@ -532,10 +539,10 @@ def _check_polygon_simple(vertices, zero, names):
     if np.any(crossing):
         i, j = i[crossing], j[crossing]
         pairs = _listed([f"{names[a]}-{names[(a + 1) % n]} with {names[b]}-{names[(b + 1) % n]}" for a, b in zip(i, j)])
-        defects.append(
+        defects.append(_NamesVertices(
             f"the polygon cage intersects itself at {_count(len(i), 'pair')} of crossing or touching edges (between "
             f"input vertices {pairs}); move its vertices so that the outline does not cross itself"
-        )
+        ))
     _raise_all(defects)
 
 
@@ -573,10 +580,10 @@ def _make_mesh_cage(vertices, faces, weld_tolerance, max_control_points):
         warnings.append(f"dropped {_count(collapsed, 'cage face')} that welding collapsed to an edge or a point")
     unused = np.setdiff1d(np.arange(len(welded)), [corner for _, face in faces for corner in face])
     if len(unused):
-        defects.append(
+        defects.append(_NamesVertices(
             f"the cage has {_count(len(unused), 'loose vertex', 'loose vertices')}, in no face (vertex "
             f"{some_indices(names[unused])}): delete them from the cage (in Blender: Mesh > Clean Up > Delete Loose)"
-        )
+        ))
     triangles, triangle_face, clean = _triangulate(welded, faces, zero, defects)
     clean &= ~_report_degenerate(welded, triangles, triangle_face, zero, defects)
     pairing = _check_closed_manifold(triangles, names, defects, excused)
@@ -744,10 +751,10 @@ def _collapse_welded(faces, vertex_map, names, defects):
     if twice:
         listed = _listed([f"face {index} twice through vertex {some_indices(names[corners])}"
                           for index, corners in twice])
-        defects.append(
+        defects.append(_NamesVertices(
             f"{_count(len(twice), 'cage face passes', 'cage faces pass')} through a vertex twice ({listed}): split "
             "each into faces that visit a vertex once"
-        )
+        ))
     if copies:
         listed = _listed([f"{a} and {b}" for a, b in copies])
         defects.append(
@@ -915,18 +922,18 @@ def _check_closed_manifold(triangles, names, defects, excused=()):
     if np.any(holes):
         where = _listed([f"{names[a]}-{names[b]}" for a, b in edge_of[holes]])
         open_edges = _count(np.count_nonzero(holes), "boundary edge")
-        defects.append(
+        defects.append(_NamesVertices(
             f"the cage is not closed: it has {open_edges}, each in only one face (between vertices {where}); fill "
             "the holes (in Blender: select the boundary edges with Select > Select All by Trait > Non Manifold, and "
             "press F)"
-        )
+        ))
     if np.any(counts > 2):
         where = _listed([f"{names[a]}-{names[b]}" for a, b in edge_of[counts > 2]])
-        defects.append(
+        defects.append(_NamesVertices(
             f"the cage has {_count(np.count_nonzero(counts > 2), 'non-manifold edge')} shared by more than two faces "
             f"(between vertices {where}): make every edge belong to exactly two faces "
             "(in Blender: Select > Select All by Trait > Non Manifold)"
-        )
+        ))
     n_tri = len(triangles)
     # Triangles sharing an edge are connected, whatever the edge's number of faces.
     group_head = order[np.repeat(np.cumsum(counts) - counts, counts)]
@@ -965,11 +972,11 @@ def _check_manifold_vertices(triangles, directed, first, second, names, defects)
     fans_per_vertex = np.bincount(np.unique(np.c_[corner_vertex, fan], axis=0)[:, 0])
     pinched = np.flatnonzero(fans_per_vertex > 1)
     if len(pinched):
-        defects.append(
+        defects.append(_NamesVertices(
             f"the cage has {_count(len(pinched), 'non-manifold vertex', 'non-manifold vertices')} where separate "
             f"sheets of the surface touch at a point (vertex {some_indices(names[pinched])}): pull the sheets apart or "
             "merge them along an edge"
-        )
+        ))
 
 
 def _orient_outward(vertices, triangles, pairing, triangle_face, defects):

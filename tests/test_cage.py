@@ -1,6 +1,7 @@
 """Cage checks: one test per entry of the bad-input catalogue (docs/what-can-go-wrong.md), plus the repairs
 (welding, orientation) and the triangulation of quads and n-gons."""
 
+import re
 import time
 from pathlib import Path
 
@@ -13,7 +14,7 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from lbc_core.cage import MAX_CONTROL_POINTS, Cage, _intersecting_triangles, _overlapping_boxes, make_cage
-from lbc_core.errors import CageError
+from lbc_core.errors import CageError, CageVertexError
 from random_cages import draw_dented_sphere, lengths, sphere_directions, star_polygon, subdivided_cube
 
 DATA = Path(__file__).parent / "data"
@@ -46,13 +47,20 @@ def sphere(n_points, seed=0):
     return directions * radii[:, None], ConvexHull(directions).simplices
 
 
+# A message that cites cage vertices by number ("vertex 3", "vertices (1, 2", "vertices 0-4"): what the add-on told
+# apart by this text before the refusals that do so became CageVertexError.
+CITES_VERTICES = re.compile(r"\bvert(ex|ices) \(?\d")
+
+
 def assert_refused(vertices, faces, *words, **options):
-    """make_cage raises CageError whose message contains every word (case-insensitive)."""
+    """make_cage raises CageError whose message contains every word (case-insensitive); a CageVertexError exactly
+    when the message cites vertices by number."""
     with pytest.raises(CageError) as caught:
         make_cage(vertices, faces, **options)
     message = str(caught.value).lower()
     for word in words:
         assert word.lower() in message, message
+    assert isinstance(caught.value, CageVertexError) == bool(CITES_VERTICES.search(message)), message
     return message
 
 
@@ -546,7 +554,7 @@ def test_welded_copies_follow_their_first_copy_and_may_not_be_posed_apart():
     np.testing.assert_array_equal(cage.control_points_from_input(moved), CUBE * 2.0)
     alone = vertices.copy()
     alone[6] += [0.0, 0.5, 0.0]  # one copy moved, the other left behind
-    with pytest.raises(CageError, match=r"cage vertices 6/8 coincided when bound .* are posed apart"):
+    with pytest.raises(CageVertexError, match=r"cage vertices 6/8 coincided when bound .* are posed apart"):
         cage.control_points_from_input(alone)
 
 
@@ -555,7 +563,7 @@ def test_a_2d_cage_may_be_posed_with_its_constant_z():
     np.testing.assert_array_equal(cage.control_points_from_input(np.c_[SQUARE * 2, np.full(4, 7.0)]), SQUARE * 2)
     with pytest.raises(CageError, match=r"got positions of shape \(4, 3\)"):
         cage.control_points_from_input(np.c_[SQUARE, [0.0, 0.0, 0.0, 1.0]])
-    with pytest.raises(CageError, match="NaN or infinite positions of cage vertex 2"):
+    with pytest.raises(CageVertexError, match="NaN or infinite positions of cage vertex 2"):
         cage.control_points_from_input(np.where([[0], [0], [1], [0]], np.nan, SQUARE))
 
 
