@@ -47,8 +47,15 @@ bench: $(BIN)/.installed
 docs: $(BIN)/.installed
 	$(BIN)/python tools/build_docs.py
 
-extension: $(BIN)/.installed
-	$(BIN)/python tools/build_extension.py
+# The extension zips and an extension repository (index.json) into dist/. Building needs only pip: .venv-build is a
+# bare Python 3.11 environment, and tools/build_extension.py downloads the wheels and Blender's builder itself.
+.venv-build/.installed:
+	python=$(PYTHON311) && "$$python" -m venv --clear .venv-build
+	.venv-build/bin/pip install -q --upgrade pip
+	touch $@
+
+extension: .venv-build/.installed
+	.venv-build/bin/python tools/build_extension.py
 
 clean:
-	rm -rf $(VENV) $(LINE_VENVS)
+	rm -rf $(VENV) $(LINE_VENVS) .venv-build

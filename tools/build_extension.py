@@ -17,14 +17,24 @@ Steps:
 2. Check that ``blender_manifest.toml`` lists exactly these wheels (or rewrite the list with ``--write-manifest``).
 3. For each Python ABI and platform, stage the extension (the manifest with that ABI's Blender range and that
    platform's wheels alone, ``lbc_addon``'s modules at the package root, ``lbc_core`` as a sub-package: bundled wheels
-   must be PyPI's own) and build it with Blender's own builder: ``blender --command extension`` when a Blender binary
-   is on the PATH, else the same builder script shipped in the ``bpy`` module; then validate the zip with it.
+   must be PyPI's own) and build it with Blender's own builder; then validate the zip with it.
+4. Write a static extension repository beside the zips: Blender's ``index.json`` (and an ``index.html`` listing the
+   zips) for every zip in the output folder, as ``blender --command extension server-generate`` makes it. A studio
+   hosts the folder on any file server; artists add the URL of its ``index.json`` once, in Blender's Preferences >
+   Get Extensions > Repositories, and Blender picks the zip for its version and platform.
+5. Print which zip is for which Blender versions and platform.
+
+Blender's builder is ``blender --command extension`` when a Blender binary is on the PATH, else the same script
+(``blender_ext.py``, standard library only) from the ``bpy`` module when it is installed, else from the ``bpy`` wheel
+pinned by pyproject.toml's ``dev`` extra: downloaded once with ``pip download``, the script kept in ``wheels/builder/``.
+So the build needs only Python 3.11 or newer and pip (``make extension`` makes such an environment, ``.venv-build``).
 
 Shewchuk's Triangle is never bundled (its licence is not GPL-compatible); the add-on uses lbc_core's own mesher.
 """
 
 import argparse
 import importlib.util
+import json
 import re
 import shutil
 import subprocess
@@ -155,16 +165,59 @@ def with_lists(text, platforms, wheels, blender_range=None):
     return text
 
 
+BUILDER_SCRIPT = "scripts/addons_core/bl_pkg/cli/blender_ext.py"
+
+
+def builder_bpy_version():
+    """The bpy version whose builder script is downloaded when there is no Blender: the one the dev extra pins."""
+    for requirement in _pyproject()["optional-dependencies"]["dev"]:
+        name, _, version = requirement.partition("==")
+        if normalise(name) == "bpy" and version:
+            return version.strip()
+    sys.exit("pyproject.toml's dev extra must pin bpy with ==: its builder script builds the extension")
+
+
+def _version_tuple(text):
+    return tuple(int(part) for part in text.split("."))
+
+
+def downloaded_builder():
+    """Blender's builder script from the pinned bpy wheel, downloaded once and kept in wheels/builder/; its path."""
+    version = builder_bpy_version()
+    script = WHEELS / "builder" / f"bpy-{version}" / "blender_ext.py"
+    if script.exists():
+        return script
+    # The script is the same on every platform: take it from the Linux wheel, for the Python of that Blender.
+    (python,) = [python for python, (low, high, _) in PYTHON_LINES.items()
+                 if _version_tuple(low) <= _version_tuple(version) < _version_tuple(high)]
+    print(f"downloading the bpy {version} wheel once, for Blender's extension builder (about 400 MB)")
+    WHEELS.mkdir(exist_ok=True)
+    (WHEELS / ".gitignore").write_text("*\n")
+    with tempfile.TemporaryDirectory() as scratch:
+        subprocess.run([sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", "--only-binary=:all:",
+                        "--implementation", "cp", "--python-version", python, "--platform", "manylinux_2_28_x86_64",
+                        "--dest", scratch, f"bpy=={version}"], check=True)
+        (wheel,) = Path(scratch).glob("bpy-*.whl")
+        with zipfile.ZipFile(wheel) as archive:
+            (member,) = [name for name in archive.namelist() if name.endswith(f"/{BUILDER_SCRIPT}")]
+            script.parent.mkdir(parents=True, exist_ok=True)
+            partial = script.with_suffix(".part")
+            partial.write_bytes(archive.read(member))
+            partial.replace(script)
+    return script
+
+
 def blender_builder():
-    """The command that runs Blender's extension builder: a Blender binary, else the script in the bpy module."""
+    """The command that runs Blender's extension builder: a Blender binary, else the script of the bpy module, else
+    the script downloaded from the pinned bpy wheel."""
     blender = shutil.which("blender")
     if blender:
         return [blender, "--factory-startup", "--command", "extension"]
     spec = importlib.util.find_spec("bpy")
     if spec is not None:
-        for script in Path(spec.origin).parent.glob("*/scripts/addons_core/bl_pkg/cli/blender_ext.py"):
+        for script in Path(spec.origin).parent.glob(f"*/{BUILDER_SCRIPT}"):
             return [sys.executable, str(script)]
-    sys.exit("Blender's extension builder was not found: put blender on the PATH or install the bpy module")
+    return [sys.executable, str(downloaded_builder())]
 
 
 def stage(directory, manifest_text, wheels):
@@ -185,6 +238,31 @@ def stage(directory, manifest_text, wheels):
 def zip_name(version, python, platform):
     """The file name of one zip, e.g. ``lbc-0.1.0-blender4.2-5.0-linux_x64.zip``."""
     return f"lbc-{version}-{PYTHON_LINES[python][2]}-{platform.replace('-', '_')}.zip"
+
+
+def write_repository(builder, output):
+    """Write Blender's index.json (and index.html) of every zip in ``output``; returns the index's entries."""
+    generated = subprocess.run([*builder, "server-generate", "--repo-dir", str(output), "--html"], text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    # It reports a zip it cannot read, or two zips for the same Blender and platform, and goes on: show all but its
+    # count of packages.
+    for line in generated.stdout.splitlines():
+        if not re.fullmatch(r"found \d+ packages\.", line.strip()):
+            print(line)
+    if generated.returncode:
+        sys.exit(f"Blender's builder could not write the extension repository of {output}")
+    return json.loads((output / "index.json").read_text(encoding="utf-8"))["data"]
+
+
+def describe(entry):
+    """One line saying which Blender versions and platforms a zip of the repository is for."""
+    high = entry.get("blender_version_max")
+    blenders = f"Blender {entry['blender_version_min']} or newer" if high is None else \
+        f"Blender {entry['blender_version_min']} up to {high} (excluded)"
+    platforms = ", ".join(entry.get("platforms", ["every platform"]))
+    pythons = ", ".join(entry.get("python_versions", []))
+    return (f"{entry['archive_url'].removeprefix('./')}: {blenders}, {platforms}"
+            f"{f', Python {pythons}' if pythons else ''}; {entry['archive_size'] / 1e6:.1f} MB")
 
 
 def build(platforms, pythons, output, write_manifest):
@@ -228,7 +306,7 @@ def build(platforms, pythons, output, write_manifest):
                 shutil.move(built / f"lbc-{version}-{platform.replace('-', '_')}.zip", target)
                 subprocess.run([*builder, "validate", str(target)], check=True)
                 zips.append(target)
-    return zips
+    return zips, write_repository(builder, output)
 
 
 def main(argv=None):
@@ -241,10 +319,15 @@ def main(argv=None):
     parser.add_argument("--write-manifest", action="store_true",
                         help="rewrite blender_manifest.toml's wheel list from the pinned versions")
     args = parser.parse_args(argv)
-    zips = build(args.platform or list(PLATFORM_TAGS), args.python or list(PYTHON_LINES), args.output,
-                 args.write_manifest)
-    for path in zips:
-        print(f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}: {path.stat().st_size / 1e6:.1f} MB")
+    zips, entries = build(args.platform or list(PLATFORM_TAGS), args.python or list(PYTHON_LINES), args.output,
+                          args.write_manifest)
+    output = args.output.resolve()
+    shown = output.relative_to(ROOT) if output.is_relative_to(ROOT) else output
+    print(f"\n{shown}/ holds {len(entries)} zip(s) and an extension repository, index.json:")
+    for entry in sorted(entries, key=lambda entry: entry["archive_url"]):
+        print(f"  {describe(entry)}")
+    print(f"Install one zip from disk, or host {shown}/ on a file server and add the URL of its index.json in "
+          f"Blender's Preferences > Get Extensions > Repositories.")
     return zips
 
 
