@@ -148,10 +148,17 @@ def test_a_cage_object_scaled_to_zero_on_an_axis_is_refused_as_such():
 
 def test_messages_about_a_cage_name_its_modifiers_when_they_make_it_another_cage():
     """A new user's finding: a Solidify cage was "2 separate parts" with one part in the mesh data; a Mirror turned off
-    in viewports after binding led Rebind to say "fill the holes"; a changed Subdivision level only "has 98 vertices"."""
+    in viewports after binding led Rebind to say "fill the holes"; a changed Subdivision level only "has 98 vertices".
+
+    A Solidify box is a valid shell now (its inner surface faces into the cavity), and the sphere lies in the cavity,
+    outside the shell; an Array's copy beside the box still makes the cage two parts, and the message says whose."""
     mesh, cage = sphere_in_box_scene()
     cage.modifiers.new("Solidify", "SOLIDIFY").thickness = 0.05
-    with pytest.raises(lbc_core.CageError, match=r"separate parts.*\(this is the cage as its modifier 'Solidify' "
+    with pytest.raises(lbc_core.CageError, match=r"every vertex of 'Sphere' lies outside the cage 'Box'"):
+        api.bind(mesh, cage, cells=1000)
+    cage.modifiers.clear()
+    cage.modifiers.new("Array", "ARRAY").relative_offset_displace = (1.5, 0.0, 0.0)  # a copy beside it, apart
+    with pytest.raises(lbc_core.CageError, match=r"separate parts.*\(this is the cage as its modifier 'Array' "
                                                  r"makes it\)"):
         api.bind(mesh, cage, cells=1000)
     cage.modifiers.clear()
