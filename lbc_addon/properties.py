@@ -13,13 +13,11 @@ from .core import (
     DEFAULT_CELLS_3D,
     DEFAULT_FLOOR,
     DEFAULT_TOLERANCE,
-    LOOSE_TOLERANCE,
-    LOOSE_TOLERANCE_FROM,
 )
 
 # Influences per mesh vertex by default (bench/RESULTS.md, "Blender deformer"): every weight lowered by the
 # Thinning floor (DEFAULT_FLOOR) and no cap on the count. A cap ranks the weights of each vertex, and where the ranks
-# swap the thinned weights bend: even continuous, a cap of 12 creases issue 12's bent capsule (p99 3.4°, max 19°), the
+# swap the thinned weights bend: even continuous, a cap of 12 creases the bent capsule of bench/capsule.py (p99 3.4°, max 19°), the
 # floor alone does not (1.4° / 2.8°, Mesh Deform 2.1° / 3.3°).
 DEFAULT_INFLUENCES = 0
 
@@ -74,8 +72,8 @@ class BindOptionProperties:
     tolerance: FloatProperty(
         name="Tolerance",
         description="Stopping tolerance of the solver (relative ADMM residual); 0 uses lbc's default "
-        f"({DEFAULT_TOLERANCE[2]:g} in 2D, {DEFAULT_TOLERANCE[3]:g} in 3D, {LOOSE_TOLERANCE:g} from "
-        f"{LOOSE_TOLERANCE_FROM} cage vertices). Smaller: more accurate weights, slower bind",
+        f"({DEFAULT_TOLERANCE[2]:g} in 2D, {DEFAULT_TOLERANCE[3]:g} in 3D). Smaller: more accurate weights, "
+        "slower bind",
         default=0.0,
         min=0.0,
         soft_max=0.01,

@@ -28,7 +28,7 @@ class Anderson:
         self.count += 1
         used = min(self.count, self.memory)
         # BLAS in the history's own precision: mixing in float64 would copy the whole history each call.
-        products = (self.dF[:used] @ residual).astype(np.float64)
+        products = (self.dF[:used] @ residual.astype(self.dF.dtype, copy=False)).astype(np.float64)
         if previous_residual is self._residual:
             # ΔF_j · ΔF_new = ΔF_j · r_new - ΔF_j · r_old: the history is read once per step, not twice.
             row = products.copy()
@@ -49,19 +49,22 @@ class Anderson:
         if residual is self._residual:
             products = self._products
         else:
-            products = (self.dF[:used] @ residual).astype(np.float64)
+            products = (self.dF[:used] @ residual.astype(self.dF.dtype, copy=False)).astype(np.float64)
         theta = np.linalg.solve(gram, products)
-        return value - (theta.astype(value.dtype) @ self.dG[:used])
+        return value - (theta.astype(self.dG.dtype) @ self.dG[:used])
 
 
     def embed(self, positions, size, residual):
-        """Carry the history into a larger state whose entry ``positions[k]`` is this state's entry k (the new
-        entries 0): differences and their products are unchanged. ``residual`` is the last pushed residual, already
-        carried."""
+        """Carry the history into another layout of the state, whose entry ``positions[k]`` is this state's entry k
+        (-1: dropped; entries no one maps to are 0). ``residual`` is the last pushed residual, already carried."""
+        kept = positions >= 0
         for name in ("dF", "dG"):
             old = getattr(self, name)
             new = np.zeros((self.memory, size), dtype=old.dtype)
-            new[:, positions] = old
+            new[:, positions[kept]] = old[:, kept]
             setattr(self, name, new)
+        used = min(self.count, self.memory)
+        self.gram[:used, :used] = (self.dF[:used] @ self.dF[:used].T).astype(np.float64)
         if self._residual is not None:
             self._residual = residual
+            self._products = (self.dF[:used] @ residual.astype(self.dF.dtype, copy=False)).astype(np.float64)

@@ -8,13 +8,9 @@ import numpy as np
 from .errors import CageError
 from .stretch import Stretch
 
-# In 3D, 2e-4 stops where the deformation is within half of what remeshing alone changes (8000 against 9000 cells)
-# and the objective within 0.06 % of a tight solve, at 0.65-0.8 of the iterations of 1e-4 (see bench/RESULTS.md).
-DEFAULT_TOLERANCE = {2: 2.5e-4, 3: 2e-4}
-# From LOOSE_TOLERANCE_FROM control points on, remeshing changes more (the coordinates are narrower) and a 3D solve
-# stopped at LOOSE_TOLERANCE still stays within half of it (at most 0.32 of it on 13 cages of 42-168 control points,
-# against 0.34-0.44 at 2e-4 on cages of 11 and 27), in LOOSE_TOLERANCE_ITERATIONS of the iterations (bench/RESULTS.md).
-LOOSE_TOLERANCE, LOOSE_TOLERANCE_FROM, LOOSE_TOLERANCE_ITERATIONS = 3e-4, 40, 0.82
+# The relative residual a solve stops at by default, per dimension: within 0.03 % of a tight solve's objective on
+# the gargoyle's cages and the paper's 2D cages (bench/RESULTS.md, "The locality solver").
+DEFAULT_TOLERANCE = {2: 1e-4, 3: 5e-4}
 
 
 
@@ -26,7 +22,7 @@ VERTICES_PER_CELL = {2: 0.53, 3: 0.23}
 
 
 def default_tolerance(dim, n_control_points):
-    """The stopping tolerance of a solve that is given none (see DEFAULT_TOLERANCE and LOOSE_TOLERANCE).
+    """The stopping tolerance of a solve that is given none (DEFAULT_TOLERANCE; the same for any cage).
 
     Parameters
     ----------
@@ -36,8 +32,7 @@ def default_tolerance(dim, n_control_points):
     -------
     float, a relative primal residual
     """
-    if dim == 3 and n_control_points >= LOOSE_TOLERANCE_FROM:
-        return LOOSE_TOLERANCE
+    del n_control_points
     return DEFAULT_TOLERANCE[dim]
 
 
@@ -134,8 +129,6 @@ def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0):
     """About how many iterations a solve takes at the default tolerance (see :data:`ITERATIONS_SCALE`,
     :data:`STRETCHED_ITERATIONS`, :data:`THIN_FROM_ASPECT`); the arguments as for :func:`solve_forecast`."""
     iterations = ITERATIONS_SCALE * n_control_points ** ITERATIONS_POWER
-    if default_tolerance(dim, n_control_points) == LOOSE_TOLERANCE:
-        iterations *= LOOSE_TOLERANCE_ITERATIONS
     if stretched:
         iterations *= STRETCHED_ITERATIONS
     elif dim == 3 and aspect > THIN_FROM_ASPECT:

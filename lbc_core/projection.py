@@ -22,15 +22,17 @@ import numpy as np
 
 # Newton steps at most per projection; a converged vertex leaves the batch.
 NEWTON_STEPS = 50
-# A vertex is converged when |b − A w| is below this (its entries are weights and unit-frame coordinates).
-RESIDUAL_TOLERANCE = 1e-13
+# A vertex is converged when |b − A w| is below this (its entries are weights and unit-frame coordinates), and
+# below STEP_TOLERANCE within a solve's iterations (bench/RESULTS.md, "The locality solver").
+RESIDUAL_TOLERANCE, STEP_TOLERANCE = 1e-13, 1e-10
 # Halvings of a Newton step at most in the line search, and the residual below which it takes the full step.
 LINE_SEARCH_STEPS, LINE_SEARCH_FROM = 30, 1e-6
 # What padding slots hold: far below any y + Aᵀν, so they stay 0.
 PADDING_VALUE = -1e30
 
 
-def project_rows(values, corners, targets, duals=None, steps=NEWTON_STEPS, products=None):
+def project_rows(values, corners, targets, duals=None, steps=NEWTON_STEPS, products=None,
+                 tolerance=RESIDUAL_TOLERANCE):
     """Project each row of ``values`` onto its vertex's constraint set.
 
     Parameters
@@ -46,6 +48,8 @@ def project_rows(values, corners, targets, duals=None, steps=NEWTON_STEPS, produ
     steps : int
     products : (N, K, m(m+1)/2) float array, optional
         :func:`corner_products` of ``corners``, when the caller keeps them from one projection to the next.
+    tolerance : float
+        |b − A w| at which a row is done (the iterations of a solve take a looser one than its output).
 
     Returns
     -------
@@ -54,7 +58,7 @@ def project_rows(values, corners, targets, duals=None, steps=NEWTON_STEPS, produ
     duals : (N, m) float array
         ν at the end, to warm-start the next projection.
     feasible : (N,) bool array
-        Whether the constraints were met to RESIDUAL_TOLERANCE; False where x_v lies outside the hull of the row's
+        Whether the constraints were met to ``tolerance``; False where x_v lies outside the hull of the row's
         control points (the dual ascent then diverges) or the steps ran out.
     """
     nu = np.zeros(targets.shape) if duals is None else np.array(duals, dtype=float)
@@ -72,7 +76,7 @@ def project_rows(values, corners, targets, duals=None, steps=NEWTON_STEPS, produ
         rows = np.where(active, shifted, 0.0)
         gradient = batch.targets - _apply_transposed(batch.corners, rows)
         size = np.sqrt(np.einsum("nj,nj->n", gradient, gradient))
-        done = size <= RESIDUAL_TOLERANCE
+        done = size <= tolerance
         weights[pending[done]] = rows[done]
         feasible[pending[done]] = True
         if step == steps:

@@ -32,12 +32,12 @@ from .objective import tv_objective
 from .progress import Progress
 from .splitting import DouglasRachford
 from .stretch import Stretch
-from .working_sets import MeshData, PairOperators, WorkingSets, first_working_sets
+from .working_sets import MeshData, PairOperators, WorkingSets, feasible_working_sets, first_working_sets
 
 # β: the weight of the W = Z block against the gradient block, on the unit-diagonal cage.
 BETA = {2: 20.0, 3: 1280.0}
 # The starting penalty c_d / n^(1/(d-1)) for n control points: c_d.
-PENALTY_SCALE = {2: 1.3, 3: 1.3}
+PENALTY_SCALE = {2: 1.3, 3: 0.3}
 # The dual residual's tolerance as a multiple of the primal one (it lags; the objective settles first).
 DUAL_TOLERANCE_FACTOR = 10.0
 # Steps per Anderson extrapolation, and the over-relaxation α of each step.
@@ -47,10 +47,10 @@ RELAXATION = {2: 1.6, 3: 1.9}
 # residual exceeds BALANCE_HIGH times the dual, halve it below BALANCE_LOW times (bench/RESULTS.md, "Penalty").
 BALANCE_UNTIL, BALANCE_SPACING = 300, 30
 BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
-# The working sets grow by a ring around the weights above GROWTH_FLOOR at iterations GROWTH_FIRST_CHECK, twice
-# that, four times..., and around those above GROWTH_FLOOR_AT_END before the solve may stop (bench/RESULTS.md,
-# "The locality solver").
-GROWTH_FIRST_CHECK, GROWTH_FLOOR, GROWTH_FLOOR_AT_END = 10, 1e-3, 1e-4
+# The working sets are reshaped to one ring of vertices around the weights above GROWTH_FLOOR at iterations
+# GROWTH_FIRST_CHECK, then each time GROWTH_SPACING times as many; a solve that meets its tolerance grows them
+# first unless that adds at most END_GROWTH_SHARE of the slots (bench/RESULTS.md, "The locality solver").
+GROWTH_FIRST_CHECK, GROWTH_SPACING, GROWTH_FLOOR, END_GROWTH_SHARE = 10, 3, 1e-3, 0.01
 # Where each part of the solve ends on its progress range.
 _SETUP_END, _ADMM_END = 0.06, 0.98
 
@@ -233,9 +233,9 @@ def _starting_point(mesh, start, progress):
         harmonic = _harmonic(mesh, progress.check)
         sets, weights, duals = first_working_sets(mesh, harmonic, progress.check)
         return sets, weights, duals, None
-    sets, carried = start.sets, start
-    weights = carried.slot_state / carried.sqrt_mass[sets.vertex_of_slot]
-    return sets, weights, carried.duals.copy(), carried
+    values = start.slot_state / start.sqrt_mass[start.sets.vertex_of_slot]
+    sets, weights, duals = feasible_working_sets(mesh, start.sets, values, start.duals, progress.check)
+    return sets, weights, duals, start
 
 
 def _harmonic(mesh, check):
@@ -266,7 +266,7 @@ class _Run:
 
     def solve(self, sets, weights, duals, carried):
         check = self.progress.check
-        grown = sets.grown(self.mesh.required(sets, weights))
+        grown = sets.grown(self.mesh.margins(sets, weights)[0])
         if grown is not None:
             weights = _moved(weights, sets.slot_positions(grown), grown.n_slots)
             sets = grown
@@ -275,21 +275,19 @@ class _Run:
         check()
         step = self._step_map(ops, duals)
         state = step.state_of(weights) if carried is None else carried.state_for(step, sets)
+        if carried is not None:  # a warm start's sets fit already: its first reshape comes later
+            self.next_growth_check = GROWTH_SPACING ** 2 * GROWTH_FIRST_CHECK
         self.started = time.perf_counter()
         self.checks, self.fraction, self.first_distance = [], 0.0, None
         state, out, step = self._iterate(step, state)
         final = SolverState.of(step, state, self.mesh)
-        if out is None:  # the limit came right after the sets grew: the weights of the state as it is
-            weights = step.projected(step.split(state)[1]) / step.ops.slot_mass
-        else:
-            weights = step.weights(out)
-        return _Solution(step.ops.sets, weights, final)
+        return _Solution(step.ops.sets, step.final_weights(state), final)
 
     def _iterate(self, step, state):
         """Steps from ``state`` until convergence, the iteration limit, or growth of the working sets (which
         returns the state carried onto the grown layout)."""
         settings, check = self.settings, self.progress.check
-        anderson = Anderson(len(state), settings.anderson_memory, state.dtype, check) \
+        anderson = Anderson(len(state), settings.anderson_memory, np.float32, check) \
             if settings.anderson_memory else None
         alpha, period = settings.relaxation, settings.anderson_period
         value, residual, norm, out, previous = state, None, np.inf, None, None
@@ -324,8 +322,8 @@ class _Run:
             if verdict == "converged":
                 self.converged = True
                 return value, out, step
-            if verdict == "grown":
-                step, positions = self._grow(step)
+            if verdict == "reshaped":
+                step, positions = self._reshape(step)
                 value = _moved(value, positions, step.size_x + step.ops.sets.n_slots)
                 residual = None if residual is None else _moved(residual, positions, len(value))
                 if anderson:
@@ -359,18 +357,20 @@ class _Run:
             self.history.append(record)
             distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
             if distance <= 1:
-                self.pending_growth = self._growth(step, out, GROWTH_FLOOR_AT_END)
-                if self.pending_growth is None:
+                self.pending_growth = self._growth(step, out, GROWTH_FLOOR, prune=False)
+                if self.pending_growth is None or \
+                        self.pending_growth.n_slots <= (1 + END_GROWTH_SHARE) * step.ops.sets.n_slots:
+                    self.pending_growth = None
                     return "converged"
         else:
             self.history.append(dict(iteration=self.iteration, primal=float(primal)))
             distance = primal / tolerance
         self._report(distance)
         if self.pending_growth is None and self.iteration >= self.next_growth_check:
-            self.next_growth_check = 2 * self.iteration
+            self.next_growth_check = GROWTH_SPACING * self.iteration
             self.pending_growth = self._growth(step, out, GROWTH_FLOOR)
         if self.pending_growth is not None:
-            return "grown"
+            return "reshaped"
         if self.iteration <= BALANCE_UNTIL and previous is not None and \
                 self.iteration % BALANCE_SPACING < settings.check_every:
             factor = _balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
@@ -383,21 +383,28 @@ class _Run:
                 return "rescaled"
         return None
 
-    def _growth(self, step, out, floor):
-        """The working sets grown by one ring around the weights above ``floor``, or None where they hold it."""
+    def _growth(self, step, out, floor, prune=True):
+        """The working sets reshaped to the weights above ``floor``: grown to one ring around them, and (with
+        ``prune``) rid of the slots beyond two rings; None where they already hold that."""
         weights = step.weights(out)
-        return step.ops.sets.grown(self.mesh.required(step.ops.sets, np.where(weights > floor, weights, 0.0)))
+        one_ring, two_rings = self.mesh.margins(step.ops.sets, np.where(weights > floor, weights, 0.0))
+        sets = step.ops.sets
+        return sets.reshaped(one_ring, one_ring) if prune else sets.grown(one_ring)
 
-    def _grow(self, step):
-        """The step map on the grown working sets, and where each entry of the flat state goes there."""
-        grown = self.pending_growth
-        ops = PairOperators(self.mesh, grown)
+    def _reshape(self, step):
+        """The step map on the reshaped working sets, and where each entry of the flat state goes there (-1:
+        dropped)."""
+        sets = self.pending_growth
+        ops = PairOperators(self.mesh, sets)
         self.progress.check()
         new_step = self._step_map(ops, step.duals)
         pair_positions = step.ops.pair_positions(ops)
-        x_positions = (np.arange(ops.d)[:, None] * ops.n_pairs + pair_positions[None, :]).ravel()
-        positions = np.concatenate([x_positions, new_step.size_x + step.ops.sets.slot_positions(grown)])
-        self.history.append(dict(iteration=self.iteration, slots=grown.n_slots, pairs=ops.n_pairs))
+        x_positions = np.arange(ops.d)[:, None] * ops.n_pairs + pair_positions[None, :]
+        x_positions[:, pair_positions < 0] = -1
+        slot_positions = step.ops.sets.slot_positions(sets)
+        positions = np.concatenate([x_positions.ravel(),
+                                    np.where(slot_positions >= 0, new_step.size_x + slot_positions, -1)])
+        self.history.append(dict(iteration=self.iteration, slots=sets.n_slots, pairs=ops.n_pairs))
         return new_step, positions
 
     def _report(self, distance):
@@ -415,9 +422,10 @@ class _Run:
 
 
 def _moved(values, positions, size):
-    """``values`` placed at ``positions`` of a zero array of ``size``."""
+    """``values`` placed at ``positions`` of a zero array of ``size`` (those at -1 dropped)."""
     out = np.zeros(size)
-    out[positions] = values
+    kept = positions >= 0
+    out[positions[kept]] = values[kept]
     return out
 
 
@@ -567,7 +575,7 @@ class SolverState:
                                     where=thresholds > 0)
         v_x[:, new_positions] = old * (kept * cell_ratio + (1.0 - kept) * threshold_ratio)
         mass_ratio = ops.slot_mass / self.sqrt_mass[sets.vertex_of_slot]
-        v_w[self.sets.slot_positions(sets)] = self.slot_state
+        v_w[self.sets.slot_positions(sets)] = self.slot_state  # ``sets`` holds every slot of this state's
         v_w *= mass_ratio
         return state
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .projection import RESIDUAL_TOLERANCE
 from .shrink import group_norms, shrink_factor, weighted_shrink_factors
 
 
@@ -88,7 +89,7 @@ class DouglasRachford:
         shrink = self.shrink_factors(v_x, self.thresholds, remember=True)
         W = self.projected(v_w)
         reflected_x = v_x * (2.0 * shrink - 1.0) - ops.boundary_part
-        rhs = ops.gradient_t @ reflected_x.ravel()
+        rhs = ops.gradient.T @ reflected_x.ravel()
         rhs += ops.slot_mass * (2.0 * W - v_w)
         z = ops.solve(rhs)
         gradient = ops.gradients(z)
@@ -123,5 +124,11 @@ class DouglasRachford:
         return float(np.sum(self.pair_weights * self.ops.pair_sqrt_cell * group_norms(gradient)))
 
     def weights(self, step):
-        """The weights (S,) of a step: W̃ unscaled, exactly feasible."""
+        """The weights (S,) of a step: W̃ unscaled, feasible to the iterations' tolerance."""
         return step.W / self.ops.slot_mass
+
+    def final_weights(self, state):
+        """The weights (S,) of a state, projected onto the constraints to round-off: the solve's output."""
+        weights, self.duals, _ = self.ops.project(self.split(state)[1] / self.ops.slot_mass, self.duals,
+                                                  RESIDUAL_TOLERANCE)
+        return weights

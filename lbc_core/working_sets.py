@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from . import fem
 from .factor import Factor
-from .projection import PADDING_VALUE, corner_products, project_rows
+from .projection import PADDING_VALUE, STEP_TOLERANCE, corner_products, project_rows
 
 # The harmonic coordinates' largest entries a vertex's first working set takes, then twice as many until the vertex's
 # position lies in their control points' hull (bench/RESULTS.md, "The locality solver").
@@ -66,19 +66,32 @@ class WorkingSets:
         matrix.sort_indices()
         return cls(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.shape[1])
 
-    def grown(self, required):
-        """These working sets with the pattern of ``required`` (an (N_in, n) sparse matrix) added; None when it adds
-        nothing."""
-        union = (self.matrix() + sp.csr_matrix(required, dtype=float)).astype(bool).astype(float)
-        if union.nnz == self.n_slots:
+    def reshaped(self, required, kept):
+        """These working sets with the pattern of ``required`` added and the slots outside ``kept`` dropped (both
+        (N_in, n) sparse patterns, ``kept`` covering ``required``); None when nothing changes."""
+        current = self.matrix()
+        union = (current.multiply(kept) + sp.csr_matrix(required, dtype=float)).astype(bool).astype(float)
+        union.eliminate_zeros()
+        if union.nnz == self.n_slots and current.multiply(union).nnz == self.n_slots:
             return None
         return WorkingSets.from_matrix(union)
 
+    def grown(self, required):
+        """These working sets with the pattern of ``required`` added; None when it adds nothing."""
+        return self.reshaped(required, self.matrix() + sp.csr_matrix(required, dtype=float))
+
     def slot_positions(self, other):
-        """Where each of this layout's slots sits in ``other``, a superset of it (grown from it)."""
+        """Where each of this layout's slots sits in ``other``, -1 where ``other`` has no such slot."""
         keys = self.vertex_of_slot * self.n_controls + self.controls
-        other_keys = other.vertex_of_slot * other.n_controls + other.controls
-        return np.searchsorted(other_keys, keys)
+        return _positions(keys, other.vertex_of_slot * other.n_controls + other.controls)
+
+
+def _positions(keys, sorted_keys):
+    """The position of each of ``keys`` in ``sorted_keys``, -1 where it is not there."""
+    if not len(sorted_keys):
+        return np.full(len(keys), -1)
+    found = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
+    return np.where(sorted_keys[found] == keys, found, -1)
 
 
 def first_working_sets(mesh, harmonic, check):
@@ -99,21 +112,37 @@ def first_working_sets(mesh, harmonic, check):
     -------
     WorkingSets, (S,) float array of weights, (N_in, d+1) float array of the projection's duals
     """
-    n = harmonic.shape[1]
-    order = np.argsort(-harmonic, axis=1)
-    size = np.full(len(harmonic), min(FIRST_SET_SIZE, n))
+    return _until_feasible(mesh, sp.csr_matrix(harmonic.shape), np.argsort(-harmonic, axis=1), harmonic, None, check)
+
+
+def feasible_working_sets(mesh, sets, values, duals, check):
+    """``sets`` with control points added, nearest first, at the vertices whose position lies outside the hull of
+    their set's control points (a warm start's mesh, moved): the sets, the projection of ``values`` (S,) onto them,
+    and the projection's duals."""
+    distances = np.linalg.norm(mesh.unit_interior[:, None, :] - mesh.unit_controls[None, :, :], axis=2)
+    return _until_feasible(mesh, sets.matrix(), np.argsort(distances, axis=1), sets.matrix(values).toarray(), duals,
+                           check, first_size=np.zeros(len(distances), dtype=np.int64))
+
+
+def _until_feasible(mesh, base, order, values, duals, check, first_size=None):
+    """The slots of ``base`` (an (N_in, n) pattern) plus, per vertex, the first ``size`` control points of its row of
+    ``order``, ``size`` doubling (from FIRST_SET_SIZE, or ``first_size``) where the vertex's position lies outside
+    their hull; the rows of ``values`` (N_in, n) projected onto their constraints."""
+    n_rows, n = values.shape
+    size = np.full(n_rows, min(FIRST_SET_SIZE, n)) if first_size is None else np.asarray(first_size)
     while True:
         check()
         keep = np.arange(n)[None, :] < size[:, None]
-        rows = np.repeat(np.arange(len(harmonic)), size)
-        matrix = sp.csr_matrix((np.ones(len(rows)), (rows, order[keep])), shape=harmonic.shape)
-        sets = WorkingSets.from_matrix(matrix)
+        rows = np.repeat(np.arange(n_rows), size)
+        added = sp.csr_matrix((np.ones(len(rows)), (rows, order[keep])), shape=values.shape)
+        sets = WorkingSets.from_matrix(added + base.astype(bool).astype(float))
         padded = PaddedRows(sets, mesh)
-        values = padded.gather(harmonic[sets.vertex_of_slot, sets.controls])
-        weights, duals, feasible = project_rows(values, padded.corners, padded.targets, products=padded.products)
+        weights, duals_out, feasible = project_rows(padded.gather(values[sets.vertex_of_slot, sets.controls]),
+                                                    padded.corners, padded.targets, duals,
+                                                    products=padded.products)
         if feasible.all() or (size >= n).all():
-            return sets, padded.scatter(weights), duals
-        size[~feasible] = np.minimum(2 * size[~feasible], n)
+            return sets, padded.scatter(weights), duals_out
+        size[~feasible] = np.minimum(np.maximum(2 * size[~feasible], size[~feasible] + 4), n)
 
 
 @dataclass
@@ -176,16 +205,23 @@ class MeshData:
         return cls(vertices, cells, interior, position, fixed, gradients * sqrt_cell[:, None, None], sqrt_cell,
                    np.sqrt(beta * mass), adjacency, unit_controls, unit_vertices[interior])
 
-    def required(self, sets, weights):
-        """The slots one ring of margin around the positive ``weights`` (S,) and the boundary values asks for, as an
-        (N_in, n) sparse matrix."""
-        positive = sets.matrix((weights > 0).astype(float))
-        positive.eliminate_zeros()
-        on_all = sp.csr_matrix((positive.data, positive.indices, positive.indptr), shape=positive.shape)
-        on_all = sp.vstack([on_all, sp.csr_matrix((1, on_all.shape[1]))]).tocsr()[
-            np.where(self.interior_position >= 0, self.interior_position, on_all.shape[0] - 1)]
-        support = (on_all + self.fixed).astype(bool).astype(float)
-        return (self.adjacency[self.interior] @ support).astype(bool).astype(float)
+    def margins(self, sets, weights):
+        """The slots within one ring and within two rings of mesh vertices around the positive ``weights`` (S,)
+        and the boundary values, as (N_in, n) sparse patterns."""
+        support = self._on_all_vertices(sets.matrix((weights > 0).astype(float))) + self.fixed
+        one_ring = self.adjacency @ support.astype(bool).astype(float)
+        two_rings = self.adjacency @ one_ring.astype(bool).astype(float)
+        return (one_ring[self.interior].astype(bool).astype(float),
+                two_rings[self.interior].astype(bool).astype(float))
+
+    def _on_all_vertices(self, matrix):
+        """An (N_in, n) matrix's rows placed at the interior vertices of an (N, n) one."""
+        matrix = sp.csr_matrix(matrix)
+        matrix.eliminate_zeros()
+        counts = np.zeros(len(self.vertices), dtype=np.int64)
+        counts[self.interior] = np.diff(matrix.indptr)
+        return sp.csr_matrix((matrix.data, matrix.indices, np.r_[0, np.cumsum(counts)]),
+                             shape=(len(self.vertices), matrix.shape[1]))
 
 
 class PaddedRows:
@@ -224,7 +260,6 @@ class PairOperators:
         The (cell, control point) pairs where a coordinate's gradient may be non-zero, sorted.
     gradient : (d P, S) CSR matrix
         Slot values → √|c| ∇w on the pairs, component-major rows (row k P + p).
-    gradient_t : (S, d P) CSR matrix
     boundary_part : (d, P) float array
         The boundary values' part of √|c| ∇w on the pairs.
     slot_mass : (S,) float array
@@ -239,7 +274,6 @@ class PairOperators:
         slot_vertex = mesh.interior[sets.vertex_of_slot]
         n = sets.n_controls
         self.pair_cell, self.pair_control = self._pairs(mesh, sets, slot_vertex)
-        n_pairs = len(self.pair_cell)
         d = mesh.vertices.shape[1]
         # Each pair's corners: a slot (its index), or a boundary value, or nothing.
         corner_vertex = mesh.cells[self.pair_cell]  # (P, d+1)
@@ -256,16 +290,9 @@ class PairOperators:
             np.zeros(keys.shape)
         scaled = mesh.scaled_gradients[self.pair_cell]  # (P, d+1, d)
         self.boundary_part = np.einsum("pc,pck->kp", corner_fixed, scaled)
-        kept = corner_slot >= 0
-        rows = (np.arange(d)[:, None, None] * n_pairs + np.arange(n_pairs)[None, :, None])  # (d, P, 1)
-        rows = np.broadcast_to(rows, (d,) + corner_slot.shape)[:, kept]
-        columns = np.broadcast_to(corner_slot, (d,) + corner_slot.shape)[:, kept]
-        values = np.transpose(scaled, (2, 0, 1))[:, kept]
-        self.gradient = sp.csr_matrix((values.ravel(), (rows.ravel(), columns.ravel())),
-                                      shape=(d * n_pairs, sets.n_slots), dtype=dtype)
-        self.gradient_t = self.gradient.T.tocsr()
+        self.gradient = _gradient_matrix(scaled, corner_slot, sets.n_slots, dtype)
         self.slot_mass = mesh.sqrt_mass[sets.vertex_of_slot]
-        system = (self.gradient_t @ self.gradient).tocsr()
+        system = (self.gradient.T @ self.gradient).tocsr()
         system = (system + sp.diags(self.slot_mass ** 2)).tocoo()
         lower = system.row >= system.col
         self.factor = Factor(sp.coo_matrix((system.data[lower], (system.row[lower], system.col[lower])),
@@ -298,13 +325,27 @@ class PairOperators:
     def solve(self, rhs):
         return self.factor.solve(rhs)
 
-    def project(self, slot_values, duals):
+    def project(self, slot_values, duals, tolerance=STEP_TOLERANCE):
         """Each vertex's slot values projected onto its constraints: (S,) weights, (N_in, d+1) duals, feasible."""
         weights, duals, feasible = project_rows(self.padded.gather(slot_values), self.padded.corners,
-                                                self.padded.targets, duals, products=self.padded.products)
+                                                self.padded.targets, duals, products=self.padded.products,
+                                                tolerance=tolerance)
         return self.padded.scatter(weights), duals, feasible
 
     def pair_positions(self, other):
-        """Where each of this layout's pairs sits in ``other``, a layout grown from it."""
+        """Where each of this layout's pairs sits in ``other``, -1 where ``other`` has no such pair."""
         n = self.sets.n_controls
-        return np.searchsorted(other.pair_cell * n + other.pair_control, self.pair_cell * n + self.pair_control)
+        return _positions(self.pair_cell * n + self.pair_control, other.pair_cell * n + other.pair_control)
+
+
+def _gradient_matrix(scaled, corner_slot, n_slots, dtype):
+    """The (d P, S) CSR matrix of slot values → √|c| ∇w on the pairs, rows component-major, from each pair's corner
+    gradients (P, d+1, d) and corner slots (P, d+1), -1 where a corner holds no slot."""
+    n_pairs, _, d = scaled.shape
+    pair, corner = np.nonzero(corner_slot >= 0)  # row-major: each pair's corners in order
+    counts = np.bincount(pair, minlength=n_pairs)
+    row_starts = np.r_[0, np.cumsum(counts)]
+    indptr = np.concatenate([row_starts[:-1] + k * len(pair) for k in range(d)] + [[d * len(pair)]])
+    indices = np.tile(corner_slot[pair, corner], d)
+    data = np.concatenate([scaled[pair, corner, k] for k in range(d)]).astype(dtype)
+    return sp.csr_matrix((data, indices, indptr), shape=(d * n_pairs, n_slots))

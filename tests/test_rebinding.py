@@ -149,7 +149,7 @@ def test_a_second_warm_rebind_starts_from_the_first(gargoyle):
     twice = rebind(once, moved(cage, [3, 20], 0.01), faces)
     assert twice.options["start"] == "previous solution"
     assert_guarantees(twice, points)
-    assert twice.iterations < first.iterations / 2
+    assert twice.iterations <= first.iterations / 2
 
 
 def test_an_unmoved_cage_gives_the_previous_weights_back(gargoyle):
@@ -424,7 +424,8 @@ def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm()
 
 def test_cancel_stops_a_warm_rebind_and_leaves_the_previous_binding_as_it_was(gargoyle):
     cage, faces, points, first = gargoyle
-    state, domain_weights = first.solver_state.state.copy(), first.domain_weights.copy()
+    state = [part.copy() for part in (first.solver_state.pair_state, first.solver_state.slot_state)]
+    domain_weights = first.domain_weights.copy()
     polls = []
 
     def cancel():
@@ -433,7 +434,8 @@ def test_cancel_stops_a_warm_rebind_and_leaves_the_previous_binding_as_it_was(ga
 
     with pytest.raises(lbc_core.Cancelled):
         rebind(first, moved(cage, [3], 0.01), faces, cancel=cancel)
-    np.testing.assert_array_equal(first.solver_state.state, state)
+    np.testing.assert_array_equal(first.solver_state.pair_state, state[0])
+    np.testing.assert_array_equal(first.solver_state.slot_state, state[1])
     np.testing.assert_array_equal(first.domain_weights, domain_weights)
 
 
