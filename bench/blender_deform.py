@@ -21,7 +21,7 @@ Blender's default Cylinder. Variants: no deformer, Mesh Deform (precision 5), LB
 the add-on's defaults, LBC with every weight (bound with a threshold of 1e-12: nothing thinned), LBC with every
 weight thinned by other thresholds and caps (``--thin floor:cap``; see :func:`lbc_core.thinning.thin_weights`),
 LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`), the default's weights with
-another number of slots evaluated for every vertex (``--shared``; see :func:`lbc_addon.deformer.build_node_group`),
+another number of slots evaluated for every vertex (``--shared``; see :func:`lbc_addon.node_group.build_node_group`),
 and the default's tree changed by another lever (``--trees``; see :func:`rebuild_tree`, and :func:`triplet_variant`
 for "triplets"). ``--reference-cells`` also
 prints how far the binding with every weight is from a finer one: the yardstick for the error thinning makes.
@@ -52,7 +52,7 @@ from blender_scenes import (  # noqa: E402
 )
 import scipy.sparse as sp  # noqa: E402
 
-from lbc_addon import api, deformer, storage  # noqa: E402
+from lbc_addon import api, deformer, handlers, node_group, storage  # noqa: E402
 from lbc_core.thinning import thin_weights  # noqa: E402
 
 EVERY_WEIGHT = 1e-12  # a Threshold that thins nothing
@@ -116,7 +116,7 @@ def lbc_variant(bound, cage, name, thinning=None, sum_form=None, shared_slots=No
     """A copy of the bound mesh deformed by LBC, its weights thinned by ``thinning`` = (floor, cap) (None: as
     bound; see :func:`lbc_core.thinning.thin_weights`), its weighted sum built as ``sum_form`` (see
     :func:`rebuild_sum`; None: the add-on's), the slots every vertex evaluates ``shared_slots`` (see
-    :func:`lbc_addon.deformer.build_node_group`; None: the add-on's choice), its tree changed as ``tree`` says (see
+    :func:`lbc_addon.node_group.build_node_group`; None: the add-on's choice), its tree changed as ``tree`` says (see
     :func:`rebuild_tree`, or "sorted": each vertex's slots ordered by weight, largest first; None: as built)."""
     obj = copy_object(bound, name)
     index, weight = storage.read(obj.data)
@@ -134,7 +134,7 @@ def lbc_variant(bound, cage, name, thinning=None, sum_form=None, shared_slots=No
     storage.remove(obj.data)
     storage.write(obj.data, index, weight, storage.rest_offsets(index, weight, cage_rest))
     deformer.attach(obj, cage, index.shape[1], len(cage.data.vertices), len(obj.data.vertices),
-                    deformer.shared_slot_count(weight) if shared_slots is None else shared_slots)
+                    node_group.shared_slot_count(weight) if shared_slots is None else shared_slots)
     if sum_form is not None:
         rebuild_sum(obj, sum_form)
     if tree not in (None, "sorted"):
@@ -212,7 +212,7 @@ def triplet_variant(bound, cage, name):
         obj.data.attributes.new(f".bench_triplet_weights_{slot}", "FLOAT_VECTOR", "POINT").data.foreach_set(
             "vector", tri_weight[:, slot].ravel())
         obj.data.attributes[storage.weight_name(slot)].data.foreach_set("value", totals[:, slot])  # the tail's test
-    shared = deformer.shared_slot_count(totals)
+    shared = node_group.shared_slot_count(totals)
     print(f"  triplets: {len(members)} of the cage's {len(cage.data.vertices)} vertices; slots {tri_index.shape[1]} "
           f"(every vertex {shared}), {np.count_nonzero(totals, axis=1).mean():.2f} per vertex on average")
     clouds = {}
@@ -221,7 +221,7 @@ def triplet_variant(bound, cage, name):
         nodes, links = group.nodes, group.links
         if group.name not in clouds:
             points = nodes.new("GeometryNodePoints")
-            deformer._input(points, "Count").default_value = len(members)
+            node_group._input(points, "Count").default_value = len(members)
             point_index = nodes.new("GeometryNodeInputIndex")
             combine = nodes.new("FunctionNodeCombineMatrix")
             for column in range(3):
@@ -229,47 +229,47 @@ def triplet_variant(bound, cage, name):
                 switch.data_type = "INT"
                 while len(switch.index_switch_items) < len(members):
                     switch.index_switch_items.new()
-                links.new(point_index.outputs["Index"], deformer._input(switch, "Index"))
+                links.new(point_index.outputs["Index"], node_group._input(switch, "Index"))
                 for triplet in range(len(members)):
                     switch.inputs[triplet + 1].default_value = int(members[triplet, column])
                 sample = nodes.new("GeometryNodeSampleIndex")
                 sample.data_type, sample.domain = "FLOAT_VECTOR", "POINT"
-                links.new(cage_geometry, deformer._input(sample, "Geometry"))
-                links.new(position.outputs["Position"], deformer._input(sample, "Value"))
-                links.new(switch.outputs["Output"], deformer._input(sample, "Index"))
+                links.new(cage_geometry, node_group._input(sample, "Geometry"))
+                links.new(position.outputs["Position"], node_group._input(sample, "Value"))
+                links.new(switch.outputs["Output"], node_group._input(sample, "Index"))
                 separate = nodes.new("ShaderNodeSeparateXYZ")
-                links.new(sample.outputs["Value"], deformer._input(separate, "Vector"))
+                links.new(sample.outputs["Value"], node_group._input(separate, "Vector"))
                 for row, axis in enumerate("XYZ"):
-                    links.new(separate.outputs[axis], deformer._input(combine, f"Column {column + 1} Row {row + 1}"))
+                    links.new(separate.outputs[axis], node_group._input(combine, f"Column {column + 1} Row {row + 1}"))
             store = nodes.new("GeometryNodeStoreNamedAttribute")
             store.data_type, store.domain = "FLOAT4X4", "POINT"
-            links.new(points.outputs["Points"], deformer._input(store, "Geometry"))
-            deformer._input(store, "Name").default_value = ".bench_matrix"
-            links.new(combine.outputs["Matrix"], deformer._input(store, "Value"))
-            read = deformer._named_attribute(nodes, "FLOAT4X4", ".bench_matrix", (0, 0))
+            links.new(points.outputs["Points"], node_group._input(store, "Geometry"))
+            node_group._input(store, "Name").default_value = ".bench_matrix"
+            links.new(combine.outputs["Matrix"], node_group._input(store, "Value"))
+            read = node_group._named_attribute(nodes, "FLOAT4X4", ".bench_matrix", (0, 0))
             clouds[group.name] = store.outputs["Geometry"], read.outputs["Attribute"]
         cloud, matrix = clouds[group.name]
         terms = []
         for slot in slots:
-            triplet = deformer._named_attribute(nodes, "INT", f".bench_triplet_{slot}", (0, 0))
-            weights = deformer._named_attribute(nodes, "FLOAT_VECTOR", f".bench_triplet_weights_{slot}", (0, 0))
+            triplet = node_group._named_attribute(nodes, "INT", f".bench_triplet_{slot}", (0, 0))
+            weights = node_group._named_attribute(nodes, "FLOAT_VECTOR", f".bench_triplet_weights_{slot}", (0, 0))
             sample = nodes.new("GeometryNodeSampleIndex")
             sample.data_type, sample.domain = "FLOAT4X4", "POINT"
-            links.new(cloud, deformer._input(sample, "Geometry"))
-            links.new(matrix, deformer._input(sample, "Value"))
-            links.new(triplet.outputs["Attribute"], deformer._input(sample, "Index"))
+            links.new(cloud, node_group._input(sample, "Geometry"))
+            links.new(matrix, node_group._input(sample, "Value"))
+            links.new(triplet.outputs["Attribute"], node_group._input(sample, "Index"))
             product = nodes.new("FunctionNodeTransformDirection")
-            links.new(weights.outputs["Attribute"], deformer._input(product, "Direction"))
-            links.new(sample.outputs["Value"], deformer._input(product, "Transform"))
+            links.new(weights.outputs["Attribute"], node_group._input(product, "Direction"))
+            links.new(sample.outputs["Value"], node_group._input(product, "Transform"))
             terms.append(product.outputs["Direction"])
         return terms
 
-    original = deformer._weighted_samples
-    deformer._weighted_samples = triplet_samples
+    original = node_group._weighted_samples
+    node_group._weighted_samples = triplet_samples
     try:
         deformer.attach(obj, cage, tri_index.shape[1], len(cage.data.vertices), len(obj.data.vertices), shared)
     finally:
-        deformer._weighted_samples = original
+        node_group._weighted_samples = original
     return obj
 
 
@@ -293,24 +293,24 @@ def rebuild_tree(obj, form):
     samples = [n for n in nodes if n.bl_idname == "GeometryNodeSampleIndex"]
     if form == "direct":
         subtract = next(n for n in nodes if n.bl_idname == "ShaderNodeVectorMath" and n.operation == "SUBTRACT")
-        total = deformer._inputs(subtract, "Vector")[0].links[0].from_socket
+        total = node_group._inputs(subtract, "Vector")[0].links[0].from_socket
         set_position = next(n for n in nodes if n.bl_idname == "GeometryNodeSetPosition"
-                            and deformer._input(n, "Geometry").links[0].from_node.bl_idname == "NodeGroupInput")
-        links.remove(deformer._input(set_position, "Offset").links[0])
-        links.new(total, deformer._input(set_position, "Position"))
+                            and node_group._input(n, "Geometry").links[0].from_node.bl_idname == "NodeGroupInput")
+        links.remove(node_group._input(set_position, "Offset").links[0])
+        links.new(total, node_group._input(set_position, "Position"))
     elif form == "pairs":
         index, weight = storage.read(obj.data)
         for slot in range(index.shape[1]):
             attribute = obj.data.attributes.new(f".bench_pair_{slot}", "FLOAT2", "POINT")
             attribute.data.foreach_set("vector", np.column_stack([index[:, slot], weight[:, slot]]).astype(
                 np.float32).ravel())
-        reads = {deformer._input(n, "Name").default_value: n for n in nodes
+        reads = {node_group._input(n, "Name").default_value: n for n in nodes
                  if n.bl_idname == "GeometryNodeInputNamedAttribute" and n.data_type in ("INT", "FLOAT")}
         for slot in range(index.shape[1]):
             index_read, weight_read = reads[storage.index_name(slot)], reads[storage.weight_name(slot)]
-            pair = deformer._named_attribute(nodes, "FLOAT_VECTOR", f".bench_pair_{slot}", index_read.location)
+            pair = node_group._named_attribute(nodes, "FLOAT_VECTOR", f".bench_pair_{slot}", index_read.location)
             separate = nodes.new("ShaderNodeSeparateXYZ")
-            links.new(pair.outputs["Attribute"], deformer._input(separate, "Vector"))
+            links.new(pair.outputs["Attribute"], node_group._input(separate, "Vector"))
             for read, output in ((index_read, "X"), (weight_read, "Y")):
                 for link in list(read.outputs["Attribute"].links):
                     to_socket = link.to_socket
@@ -319,12 +319,12 @@ def rebuild_tree(obj, form):
                     links.remove(link)
                     links.new(separate.outputs[output], to_socket)
     elif form == "points":
-        cage_geometry = deformer._input(samples[0], "Geometry").links[0].from_socket
+        cage_geometry = node_group._input(samples[0], "Geometry").links[0].from_socket
         points = nodes.new("GeometryNodeMeshToPoints")
         points.mode = "VERTICES"
-        links.new(cage_geometry, deformer._input(points, "Mesh"))
+        links.new(cage_geometry, node_group._input(points, "Mesh"))
         for sample in samples:
-            links.new(points.outputs["Points"], deformer._input(sample, "Geometry"))
+            links.new(points.outputs["Points"], node_group._input(sample, "Geometry"))
     elif form == "displacement":
         cage = deformer.inputs(obj.modifiers[0])["Cage"]
         rest = cage_rest_local(cage, obj)
@@ -333,29 +333,29 @@ def rebuild_tree(obj, form):
         values[:len(rest)] = rest
         attribute.data.foreach_set("vector", values.ravel())
         group_in = next(n for n in nodes if n.bl_idname == "NodeGroupInput")
-        cage_geometry = deformer._input(samples[0], "Geometry").links[0].from_socket
-        rest_read = deformer._named_attribute(nodes, "FLOAT_VECTOR", ".bench_cage_rest", (0, 600))
+        cage_geometry = node_group._input(samples[0], "Geometry").links[0].from_socket
+        rest_read = node_group._named_attribute(nodes, "FLOAT_VECTOR", ".bench_cage_rest", (0, 600))
         rest_sample = nodes.new("GeometryNodeSampleIndex")
         rest_sample.data_type, rest_sample.domain = "FLOAT_VECTOR", "POINT"
-        links.new(group_in.outputs["Geometry"], deformer._input(rest_sample, "Geometry"))
-        links.new(rest_read.outputs["Attribute"], deformer._input(rest_sample, "Value"))
-        links.new(nodes.new("GeometryNodeInputIndex").outputs["Index"], deformer._input(rest_sample, "Index"))
-        displacement = deformer._vector_math(nodes, "SUBTRACT", (0, 700))
+        links.new(group_in.outputs["Geometry"], node_group._input(rest_sample, "Geometry"))
+        links.new(rest_read.outputs["Attribute"], node_group._input(rest_sample, "Value"))
+        links.new(nodes.new("GeometryNodeInputIndex").outputs["Index"], node_group._input(rest_sample, "Index"))
+        displacement = node_group._vector_math(nodes, "SUBTRACT", (0, 700))
         position = nodes.new("GeometryNodeInputPosition").outputs["Position"]
-        links.new(position, deformer._inputs(displacement, "Vector")[0])
-        links.new(rest_sample.outputs["Value"], deformer._inputs(displacement, "Vector")[1])
+        links.new(position, node_group._inputs(displacement, "Vector")[0])
+        links.new(rest_sample.outputs["Value"], node_group._inputs(displacement, "Vector")[1])
         store = nodes.new("GeometryNodeStoreNamedAttribute")
         store.data_type, store.domain = "FLOAT_VECTOR", "POINT"
-        deformer._input(store, "Name").default_value = ".bench_displacement"
-        links.new(cage_geometry, deformer._input(store, "Geometry"))
-        links.new(displacement.outputs["Vector"], deformer._input(store, "Value"))
-        displacement_read = deformer._named_attribute(nodes, "FLOAT_VECTOR", ".bench_displacement", (0, 800))
+        node_group._input(store, "Name").default_value = ".bench_displacement"
+        links.new(cage_geometry, node_group._input(store, "Geometry"))
+        links.new(displacement.outputs["Vector"], node_group._input(store, "Value"))
+        displacement_read = node_group._named_attribute(nodes, "FLOAT_VECTOR", ".bench_displacement", (0, 800))
         for sample in samples:
-            links.new(store.outputs["Geometry"], deformer._input(sample, "Geometry"))
-            links.new(displacement_read.outputs["Attribute"], deformer._input(sample, "Value"))
+            links.new(store.outputs["Geometry"], node_group._input(sample, "Geometry"))
+            links.new(displacement_read.outputs["Attribute"], node_group._input(sample, "Value"))
         subtract = next(n for n in nodes if n.bl_idname == "ShaderNodeVectorMath" and n.operation == "SUBTRACT"
                         and n is not displacement)
-        total = deformer._inputs(subtract, "Vector")[0].links[0].from_socket
+        total = node_group._inputs(subtract, "Vector")[0].links[0].from_socket
         for link in list(subtract.outputs["Vector"].links):
             to_socket = link.to_socket
             links.remove(link)
@@ -372,8 +372,8 @@ def compact_tail(obj, group):
     nodes, links = group.nodes, group.links
     index, weight = storage.read(obj.data)
     set_tail = next(n for n in nodes if n.bl_idname == "GeometryNodeSetPosition"
-                    and deformer._input(n, "Selection").is_linked)
-    first = deformer.shared_slot_count(weight)
+                    and node_group._input(n, "Selection").is_linked)
+    first = node_group.shared_slot_count(weight)
     rows = np.flatnonzero(weight[:, first] != 0)
     count = len(obj.data.vertices)
     rank = np.full(count, count, dtype=np.int32)  # past the end: Sample Index gives zero
@@ -389,54 +389,54 @@ def compact_tail(obj, group):
             "value", compact_weight)
         # Each slot of the old tail: its Sample Index of the cage, re-fed with the compact index and weight.
         old_sample = next(n for n in nodes if n.bl_idname == "GeometryNodeSampleIndex"
-                          and deformer._input(n, "Index").links[0].from_node.bl_idname
+                          and node_group._input(n, "Index").links[0].from_node.bl_idname
                           == "GeometryNodeInputNamedAttribute"
-                          and deformer._input(deformer._input(n, "Index").links[0].from_node, "Name").default_value
+                          and node_group._input(node_group._input(n, "Index").links[0].from_node, "Name").default_value
                           == storage.index_name(slot))
         sample = nodes.new("GeometryNodeSampleIndex")
         sample.data_type, sample.domain = "FLOAT_VECTOR", "POINT"
         for name in ("Geometry", "Value"):
-            links.new(deformer._input(old_sample, name).links[0].from_socket, deformer._input(sample, name))
-        compact = deformer._named_attribute(nodes, "INT", f".bench_tail_index_{slot}", (0, 0))
-        links.new(compact.outputs["Attribute"], deformer._input(sample, "Index"))
-        scaled = deformer._vector_math(nodes, "SCALE", (0, 0))
-        links.new(sample.outputs["Value"], deformer._input(scaled, "Vector"))
-        links.new(deformer._named_attribute(nodes, "FLOAT", f".bench_tail_weight_{slot}", (0, 0)).outputs["Attribute"],
-                  deformer._input(scaled, "Scale"))
+            links.new(node_group._input(old_sample, name).links[0].from_socket, node_group._input(sample, name))
+        compact = node_group._named_attribute(nodes, "INT", f".bench_tail_index_{slot}", (0, 0))
+        links.new(compact.outputs["Attribute"], node_group._input(sample, "Index"))
+        scaled = node_group._vector_math(nodes, "SCALE", (0, 0))
+        links.new(sample.outputs["Value"], node_group._input(scaled, "Vector"))
+        links.new(node_group._named_attribute(nodes, "FLOAT", f".bench_tail_weight_{slot}", (0, 0)).outputs["Attribute"],
+                  node_group._input(scaled, "Scale"))
         terms.append(scaled.outputs["Vector"])
-    total = deformer.pairwise_sum(group, terms, 0)
-    in_range = deformer._compare(nodes, "INT", "LESS_THAN", (0, 0))
-    links.new(nodes.new("GeometryNodeInputIndex").outputs["Index"], deformer._input(in_range, "A"))
-    deformer._input(in_range, "B").default_value = len(rows)
+    total = node_group.pairwise_sum(group, terms, 0)
+    in_range = node_group._compare(nodes, "INT", "LESS_THAN", (0, 0))
+    links.new(nodes.new("GeometryNodeInputIndex").outputs["Index"], node_group._input(in_range, "A"))
+    node_group._input(in_range, "B").default_value = len(rows)
     store = nodes.new("GeometryNodeStoreNamedAttribute")
     store.data_type, store.domain = "FLOAT_VECTOR", "POINT"
-    deformer._input(store, "Name").default_value = ".bench_tail_sum"
-    links.new(deformer._input(set_tail, "Geometry").links[0].from_socket, deformer._input(store, "Geometry"))
-    links.new(in_range.outputs["Result"], deformer._input(store, "Selection"))
-    links.new(total, deformer._input(store, "Value"))
+    node_group._input(store, "Name").default_value = ".bench_tail_sum"
+    links.new(node_group._input(set_tail, "Geometry").links[0].from_socket, node_group._input(store, "Geometry"))
+    links.new(in_range.outputs["Result"], node_group._input(store, "Selection"))
+    links.new(total, node_group._input(store, "Value"))
     gather = nodes.new("GeometryNodeSampleIndex")
     gather.data_type, gather.domain = "FLOAT_VECTOR", "POINT"
-    links.new(store.outputs["Geometry"], deformer._input(gather, "Geometry"))
-    links.new(deformer._named_attribute(nodes, "FLOAT_VECTOR", ".bench_tail_sum", (0, 0)).outputs["Attribute"],
-              deformer._input(gather, "Value"))
-    links.new(deformer._named_attribute(nodes, "INT", ".bench_tail_rank", (0, 0)).outputs["Attribute"],
-              deformer._input(gather, "Index"))
+    links.new(store.outputs["Geometry"], node_group._input(gather, "Geometry"))
+    links.new(node_group._named_attribute(nodes, "FLOAT_VECTOR", ".bench_tail_sum", (0, 0)).outputs["Attribute"],
+              node_group._input(gather, "Value"))
+    links.new(node_group._named_attribute(nodes, "INT", ".bench_tail_rank", (0, 0)).outputs["Attribute"],
+              node_group._input(gather, "Index"))
     # The old tail sum feeds the Strength / mask product and its switch: the gathered sum takes its place there.
-    offset_switch = deformer._input(set_tail, "Offset").links[0].from_node
-    old_sum = deformer._input(offset_switch, "True").links[0].from_socket
+    offset_switch = node_group._input(set_tail, "Offset").links[0].from_node
+    old_sum = node_group._input(offset_switch, "True").links[0].from_socket
     for link in list(old_sum.links):
         to_socket = link.to_socket
         links.remove(link)
         links.new(gather.outputs["Value"], to_socket)
-    links.new(store.outputs["Geometry"], deformer._input(set_tail, "Geometry"))
-    links.remove(deformer._input(set_tail, "Selection").links[0])
+    links.new(store.outputs["Geometry"], node_group._input(set_tail, "Geometry"))
+    links.remove(node_group._input(set_tail, "Selection").links[0])
 
 
 def rebuild_sum(obj, form):
     """Rebuild the deformer's Σ w_k c_k in another shape, to measure the node tree's shape as a lever.
 
     The add-on's: per slot a Scale (sample × weight), summed pairwise in a balanced tree of Adds
-    (:func:`lbc_addon.deformer.pairwise_sum`). "chain": the Scales added one after the other to a running total.
+    (:func:`lbc_addon.node_group.pairwise_sum`). "chain": the Scales added one after the other to a running total.
     "fma": per slot one Multiply Add (sample × weight + running total), the weight converted to a vector on the
     way. "fma-vector": the same with each weight stored as a vector attribute (w, w, w), three times its memory, so
     that nothing is converted.
@@ -444,7 +444,7 @@ def rebuild_sum(obj, form):
     group = obj.modifiers[0].node_group
     nodes, links = group.nodes, group.links
     samples = sorted((n for n in nodes if n.bl_idname == "GeometryNodeSampleIndex"), key=lambda n: -n.location.y)
-    weights = {deformer._input(n, "Name").default_value: n for n in nodes
+    weights = {node_group._input(n, "Name").default_value: n for n in nodes
                if n.bl_idname == "GeometryNodeInputNamedAttribute" and n.data_type == "FLOAT"}
     subtract = next(n for n in nodes if n.bl_idname == "ShaderNodeVectorMath" and n.operation == "SUBTRACT")
     for node in list(nodes):  # the add-on's sum: every vector Add, and the Scales of the samples
@@ -459,12 +459,12 @@ def rebuild_sum(obj, form):
     total = None
     for slot, sample in enumerate(samples):
         if form == "fma-vector":
-            weight = deformer._named_attribute(nodes, "FLOAT_VECTOR", f".bench_weight3_{slot}", (0, 0))
+            weight = node_group._named_attribute(nodes, "FLOAT_VECTOR", f".bench_weight3_{slot}", (0, 0))
         else:
             weight = weights[storage.weight_name(slot)]
         if form.startswith("fma"):
-            node = deformer._vector_math(nodes, "MULTIPLY_ADD", (0, 0))
-            vectors = deformer._inputs(node, "Vector")
+            node = node_group._vector_math(nodes, "MULTIPLY_ADD", (0, 0))
+            vectors = node_group._inputs(node, "Vector")
             links.new(sample.outputs["Value"], vectors[0])
             links.new(weight.outputs["Attribute"], vectors[1])
             if total is None:
@@ -473,17 +473,17 @@ def rebuild_sum(obj, form):
                 links.new(total, vectors[2])
             total = node.outputs["Vector"]
             continue
-        node = deformer._vector_math(nodes, "SCALE", (0, 0))
-        links.new(sample.outputs["Value"], deformer._input(node, "Vector"))
-        links.new(weight.outputs["Attribute"], deformer._input(node, "Scale"))
+        node = node_group._vector_math(nodes, "SCALE", (0, 0))
+        links.new(sample.outputs["Value"], node_group._input(node, "Vector"))
+        links.new(weight.outputs["Attribute"], node_group._input(node, "Scale"))
         if total is None:
             total = node.outputs["Vector"]
         else:  # "chain"
-            add = deformer._vector_math(nodes, "ADD", (0, 0))
-            links.new(total, deformer._inputs(add, "Vector")[0])
-            links.new(node.outputs["Vector"], deformer._inputs(add, "Vector")[1])
+            add = node_group._vector_math(nodes, "ADD", (0, 0))
+            links.new(total, node_group._inputs(add, "Vector")[0])
+            links.new(node.outputs["Vector"], node_group._inputs(add, "Vector")[1])
             total = add.outputs["Vector"]
-    links.new(total, deformer._inputs(subtract, "Vector")[0])
+    links.new(total, node_group._inputs(subtract, "Vector")[0])
 
 
 def cage_rest_local(cage, obj):
@@ -550,7 +550,7 @@ def measure(variants, cage, rest, rounds, without_handler=(), playback=False):
             obj = variants[name]
             scene.collection.objects.link(obj)
             if name in without_handler:
-                deformer.unregister()
+                handlers.unregister()
             # Untimed: relations rebuilt after linking; then the same timed change for every variant of the round.
             if playback:
                 scene.frame_set(2 * number + 1)
@@ -565,7 +565,7 @@ def measure(variants, cage, rest, rounds, without_handler=(), playback=False):
                 bpy.context.evaluated_depsgraph_get()
             times[name].append((1000 * (time.perf_counter() - start), 1000 * (time.process_time() - cpu)))
             if name in without_handler:
-                deformer.register()
+                handlers.register()
             scene.collection.objects.unlink(obj)
     if playback:
         cage.shape_key_clear()

@@ -6,16 +6,17 @@ Python with the ``bpy`` module (tests, background scripts).
 
 Three parts: what reads Blender (``geometry``: the scene into a bind request), what runs without ``bpy`` (``jobs``:
 the request, the solve on a worker thread, the result; importable and tested without Blender, so this file imports
-the Blender modules only when the add-on is registered), and what writes Blender (``writing``, ``storage``,
-``deformer``, ``influence``); ``properties``, ``operators``, ``ui`` and ``api`` are the user's side.
+the Blender modules only when the add-on is registered), and what writes Blender (``writing``, ``storage``, the
+deformer: ``node_group``, ``deformer`` (its modifier), ``diagnosis``, ``handlers``; and ``influence``);
+``properties``, ``operators``, ``ui`` and ``api`` are the user's side.
 """
 
 
 def _modules():
     """The modules with a register(), in registration order."""
-    from . import deformer, operators, properties, ui
+    from . import handlers, operators, properties, ui
 
-    return (properties, operators, ui, deformer)
+    return (properties, operators, ui, handlers)
 
 
 def register():

@@ -15,7 +15,7 @@ from dataclasses import replace
 
 import bpy
 
-from . import deformer, geometry, jobs, writing
+from . import deformer, diagnosis, geometry, jobs, node_group, writing
 from .core import CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
 from .properties import DEFAULT_INFLUENCES, is_bound
 
@@ -71,7 +71,7 @@ def _bind_request(request, progress, cancel, solved=None):
         solved.append((request, result))
     bound = writing.apply(request, result)
     settings = bound.lbc
-    held_off = deformer.held_off_warning(bound)
+    held_off = diagnosis.held_off_warning(bound)
     found = list(result.warnings) + ([held_off] if held_off else [])
     _tell(bound.name, found, printing)
     return {
@@ -168,7 +168,7 @@ def set_deformer(mesh_obj, **inputs):
         if not isinstance(value, types[key]) or (key == "strength" and isinstance(value, bool)):
             expected = " or ".join(kind.__name__ for kind in types[key])
             raise TypeError(f"set_deformer({key}=...) takes a {expected}, not {type(value).__name__} {value!r}")
-    low, high = deformer.STRENGTH_RANGE
+    low, high = node_group.STRENGTH_RANGE
     if "strength" in inputs and not low <= inputs["strength"] <= high:
         raise ValueError(f"set_deformer(strength={inputs['strength']!r}) is out of the Strength range {low:g} to {high:g}"
                          " (1 follows the cage fully, 0 stays at rest)")
@@ -202,7 +202,7 @@ def status(mesh_obj):
         leftover = ("; it carries LBC weights for no binding (from a bound mesh joined into it), which api.unbind "
                     "removes" if geometry.leftover_weights(mesh_obj) else "")
         return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}"
-    return deformer.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
+    return diagnosis.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
 
 
 def _require_enabled():

@@ -484,3 +484,23 @@ def shared_with(mesh_obj):
     if mesh_obj.data.users < 2:
         return []
     return [obj for obj in bpy.data.objects if obj != mesh_obj and obj.data == mesh_obj.data and is_bound(obj)]
+
+
+def evaluated_cage(cage_obj, depsgraph):
+    """Topology fingerprints (:func:`topology_fingerprints`) and (n, 3) vertex positions of the cage as the
+    deformer sees it (modifiers applied)."""
+    cage_eval = cage_obj.evaluated_get(depsgraph)
+    mesh = cage_eval.to_mesh()
+    try:
+        return topology_fingerprints(mesh), vertex_positions(mesh)
+    finally:
+        cage_eval.to_mesh_clear()
+
+
+def evaluated_cage_once(cage_obj, depsgraph, cages):
+    """:func:`evaluated_cage`, kept in ``cages`` (a dict by cage name, or None to keep nothing) for the next call."""
+    if cages is None:
+        return evaluated_cage(cage_obj, depsgraph)
+    if cage_obj.name_full not in cages:
+        cages[cage_obj.name_full] = evaluated_cage(cage_obj, depsgraph)
+    return cages[cage_obj.name_full]

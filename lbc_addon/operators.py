@@ -15,7 +15,7 @@ from dataclasses import replace
 import bpy
 from bpy.props import BoolProperty
 
-from . import deformer, geometry, influence, jobs, writing
+from . import deformer, diagnosis, geometry, influence, jobs, writing
 from .core import CageError, Cancelled
 from .properties import OPTION_NAMES, BindOptionProperties, bound_to, is_bound
 
@@ -43,7 +43,7 @@ def _leftover_selection(context):
 def _report_result(operator, mesh_obj):
     """Warnings about a finished bind: vertices outside the cage, repairs lbc_core made (:func:`jobs.solve`), a
     deformer the stack holds off."""
-    for warning in (mesh_obj.lbc.warnings, deformer.held_off_warning(mesh_obj)):
+    for warning in (mesh_obj.lbc.warnings, diagnosis.held_off_warning(mesh_obj)):
         if warning:
             operator.report({"WARNING"}, f"{mesh_obj.name}: {warning}")
 

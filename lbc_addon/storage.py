@@ -28,7 +28,7 @@ def slot_arrays(weights, column_vertex):
     """Sparse weights to K padded slots, each vertex's weights first and its padding (weight 0) last.
 
     The deformer relies on the padding coming last: it evaluates the last slots only on the vertices whose first of
-    them holds a weight (see :func:`deformer.build_node_group`).
+    them holds a weight (see :func:`node_group.build_node_group`).
 
     Parameters
     ----------

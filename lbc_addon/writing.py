@@ -7,7 +7,7 @@ import time
 import bpy
 import numpy as np
 
-from . import deformer, geometry, influence, jobs, storage
+from . import deformer, diagnosis, geometry, handlers, influence, jobs, node_group, storage
 from .core import CageError
 from .properties import is_bound
 
@@ -52,11 +52,11 @@ def _write(mesh_obj, cage_obj, request, result):
     storage.remove(mesh_obj.data)
     storage.write(mesh_obj.data, result.index, result.weight, result.rest)
     modifier, replaced_group = deformer.attach(mesh_obj, cage_obj, result.index.shape[1], len(request.cage_points),
-                                              len(request.points), deformer.shared_slot_count(result.weight))
+                                              len(request.points), node_group.shared_slot_count(result.weight))
     _store_settings(settings, request, result, cage_obj, modifier.node_group)
     settings.mesh_transform = _flat(mesh_obj.matrix_basis)
     if cage_obj.users_collection:  # from now on, leaving every collection means X deleted it
-        deformer.note_cage_in_scene(cage_obj)
+        handlers.note_cage_in_scene(cage_obj)
     if settings.show_influence:  # repainted with the new weights
         influence.show(mesh_obj, settings.influence_vertex)
     return replaced_group
@@ -181,8 +181,8 @@ def save_shape_key(mesh_obj, depsgraph, name=""):
     if mesh_obj.data.is_editmode:
         raise CageError(f"'{mesh_obj.name}' is in Edit Mode: switch to Object Mode first")
     cages = {}  # the cage evaluated once, for the check and the displacement
-    cause, message = deformer.diagnose(mesh_obj, depsgraph, cages)
-    if cause is not None and cause not in deformer.ARTISTS_CHOICE:
+    cause, message = diagnosis.diagnose(mesh_obj, depsgraph, cages)
+    if cause is not None and cause not in diagnosis.ARTISTS_CHOICE:
         raise CageError(f"the deformer does not work now: {message}")
     offsets = deformer.displacement(mesh_obj, depsgraph, cages)
     if mesh_obj.data.shape_keys is None:

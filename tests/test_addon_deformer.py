@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from mathutils import Matrix
 
-from lbc_addon import api, deformer, storage
+from lbc_addon import api, deformer, diagnosis, geometry, handlers, node_group, storage
+from lbc_addon.properties import is_bound
 from blender_scenes import (
     CELLS,
     delete_with_x,
@@ -181,11 +182,11 @@ def test_a_move_as_a_whole_is_seen_far_from_the_origin_and_at_large_scales():
     mesh Apply-Transformed at x = 2000 or scaled 500 jumped, its status "Following")."""
     rest = np.random.default_rng(0).uniform(-0.8, 0.8, (16, 3)).astype(np.float32)
     for moved in (rest + [2000.0, 0, 0], rest * 500.0, rest @ np.diag([300.0, 1.0, 2.0]) + [0, 10000.0, 0]):
-        assert deformer.moved_affinely(rest.astype(float), moved.astype(np.float32).astype(float))
+        assert diagnosis.moved_affinely(rest.astype(float), moved.astype(np.float32).astype(float))
     far = (rest + [2000.0, 0, 0]).astype(np.float32)
     sculpted = far.copy()
     sculpted[3, 2] += 0.02  # one vertex of the sample pushed: an edit, not a move
-    assert not deformer.moved_affinely(far.astype(float), sculpted.astype(float))
+    assert not diagnosis.moved_affinely(far.astype(float), sculpted.astype(float))
 
 
 def test_a_small_stroke_far_from_the_origin_is_no_move_as_a_whole():
@@ -197,9 +198,9 @@ def test_a_small_stroke_far_from_the_origin_is_no_move_as_a_whole():
         for vertices in ([3], [3, 9]):
             sculpted = far.copy()
             sculpted[vertices, 2] += np.float32(stroke)
-            assert not deformer.moved_affinely(far.astype(float), sculpted.astype(float)), (offset, stroke, vertices)
+            assert not diagnosis.moved_affinely(far.astype(float), sculpted.astype(float)), (offset, stroke, vertices)
         moved = (far.astype(float) * 1.001).astype(np.float32)  # a small Apply Scale there is still seen
-        assert deformer.moved_affinely(far.astype(float), moved.astype(float))
+        assert diagnosis.moved_affinely(far.astype(float), moved.astype(float))
 
 
 def test_a_sculpted_bound_mesh_keeps_following(bound_gargoyle):
@@ -210,7 +211,7 @@ def test_a_sculpted_bound_mesh_keeps_following(bound_gargoyle):
     cage.location.x += 0.3
     bpy.context.evaluated_depsgraph_get()
     assert mesh.lbc.status == f"Following '{cage.name}'"
-    assert deformer.moved_affinely(np.eye(4, 3), np.eye(4, 3) * 2) and not deformer.moved_affinely(np.eye(4, 3),
+    assert diagnosis.moved_affinely(np.eye(4, 3), np.eye(4, 3) * 2) and not diagnosis.moved_affinely(np.eye(4, 3),
                                                                                                     np.eye(4, 3))
 
 
@@ -220,7 +221,7 @@ def test_deleted_cage_is_reported_and_nothing_crashes(bound_gargoyle, capsys):
     assert np.array_equal(evaluated_positions(mesh), positions(mesh.data))
     assert "deleted" in mesh.lbc.status
     assert "was deleted" in capsys.readouterr().out
-    ok, message = deformer.status(mesh, bpy.context.evaluated_depsgraph_get())
+    ok, message = diagnosis.status(mesh, bpy.context.evaluated_depsgraph_get())
     assert not ok and "deleted" in message
 
 
@@ -232,11 +233,11 @@ def test_meshes_bound_to_one_cage_are_checked_with_one_evaluation_of_it(bound_ga
         bpy.context.scene.collection.objects.link(twin)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     evaluated = []
-    evaluate = deformer.evaluated_cage
-    monkeypatch.setattr(deformer, "evaluated_cage",
+    evaluate = geometry.evaluated_cage
+    monkeypatch.setattr(geometry, "evaluated_cage",
                         lambda cage_obj, graph: evaluated.append(cage_obj.name) or evaluate(cage_obj, graph))
-    deformer.check_bindings(depsgraph)
-    bound = [obj for obj in bpy.context.scene.objects if deformer.is_bound(obj)]
+    handlers.check_bindings(depsgraph)
+    bound = [obj for obj in bpy.context.scene.objects if is_bound(obj)]
     assert len(bound) == 3 and evaluated == [cage.name]
     assert [obj.lbc.status for obj in bound] == [f"Following '{cage.name}'"] * 3
 
@@ -247,7 +248,7 @@ def test_renamed_cage_keeps_deforming(bound_gargoyle):
     cage.location.z += 0.4
     moved = evaluated_positions(mesh) - positions(mesh.data)
     assert np.abs(moved).max() > 0.1
-    ok, message = deformer.status(mesh, bpy.context.evaluated_depsgraph_get())
+    ok, message = diagnosis.status(mesh, bpy.context.evaluated_depsgraph_get())
     assert ok and "Renamed Cage" in message
 
 
@@ -370,7 +371,7 @@ def test_a_mesh_appended_or_linked_alone_follows_its_cage_that_came_along(bound_
     assert cage is not None and not cage.users_collection
     bpy.context.view_layer.update()
     assert mesh.lbc.cage == cage and cage.name in bpy.data.objects
-    ok, message = deformer.status(mesh, bpy.context.evaluated_depsgraph_get())
+    ok, message = diagnosis.status(mesh, bpy.context.evaluated_depsgraph_get())
     assert ok, message
     if not link:  # an appended cage is the artist's to move (a linked one is moved in its library)
         rest = evaluated_positions(mesh)
@@ -558,7 +559,7 @@ def test_with_an_event_loop_the_deleted_cage_is_removed_by_a_timer_outside_the_h
     timers = []
     monkeypatch.setattr(bpy.app.timers, "register", lambda function, first_interval: timers.append(function))
     bpy.context.scene.collection.objects.unlink(cage)  # what X does to an object with other users
-    deformer.forget_cage(cage, defer=True)
+    handlers.forget_cage(cage, defer=True)
     assert mesh.lbc.cage is None and "Cage" in bpy.data.objects and len(timers) == 1
     assert timers[0]() is None  # run once, not again
     assert "Cage" not in bpy.data.objects
@@ -644,10 +645,10 @@ def test_slots_beyond_the_shared_ones_deform_exactly_where_used_with_strength_an
 def test_a_bind_splits_the_slots_where_few_vertices_use_the_rest(bound_gargoyle):
     mesh, _ = bound_gargoyle
     _, weight = storage.read(mesh.data)
-    shared = deformer.shared_slot_count(weight)
+    shared = node_group.shared_slot_count(weight)
     used = np.count_nonzero(weight, axis=0) / len(weight)
-    assert shared < mesh.lbc.slots and used[shared] <= deformer.TAIL_SHARE  # this binding has a tail
-    assert np.all(used[1:shared] > deformer.TAIL_SHARE)  # and it starts at the first slot few vertices use
+    assert shared < mesh.lbc.slots and used[shared] <= node_group.TAIL_SHARE  # this binding has a tail
+    assert np.all(used[1:shared] > node_group.TAIL_SHARE)  # and it starts at the first slot few vertices use
     assert sum(node.bl_idname == "GeometryNodeSetPosition" for node in mesh.lbc.node_group.nodes) == 2
 
 
@@ -655,12 +656,12 @@ def test_shared_slot_count_keeps_every_slot_when_an_empty_slot_precedes_a_weight
     weight = np.zeros((100, 4), dtype=np.float32)
     weight[:, :2] = 0.4
     weight[:3, 2] = 0.2
-    assert deformer.shared_slot_count(weight) == 2  # 3 % of the vertices use slots 2 and 3
+    assert node_group.shared_slot_count(weight) == 2  # 3 % of the vertices use slots 2 and 3
     weight[50, 3] = 0.2  # a weight after an empty slot 2, which a tail from slot 2 would miss: from slot 3
-    assert deformer.shared_slot_count(weight) == 3
+    assert node_group.shared_slot_count(weight) == 3
     weight[10:20, 3] = 0.2  # and slot 3 used by 11 %: no split
-    assert deformer.shared_slot_count(weight) == 4
-    assert deformer.shared_slot_count(np.full((10, 3), 1 / 3)) == 3  # every vertex uses every slot
+    assert node_group.shared_slot_count(weight) == 4
+    assert node_group.shared_slot_count(np.full((10, 3), 1 / 3)) == 3  # every vertex uses every slot
 
 
 def test_the_displacement_computed_from_the_slots_is_what_the_modifier_adds(bound_gargoyle):
@@ -700,20 +701,20 @@ def test_a_group_whose_warning_nodes_read_false_still_stops(bound_gargoyle):
 def test_a_group_made_without_warning_nodes_is_rebuilt_when_the_file_is_opened(tmp_path, monkeypatch):
     """A colleague's find: a file bound in 4.2 (no Warning node) kept its group in every newer Blender, even after a
     Rebind, so the modifier showed no errors and the panel said "Following" below a Subdivision that stopped it."""
-    if not deformer.HAS_WARNING_NODE:
+    if not node_group.HAS_WARNING_NODE:
         pytest.skip("Blender 4.2 makes every group without Warning nodes")
     mesh, cage = sphere_in_box_scene()
     with monkeypatch.context() as patched:
-        patched.setattr(deformer, "HAS_WARNING_NODE", False)
+        patched.setattr(node_group, "HAS_WARNING_NODE", False)
         assert api.bind(mesh, cage, cells=CELLS)
-    assert deformer.outdated(mesh.modifiers[deformer.MODIFIER_NAME].node_group)
+    assert node_group.outdated(mesh.modifiers[deformer.MODIFIER_NAME].node_group)
     path = tmp_path / "bound_without_warnings.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     mesh, cage = bpy.data.objects["Sphere"], bpy.data.objects["Box"]
     group = mesh.modifiers[deformer.MODIFIER_NAME].node_group
-    assert not deformer.outdated(group) and group[deformer.LAYOUT_KEY].endswith("warnings 1")
-    assert [g for g in bpy.data.node_groups if deformer.LAYOUT_KEY in g] == [group]  # the old one released
+    assert not node_group.outdated(group) and group[node_group.LAYOUT_KEY].endswith("warnings 1")
+    assert [g for g in bpy.data.node_groups if node_group.LAYOUT_KEY in g] == [group]  # the old one released
     cage.location.x += 0.2
     assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() > 0.1  # follows
     subdivision = mesh.modifiers.new("Subdivision", "SUBSURF")

@@ -104,12 +104,12 @@ def test_a_dense_mesh_active_with_its_cage_selected_is_refused_at_once_as_swappe
 
 def test_rebind_is_greyed_out_with_what_to_do_once_the_cage_is_deleted():
     """A new user's finding: Rebind stayed available and explained only when pressed."""
-    from lbc_addon import deformer
+    from lbc_addon import handlers
 
     mesh, cage = sphere_in_box_scene()
     assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     delete_with_x(cage)
-    deformer.check_bindings(bpy.context.evaluated_depsgraph_get())  # what the depsgraph handler runs
+    handlers.check_bindings(bpy.context.evaluated_depsgraph_get())  # what the depsgraph handler runs
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         with pytest.raises(RuntimeError, match="The cage was deleted: select the mesh, then a cage .active., and Bind"):
             bpy.ops.object.lbc_rebind()
@@ -596,7 +596,7 @@ def test_unbinding_a_linked_duplicate_keeps_the_weights_the_original_still_uses(
 
 
 def test_a_failed_write_is_reported_and_taken_back(monkeypatch):
-    from lbc_addon import deformer
+    from lbc_addon import node_group
 
     mesh, cage = sphere_in_box_scene()
     _decorate(mesh)
@@ -605,7 +605,7 @@ def test_a_failed_write_is_reported_and_taken_back(monkeypatch):
     def refused(*args, **kwargs):
         raise IndexError("bpy_prop_collection[index]: index 2 out of range")  # 5.2's Compare had 2 inputs
 
-    monkeypatch.setattr(deformer, "_stop_condition", refused)
+    monkeypatch.setattr(node_group, "_stop_condition", refused)
     with pytest.raises(RuntimeError, match="writing the binding failed .*IndexError.* the scene was left as it was"):
         bind(mesh, cage, cells=CELLS)
     assert mesh_state(mesh) == before and not is_bound(mesh)

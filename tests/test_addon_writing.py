@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 import pytest
 
-from lbc_addon import deformer, geometry, influence, jobs, storage, writing
+from lbc_addon import deformer, geometry, influence, jobs, node_group, storage, writing
 from lbc_addon.properties import is_bound
 from lbc_core import CageError, Cancelled
 from blender_scenes import evaluated_positions, mesh_state, sphere_in_box_scene
@@ -135,7 +135,7 @@ def _fail_after(function):
 
 # Every write apply() makes, in its order: the weights, the node group, the modifier's inputs, the modifier, the
 # properties, the influence colors repainted over a replaced binding.
-WRITE_STEPS = [(storage, "write"), (deformer, "build_node_group"), (deformer, "set_inputs"), (deformer, "attach"),
+WRITE_STEPS = [(storage, "write"), (node_group, "build_node_group"), (deformer, "set_inputs"), (deformer, "attach"),
                (writing, "_store_settings"), (influence, "show")]
 
 
@@ -178,7 +178,7 @@ def test_binding_a_bound_mesh_replaces_its_binding_in_place():
     deformer.set_inputs(modifier, {"Strength": 0.25, "Invert Vertex Group": True})
     writing.apply(*_solved(mesh, cage, cells=600))
     assert [m.name for m in mesh.modifiers] == ["Smooth", "My Cage Deform"]  # one deformer, where the artist put it
-    assert [group.name for group in bpy.data.node_groups] == [deformer.GROUP_NAME]
+    assert [group.name for group in bpy.data.node_groups] == [node_group.GROUP_NAME]
     values = deformer.inputs(mesh.modifiers["My Cage Deform"])
     assert values["Strength"] == 0.25 and values["Invert Vertex Group"] and values["Cage"] == cage
     assert mesh.lbc.cells == 600
@@ -201,13 +201,16 @@ def test_binding_again_with_the_same_counts_keeps_the_node_group_and_another_ver
     deformed = posed()
     writing.apply(*_solved(mesh, cage))  # bound again (Rebind): the same slots, the same counts
     assert mesh.lbc.node_group == group and deformer.find_modifier(mesh).node_group == group
-    assert [g.name for g in bpy.data.node_groups] == [deformer.GROUP_NAME]
+    assert [g.name for g in bpy.data.node_groups] == [node_group.GROUP_NAME]
     assert np.array_equal(posed(), deformed)
 
-    group[deformer.LAYOUT_KEY] = group[deformer.LAYOUT_KEY].replace(" slots", "-older slots")
-    writing.apply(*_solved(mesh, cage))  # a group another version of the add-on built is built again
+    # Groups made before the layout had a version number carry a digest of the add-on's source in its place.
+    layout = f" layout {node_group.LAYOUT_VERSION} "
+    assert layout in group[node_group.LAYOUT_KEY]
+    group[node_group.LAYOUT_KEY] = group[node_group.LAYOUT_KEY].replace(layout, " 3f2a9c41d07be815 ")
+    writing.apply(*_solved(mesh, cage))  # a group an older build of the add-on made is built again
     assert mesh.lbc.node_group != group and deformer.find_modifier(mesh).node_group == mesh.lbc.node_group
-    assert [g.name for g in bpy.data.node_groups] == [deformer.GROUP_NAME]
+    assert [g.name for g in bpy.data.node_groups] == [node_group.GROUP_NAME]
     assert np.array_equal(posed(), deformed)
 
 

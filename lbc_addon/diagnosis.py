@@ -1,0 +1,194 @@
+"""Why a bound mesh's deformer cannot work: the twelve causes :func:`diagnose` tells apart, each with its message,
+and the checks behind them (the mesh moved as a whole, welded cage vertices posed apart).
+"""
+
+import bpy
+import numpy as np
+
+from . import deformer, geometry, node_group, storage
+from .core import POSED_APART
+from .jobs import read_welded
+
+# Causes (see :func:`diagnose`) the node group cannot see, so the add-on clears its "Enabled" input.
+STOPPED_HERE = ("topology", "welded apart", "rest moved")
+# Causes that are the artist's own choice, not a fault: the panel says them, the console does not, and the binding
+# still gives its deformation (Save as Shape Key saves it).
+ARTISTS_CHOICE = ("modifier off",)
+
+# Vertices :func:`rest_moved` compares with their rest positions, spread over the mesh's order; and the rounding it
+# allows, relative to the positions' magnitude: a few float32 ulps (the mesh's and its rest attribute's positions are
+# float32, and the affine fit adds a little).
+REST_SAMPLES = 16
+FLOAT32_ROUNDING = 8 * float(np.finfo(np.float32).eps)
+# And the share of the largest change the affine fit may leave unexplained: a move as a whole leaves only rounding; a
+# stroke that pushed a few sampled vertices leaves most of their change (three quarters for one vertex of 16), even
+# where it is within the rounding allowed far from the origin (a 0.01 stroke at x = 10⁴, a new user's finding).
+UNEXPLAINED_SHARE = 0.1
+
+
+def status(mesh_obj, depsgraph):
+    """Whether a bound object's deformer can work, and if not, why.
+
+    Returns
+    -------
+    (ok: bool, message: str)
+    """
+    cause, message = diagnose(mesh_obj, depsgraph)
+    return cause is None, message
+
+
+def held_off_warning(mesh_obj):
+    """After a bind: why its deformer cannot work as the stack stands (e.g. a Rebind below a modifier that changes the
+    vertex count, which Bind's own modifier, added at the top, never is), as a warning; None when it follows."""
+    ok, message = status(mesh_obj, bpy.context.evaluated_depsgraph_get())
+    return None if ok else f"bound, but the deformer is held off: {message[:1].lower()}{message[1:]}"
+
+
+def diagnose(mesh_obj, depsgraph, cages=None):
+    """Why a bound object's deformer cannot work: (cause, message), cause None when it works.
+
+    ``cause`` is one of "modifier", "weights", "mesh vertices", "rest moved" (:func:`rest_moved`), "cage deleted",
+    "cage type", "cage vertices", "topology", "welded apart", "modifier above" (one that can change the vertex
+    count), "modifier error" (an error the node group raised for what only it sees), "modifier off" (switched off in
+    the viewport by the artist). A cage with other vertices in renders still follows (cause None), its message says
+    so. Only the causes in :data:`STOPPED_HERE` need the add-on to stop the deformer; the node group itself stops for
+    the others.
+    ``cages``: a dict keeping each cage's :func:`geometry.evaluated_cage` for the next bindings checked with the same
+    depsgraph, so that the meshes bound to one cage (a body, its clothes, its eyes) evaluate and hash it once.
+    """
+    settings = mesh_obj.lbc
+    modifier = deformer.find_modifier(mesh_obj)
+    if modifier is None:
+        return "modifier", (
+            "The LBC modifier was removed or applied: Unbind to remove the weights it left in the mesh (the mesh keeps "
+            "its shape), or Rebind"
+        )
+    count = len(mesh_obj.data.vertices)
+    # 0: bound by a version of the add-on that did not record it. Checked first: a Join changes both the vertex count
+    # and the slots stored, and the vertex count is what the artist did.
+    if settings.mesh_vertex_count and count != settings.mesh_vertex_count:
+        return "mesh vertices", (
+            f"The mesh has {count} vertices, it was bound with {settings.mesh_vertex_count}: it stays undeformed. "
+            "Rebind"
+        )
+    if storage.slot_count(mesh_obj.data) != settings.slots:
+        return "weights", "The cached weights are missing from the mesh data: Rebind"
+    if rest_moved(mesh_obj.data):
+        return "rest moved", (
+            "The mesh's vertices were moved as a whole since binding (Apply Transforms, or all of them moved in Edit "
+            "Mode): it stays at rest, undeformed (following the cage it would jump). Undo the move, or put the cage "
+            "in its rest pose and Rebind (Rebind binds to the cage as it is)"
+        )
+    cage = settings.cage
+    if cage is None:
+        return "cage deleted", (
+            "The cage was deleted: the mesh is back at rest. Select it, then a new cage (active), and Bind; or Unbind"
+        )
+    if cage.type != "MESH":
+        return "cage type", f"The cage '{cage.name}' is no longer a mesh: Rebind with a mesh cage"
+    topologies, positions = geometry.evaluated_cage_once(cage, depsgraph, cages)
+    count = len(positions)
+    if count != settings.cage_vertex_count:
+        modifiers = geometry.cage_modifiers_note(cage)
+        return "cage vertices", (
+            f"The cage '{cage.name}' has {count} vertices{f' ({modifiers})' if modifiers else ''}, it was bound with "
+            f"{settings.cage_vertex_count}: the mesh stays undeformed. Rebind"
+        )
+    if settings.cage_topology not in topologies:
+        return "topology", (
+            f"The topology of the cage '{cage.name}' changed since binding (same vertex count): the mesh stays "
+            "undeformed. Rebind"
+        )
+    apart = welded_apart(settings.welded, positions)
+    if apart is not None:
+        return "welded apart", (
+            f"Cage vertices {apart[0]} and {apart[1]} of '{cage.name}' were one point when bound and are now apart: "
+            "the mesh stays at rest. Move them together again, or merge them (Merge by Distance) and Rebind"
+        )
+    # What only the modifier sees (Blender 4.3 and newer; the causes above are ruled out): the vertex count reaching
+    # it differs. While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone.
+    warnings = getattr(modifier, "node_warnings", ()) if deformer.is_enabled(modifier) else ()
+    messages = [warning.message[len("LBC: "):] for warning in warnings if warning.message.startswith("LBC: ")]
+    # Which modifier: one above that can change the count, as the modifier's error confirms (4.2 has no Warning node
+    # to confirm it; there the modifier's type alone says so).
+    above = _vertex_count_modifier_above(mesh_obj, modifier, depsgraph)
+    if above is not None and (messages or not node_group.has_warning_nodes(modifier.node_group)):
+        return "modifier above", (
+            f"The modifier '{above.name}' above '{modifier.name}' changes the mesh's vertex count: the mesh stays "
+            f"undeformed. Move '{modifier.name}' to the top of the stack"
+        )
+    if messages:
+        return "modifier error", messages[0][:1].upper() + messages[0][1:]
+    if not modifier.show_viewport:
+        return "modifier off", (
+            f"The modifier '{modifier.name}' is switched off in the viewport (its screen icon): the mesh stays at rest "
+            f"there{'' if modifier.show_render else ' and in renders'}. Switch it on to follow '{cage.name}'"
+        )
+    difference = geometry.render_difference(cage)
+    if difference is not None:
+        return None, (f"Following '{cage.name}' in the viewport, but renders leave the mesh undeformed: the cage's "
+                      f"{difference}. Make them the same and Rebind")
+    return None, f"Following '{cage.name}'"
+
+
+def _vertex_count_modifier_above(mesh_obj, modifier, depsgraph):
+    """The first modifier shown in the viewport above ``modifier`` that can change the vertex count, or None. A
+    Geometry Nodes modifier (whose tree may keep the count) only where the evaluated mesh has another count than the
+    mesh data and no modifier below could have changed it."""
+    stack = list(mesh_obj.modifiers)
+    position = stack.index(modifier)
+    for other in filter(geometry.may_change_vertex_count, stack[:position]):
+        if other.type != "NODES":
+            return other
+        if not any(map(geometry.may_change_vertex_count, stack[position + 1:])) and (
+                len(mesh_obj.evaluated_get(depsgraph).data.vertices) != len(mesh_obj.data.vertices)):
+            return other
+    return None
+
+
+def rest_moved(mesh):
+    """Whether a bound mesh's vertices were moved as a whole since binding: a sample of them (:data:`REST_SAMPLES`)
+    is an affine image, other than the identity, of the rest positions the weights reproduce. Apply Transforms does
+    this to the mesh data, and the deformer would add the cage's displacement to a rest it no longer has: a jump.
+    Edits of part of the mesh (sculpting) are no affine image. Vertices outside the cage rest at their closest point
+    inside, which can be an affine image of them (a box outside a box): a mesh whose sampled vertices all lie outside
+    could be flagged, which is why a mesh wholly outside is refused at bind time."""
+    rest_attribute = mesh.attributes.get(storage.REST_NAME)
+    count = len(mesh.vertices)
+    if rest_attribute is None or count < 4 or len(rest_attribute.data) != count:
+        return False
+    sample = np.unique(np.linspace(0, count - 1, min(count, REST_SAMPLES)).astype(int)).tolist()
+    rest = np.array([rest_attribute.data[i].vector[:] for i in sample])
+    now = np.array([mesh.vertices[i].co[:] for i in sample])
+    return moved_affinely(rest, now)
+
+
+def moved_affinely(before, after, tolerance=1e-5):
+    """Whether (k, 3) points ``after`` are an affine image of ``before`` other than the identity, both to
+    ``tolerance`` × the size of ``before`` plus the float32 rounding of the positions (far from the origin or scaled
+    up, the rounding of the moved positions alone exceeds 1e-5 of the mesh's size), the fit leaving at most
+    UNEXPLAINED_SHARE of the largest change unexplained."""
+    size = float(np.linalg.norm(np.ptp(before, axis=0)))
+    allowed = tolerance * size + FLOAT32_ROUNDING * (np.abs(before).max() + np.abs(after).max())
+    change = np.abs(after - before).max()
+    if change <= allowed:
+        return False
+    design = np.c_[before, np.ones(len(before))]
+    fit, *_ = np.linalg.lstsq(design, after, rcond=None)
+    unexplained = np.abs(design @ fit - after).max()
+    return bool(unexplained <= allowed and unexplained <= UNEXPLAINED_SHARE * change)
+
+
+def welded_apart(welded, positions):
+    """The first (copy, kept) pair of cage vertices welded at bind time that are now apart, or None.
+
+    ``welded``: the binding's "copy:kept,..." pairs; apart means farther than lbc_core's POSED_APART × the cage's size,
+    the tolerance of ``lbc deform``.
+    """
+    pairs = read_welded(welded)
+    if not len(pairs):
+        return None
+    size = float(np.linalg.norm(np.ptp(positions, axis=0)))
+    offset = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
+    apart = np.flatnonzero(offset > POSED_APART * size)
+    return tuple(pairs[apart[0]].tolist()) if len(apart) else None
