@@ -25,7 +25,7 @@ RADIUS_EDGES = 2.0
 # Distance from the cage, in median cell edges, over which the fit fades into the P1 interpolation: a mesh nearer the
 # cage than that creases as P1 does. 0.25 rather than 1: a capsule 0.1 under Blender's Cylinder's cap p99 / max
 # 3.05° / 11.1° → 2.33° / 10.6°, the demo gargoyle bent 60° 2.24° / 14.1° → 2.14° / 9.4° (Mesh Deform 2.10° /
-# 10.2°), issue 12's capsule unchanged (bench/RESULTS.md).
+# 10.2°), the bent capsule of bench/capsule.py unchanged (bench/RESULTS.md).
 FADE_EDGES = 0.25
 # A fit whose moment matrix is this ill-conditioned (too few or coplanar vertices in reach) is not used.
 MAX_CONDITION = 1e8

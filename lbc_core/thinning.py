@@ -21,8 +21,9 @@ from .constraints import csr_from_padded, padded_rows, scatter_rows
 from .parallel import map_row_chunks
 from .progress import Progress
 
-# Default floor: keeps issue 12's capsule less creased than Mesh Deform with a margin (0.005 did once, and on today's
-# meshes reached 3.48° against its 3.33°; 0.004 gives 2.53°, at 4 % more influences; bench/RESULTS.md).
+# Default floor: keeps the bent capsule (bench/capsule.py) less creased than Mesh Deform with a margin (0.005 did
+# once, and on today's meshes reached 3.48° against its 3.33°; 0.004 gives 2.53°, at 4 % more influences;
+# bench/RESULTS.md).
 DEFAULT_FLOOR = 0.004
 
 # The tilt's tolerance: rows sum to 1 within it and reproduce their point within it times the controls' extent.

@@ -1,5 +1,5 @@
 """A new user's first cage: Blender's Cylinder as it comes (32 sides, n-gon caps) around a mesh, bound with the
-add-on's operator at the default resolution. This cage used to hang the 3D mesher (issue 11), and one vertex of each
+add-on's operator at the default resolution. This cage used to hang the 3D mesher, and one vertex of each
 cap used to move the whole cap (its fan's apex)."""
 
 import bpy

@@ -122,8 +122,9 @@ def test_built_zip_installs_in_a_fresh_blender_and_works_end_to_end(session):
 
 # Measured: the bpy module of Blender 4.2.0 crashes (SIGSEGV) at interpreter exit in a script that registers an
 # operator class of its own, but this session with the installed extension exits cleanly there (7 runs of 7 on the
-# add-on as split by issue 14; it crashed in every earlier run, cause not isolated); 4.5.4 hung at exit with
-# the add-on registered from the project's tree, not with the installed extension; 5.0.1 to 5.2.3 exit cleanly.
+# add-on split into what reads, solves and writes, its Blender modules imported in register(); it crashed in every
+# earlier run, cause not isolated); 4.5.4 hung at exit with the add-on registered from the project's tree, not with
+# the installed extension; 5.0.1 to 5.2.3 exit cleanly.
 def test_background_script_exits_cleanly(session):
     _, status, output, _ = session
     assert status == 0, output

@@ -236,7 +236,7 @@ def test_a_thin_cage_is_solved_in_its_stretched_frame_as_its_own_problem(monkeyp
 
 
 def test_a_very_thin_cage_converges():
-    """Issue 12, item 4: a cube 1/1000 as thick as wide took 10,000 iterations, unconverged, in the cage's frame."""
+    """A cube 1/1000 as thick as wide took 10,000 iterations, unconverged, in the cage's frame."""
     problem = _corpus_problem("cube", 1e-3)
     result = solve_on_mesh(*problem, max_iterations=1000)
     assert result.converged
@@ -283,7 +283,7 @@ def test_the_time_left_blends_the_share_of_the_way_and_the_residuals_power_law()
 
 
 def test_the_penalty_is_balanced_against_the_residuals_early_on(monkeypatch):
-    """Issue 12, item 4: the corpus's thin plate (as Blender makes it) took 605 iterations at 2000 cells with the
+    """The corpus's thin plate (as Blender makes it) took 605 iterations at 2000 cells with the
     penalty fixed, its dual residual far above the primal; balanced, it halves the penalty twice and stops in under
     half of them, at the same objective."""
     from lbc_core import solver
@@ -303,7 +303,7 @@ def test_the_penalty_is_balanced_against_the_residuals_early_on(monkeypatch):
 
 
 def test_a_lagging_primal_residual_doubles_the_penalty_in_3d(monkeypatch):
-    """Issue 12, item 4: the corpus's 32-sided fan cylinder sits at a primal / dual ratio of 0.7-1.4, where the
+    """The corpus's 32-sided fan cylinder sits at a primal / dual ratio of 0.7-1.4, where the
     tuned cages sit at 0.13-0.24; above 0.6 the penalty doubles, and the solve takes two thirds of the iterations at
     the same objective."""
     from lbc_core import solver
