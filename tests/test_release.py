@@ -3,7 +3,7 @@ repository it writes, from which Blender 4.2 and 5.2 each install the zip for th
 
 The repository test builds this platform's two zips (one per Python) into a temporary folder and runs a background
 session in the environments of Blender 4.2 and 5.2 (.venv-blender-4.2, .venv-blender-5.2: `make test` makes them); a
-line whose environment is missing is skipped.
+line whose environment is missing is skipped. These are marked slow (the build and two Blender sessions).
 """
 
 import json
@@ -109,6 +109,7 @@ def repository(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_repository_lists_each_zip_with_its_blender_range(repository):
     index = json.loads((repository / "index.json").read_text())
     assert index["version"] == "v1"
@@ -122,6 +123,7 @@ def test_repository_lists_each_zip_with_its_blender_range(repository):
     assert (repository / "index.html").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("line, python", [("4.2", "3.11"), ("5.2", "3.13")])
 def test_blender_installs_its_own_zip_from_the_repository_by_url(repository, tmp_path, line, python):
     interpreter = ROOT / f".venv-blender-{line}" / "bin" / "python"
