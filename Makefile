@@ -13,7 +13,7 @@ PYTHON_5.1 = $(PYTHON313)
 PYTHON_5.2 = $(PYTHON313)
 LINE_VENVS := $(LINES:%=.venv-blender-%)
 
-.PHONY: demo blender-demo test bench docs extension clean
+.PHONY: demo blender-demo test test-fast bench docs extension clean
 
 $(BIN)/.installed: pyproject.toml
 	python=$(PYTHON311) && "$$python" -m venv $(VENV)
@@ -38,6 +38,10 @@ blender-demo: $(BIN)/.installed
 # exit status of the first line that failed.
 test: $(BIN)/.installed $(LINE_VENVS:%=%/.installed)
 	$(BIN)/python tools/test_lines.py $(VENV) $(LINE_VENVS)
+
+# The inner loop: everything but the Blender tests and the ones marked slow, in under a minute.
+test-fast: $(BIN)/.installed
+	$(BIN)/python -m pytest -q -m "not slow and not blender"
 
 bench: $(BIN)/.installed
 	$(BIN)/python bench/run.py

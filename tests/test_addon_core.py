@@ -3,8 +3,12 @@
 import ast
 from pathlib import Path
 
+import pytest
+
 import lbc_core
 from lbc_addon import api, core, jobs
+
+pytestmark = pytest.mark.blender
 
 ADDON = Path(core.__file__).parent
 

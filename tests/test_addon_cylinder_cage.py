@@ -4,8 +4,11 @@ cap used to move the whole cap (its fan's apex)."""
 
 import bpy
 import numpy as np
+import pytest
 
 from blender_scenes import bind, evaluated_positions, positions, reset
+
+pytestmark = pytest.mark.blender
 
 
 def test_blender_cylinder_cage_binds_and_deforms():

@@ -24,6 +24,8 @@ from blender_scenes import (
     undo_context,
 )
 
+pytestmark = pytest.mark.blender
+
 
 def test_rest_pose_is_the_mesh_itself(bound_gargoyle):
     mesh, _ = bound_gargoyle

@@ -10,6 +10,8 @@ from lbc_addon import geometry
 from lbc_core import CageError
 from blender_scenes import mesh_object, reset, sphere_in_box_scene
 
+pytestmark = pytest.mark.blender
+
 
 def _grid(name, size=3):
     """A flat size × size vertex grid of quads, vertex (r, c) at index r * size + c."""

@@ -2,11 +2,14 @@
 
 import bpy
 import numpy as np
+import pytest
 
 from lbc_addon import influence, storage
 from blender_scenes import (
     mesh_state,
 )
+
+pytestmark = pytest.mark.blender
 
 
 def _view_shading():

@@ -17,6 +17,8 @@ import pytest
 
 from blender_scenes import ROOT
 
+pytestmark = pytest.mark.blender
+
 sys.path.insert(0, str(ROOT / "tools"))
 import build_extension  # noqa: E402
 

@@ -12,6 +12,8 @@ from lbc_addon import jobs
 from lbc_core import BindOptions, Cancelled
 from lbc_core.planar import flatten
 
+pytestmark = pytest.mark.blender
+
 ROOT = Path(__file__).resolve().parents[1]
 BOX = np.array([[x, y, z] for x in (-1.2, 1.2) for y in (-1.1, 1.3) for z in (-1.0, 1.4)])
 BOX_FACES = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]

@@ -23,6 +23,8 @@ from blender_scenes import (
     undo_context,
 )
 
+pytestmark = pytest.mark.blender
+
 CELLS = 1000
 
 

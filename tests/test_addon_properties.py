@@ -1,10 +1,13 @@
 """What Object.lbc remembers: the options a rebind reuses, nothing on objects never bound."""
 
 import bpy
+import pytest
 
 from lbc_addon.properties import WEIGHTING_ITEMS, is_bound
 from lbc_core.options import WEIGHTINGS
 from blender_scenes import bind, sphere_in_box_scene
+
+pytestmark = pytest.mark.blender
 
 
 def test_weighting_choices_are_lbc_cores():

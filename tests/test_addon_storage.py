@@ -1,10 +1,13 @@
 """The K-slot weight cache in mesh attributes."""
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
 from lbc_addon import storage
 from blender_scenes import mesh_state, sphere_in_box_scene
+
+pytestmark = pytest.mark.blender
 
 
 def test_slot_arrays_pad_rows_and_map_columns_to_cage_vertices():

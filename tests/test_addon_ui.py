@@ -6,6 +6,7 @@ records the labels and operators it is given.
 
 import bpy  # noqa: I001  (first: importing bpy makes bmesh and mathutils importable)
 import bmesh
+import pytest
 from mathutils import Matrix
 
 from lbc_addon import api, ui
@@ -14,6 +15,8 @@ from blender_scenes import (
     register_addon,
     sphere_in_box_scene,
 )
+
+pytestmark = pytest.mark.blender
 
 
 class Layout:

@@ -12,6 +12,8 @@ from lbc_addon.properties import is_bound
 from lbc_core import CageError, Cancelled
 from blender_scenes import evaluated_positions, mesh_state, sphere_in_box_scene
 
+pytestmark = pytest.mark.blender
+
 OPTIONS = {"cells": 1000}
 
 

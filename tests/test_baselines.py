@@ -13,6 +13,8 @@ from lbc_core.cage import make_cage
 from lbc_core.io import read_cage, read_mesh
 from lbc_core.meshing import mesh_domain
 
+pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
+
 DATA = Path(__file__).parent / "data"
 GARGOYLE = DATA / "cages-3d" / "gargoyle"
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])

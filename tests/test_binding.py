@@ -17,6 +17,8 @@ from lbc_core.errors import CageError
 from lbc_core.io import read_mesh
 from random_cages import STAR
 
+pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
+
 DATA = Path(__file__).parent / "data"
 
 

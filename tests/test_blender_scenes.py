@@ -1,9 +1,12 @@
 """Checks of the shared Blender test scenes themselves."""
 
 import numpy as np
+import pytest
 
 from blender_scenes import GARGOYLE, MESH_MATRIX, gargoyle_scene, mesh_state, positions, sphere_in_box_scene
 from lbc_core.io import read_mesh
+
+pytestmark = pytest.mark.blender
 
 
 def test_gargoyle_scene_has_the_data_files_geometry_in_world_space():

@@ -14,6 +14,8 @@ from hypothesis import strategies as st
 from lbc_core.cli import main
 from lbc_core.io import read_cage, read_mesh, write_mesh
 
+pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
+
 DATA = Path(__file__).parent / "data"
 LOGO = DATA / "LBClogo-control-edgeset.obj"  # 6 control points: a quick 2D bind
 GARGOYLE = DATA / "cages-3d" / "gargoyle"

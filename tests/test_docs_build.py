@@ -10,6 +10,8 @@ import pytest
 
 import lbc_core
 
+pytestmark = pytest.mark.slow  # builds and installs: left out of the fast tier
+
 ROOT = Path(__file__).resolve().parent.parent
 BUILD = ROOT / "tools" / "build_docs.py"
 

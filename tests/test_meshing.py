@@ -264,6 +264,7 @@ def test_2d_delaunay_cell_count_follows_the_target(cells):
 # ----------------------------------------------------------------------------------------------------------- 3D
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(CAGES_3D) + ["cube quads"])
 def test_3d_contract_and_size(meshes_3d, name):
     cage, mesh = meshes_3d[name]
@@ -294,6 +295,7 @@ def test_3d_tetrahedra_quality(meshes_3d, name):
     assert np.count_nonzero(with_free_corner) <= 1e-3 * len(ratio)
 
 
+@pytest.mark.slow
 def test_3d_cell_count_follows_the_target():
     cage = load_cage(CAGES_3D["gargoyle L12"])
     for cells in (2000, 30000):
@@ -384,6 +386,7 @@ def subdivided_cube_cage(cuts):
     return make_cage(*random_cages.subdivided_cube(cuts))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cuts", [6, 7, 9, 12])
 def test_3d_subdivided_cube_meshes_at_the_default_cells(cuts):
     """A new user's subdivided cubes were refused: four grid samples of a face lie on a circle, and the tetrahedra
@@ -425,6 +428,7 @@ def test_3d_flat_cell_between_two_splits_is_flipped_away():
     assert np.count_nonzero(count == 2) == 4 and np.count_nonzero(count == 1) == 8
 
 
+@pytest.mark.slow
 def test_3d_a_fine_cage_refused_at_few_cells_is_told_to_try_more():
     """12 cuts (1016 vertices) at 2000 cells still leave a flat cell, among surface samples alone with no pyramid on
     either side; the refusal says to try more cells, which mesh it."""

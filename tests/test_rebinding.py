@@ -16,6 +16,8 @@ from lbc_core.rebinding import STALE, _flipped_slivers, _squashed, carry_domain,
 from lbc_core.smoothing import median_edge
 from lbc_core.solver import solve_on_mesh
 
+pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
+
 DATA = Path(__file__).parent / "data"
 GARGOYLE = DATA / "cages-3d" / "gargoyle"
 UNITY, REPRODUCTION, NEGATIVE = 1e-9, 1e-9, -1e-12

@@ -19,6 +19,8 @@ import pytest
 
 import lbc_core
 
+pytestmark = pytest.mark.slow  # builds and installs: left out of the fast tier
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tools"))
 import build_extension  # noqa: E402

@@ -123,6 +123,7 @@ def test_the_conditioning_test_gives_what_the_eigenvalues_give():
     np.testing.assert_array_equal(well_conditioned(matrices), expected)
 
 
+@pytest.mark.slow
 def test_a_mesh_near_the_cage_is_fitted_smoothly_and_creases_less_than_with_a_wide_fade():
     """A capsule whose tips lie 0.1 under the caps of Blender's Cylinder with 4 loop cuts (about half a cell edge),
     bent 90°: within the fade the points get P1's creases. With the fade over a quarter edge instead of one, p99

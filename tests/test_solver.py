@@ -9,6 +9,8 @@ import pytest
 import lbc_core
 from lbc_core.solver import SolverState, solve_on_mesh
 
+pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
+
 DATA = Path(__file__).parent / "data"
 PACKS = ["LBClogo", "woody", "cactus", "Gil_Gecko"]
 

@@ -117,6 +117,7 @@ def test_a_point_the_kept_weights_cannot_reproduce_keeps_more():
     np.testing.assert_allclose(thinned @ controls, position, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_a_lower_cap_never_keeps_more_weights_in_blenders_cylinder():
     """A new user's finding: in Blender's default Cylinder (32-gon caps: every point feels all 64 vertices, and needs
     about 20 to be reproduced) Max Influences 4 kept all 64 weights and 8 kept 56, where 24 kept 25: the cap was
