@@ -6,7 +6,6 @@ Every cage here is valid; none may be refused or hang.
 """
 
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -17,6 +16,8 @@ from lbc_core import meshing
 from lbc_core.cage import make_cage
 from lbc_core.errors import CageError, Cancelled, GapTooNarrow
 from test_meshing import CAGES_2D, CUBE_QUADS, CUBE_VERTICES, check_contract, load_cage
+
+pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
 
 # Variants on cages of every kind: n-gon caps, a small-angle apex, rings of coplanar quads, extrusions, a thin plate.
 VARIANT_CAGES = ["cube", "cylinder-32-ngon", "cone-32-ngon", "prism-16-rings-3", "limbs", "thin-plate"]
@@ -76,35 +77,33 @@ def test_blender_cylinder_binds(kind):
     assert error <= 1e-9 * np.linalg.norm(high - low)
 
 
-def cancel_inside(function_name, seconds):
-    """A cancel() that turns True the first time it is polled directly from ``function_name``; ``seconds`` gets
-    the time it did."""
+def cancel_inside(function_name, polls):
+    """A cancel() that turns True the first time it is polled directly from ``function_name``; ``polls`` gets
+    where every poll from then on came from (one: the poll that stopped the loop)."""
 
     def cancel():
-        if not seconds and sys._getframe(2).f_code.co_name == function_name:
-            seconds.append(time.perf_counter())
-        return bool(seconds)
+        if polls or sys._getframe(2).f_code.co_name == function_name:
+            polls.append(sys._getframe(2).f_code.co_name)
+        return bool(polls)
 
     return cancel
 
 
 def test_cancel_inside_the_3d_refinement_loop():
     """The dented cylinder's feature edges need refinement (the as-made one is conforming at once)."""
-    seconds = []
+    polls = []
     cage = corpus_cage("cylinder-32-ngon", "dented-1e-2")
     with pytest.raises(Cancelled):
-        meshing.mesh_domain(cage, cells=2000, cancel=cancel_inside("refine", seconds))
-    assert seconds, "the refinement loop never polled cancel"
-    assert time.perf_counter() - seconds[0] < 0.5
+        meshing.mesh_domain(cage, cells=2000, cancel=cancel_inside("refine", polls))
+    assert polls == ["refine"], "the refinement loop never polled cancel, or went on after it said stop"
 
 
 def test_cancel_inside_the_2d_split_loop():
-    seconds = []
+    polls = []
     with pytest.raises(Cancelled):
         meshing.mesh_domain(load_cage(CAGES_2D[0]), method="delaunay",
-                            cancel=cancel_inside("mesh_delaunay", seconds))
-    assert seconds, "the split loop never polled cancel"
-    assert time.perf_counter() - seconds[0] < 0.5
+                            cancel=cancel_inside("mesh_delaunay", polls))
+    assert polls == ["mesh_delaunay"], "the split loop never polled cancel, or went on after it said stop"
 
 
 @pytest.mark.parametrize("scale", [(1.0, 1.0, 1e-4), (1.0, 1e-4, 1e-4)], ids=["box 1 x 1 x 1e-4", "needle 1e-4"])
@@ -152,11 +151,9 @@ def test_nearly_touching_parts_are_refused_when_refinement_runs_away(cells):
     budget. The missing surface triangles grow round after round; the mesher sees it is on course to pass its budget
     and refuses (in 3 s, measured, at 2000 and 8000 cells), naming the slot's faces, never blaming
     self-intersection. The message is the run-away one, not the deadline's ("could not make ... follow"): the
-    refusal does not depend on the machine's load. The clock bound only guards against a hang."""
-    clock = time.perf_counter()
+    refusal does not depend on the machine's load."""
     with pytest.raises(CageError, match=r"nearly touch near its faces [0-9, ]*\b5\b") as refused:
         meshing.mesh_domain(slotted_prism(1e-4), cells=cells)
-    assert time.perf_counter() - clock < 30.0
     assert "intersect" not in str(refused.value)
 
 
