@@ -21,14 +21,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-import lbc_core.solver as solver  # noqa: E402
+import lbc_core.geodesics as geodesics  # noqa: E402
+import lbc_core.working_sets as working_sets  # noqa: E402
+from lbc_core.factor import Factor  # noqa: E402
 from lbc_core.io import read_cage, read_mesh  # noqa: E402
 from test_binding import STAGE_MESSAGES, longest_waits  # noqa: E402
 
 GARGOYLE = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
 
 
-class _TimedFactor(solver._Factor):
+class _TimedFactor(Factor):
     """The solver's factorisation, recording how long each construction takes (the uninterruptible call)."""
 
     seconds = []
@@ -46,7 +48,7 @@ def main():
     parser.add_argument("--points", type=int, default=0, help="bind this many points near the mesh instead of it")
     parser.add_argument("--iterations", type=int, default=30, help="ADMM iterations per bind (0: to convergence)")
     args = parser.parse_args()
-    solver._Factor = _TimedFactor  # the geodesics import it from the solver at call time
+    geodesics.Factor = working_sets.Factor = _TimedFactor  # the two stages that factorise
     vertices, faces = read_cage(GARGOYLE / f"cage_{args.cage}.obj")
     points, _ = read_mesh(GARGOYLE / "mesh.off")
     if args.points:

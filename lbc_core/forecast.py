@@ -14,11 +14,13 @@ DEFAULT_TOLERANCE = {2: 1e-4, 3: 5e-4}
 
 
 
-# Peak bytes per entry of the (d F + N, n) ADMM state, measured with tracemalloc in 2D and 3D (107-115; float32 loop,
-# Anderson memory 5; a whole bind's peak is 1.05 (3D) to 1.2 (2D) times the estimate, as a test checks); and domain
-# vertices per cell of the meshes lbc makes.
-BYTES_PER_STATE_ENTRY = 120
-VERTICES_PER_CELL = {2: 0.53, 3: 0.23}
+# The solve's size: at its widest it holds about PAIRS_SCALE[d] · n^PAIRS_POWER (cell, control point) pairs per cell,
+# and BYTES_PER_PAIR bytes per pair at its peak (tracemalloc, the gargoyle's cages of 27-418 control points at
+# 4000-32,000 cells: 900-1030), besides the (cells, n) TV weights its caller holds (bench/RESULTS.md, "The locality
+# solver").
+PAIRS_SCALE, PAIRS_POWER = {2: 2.2, 3: 2.5}, 0.5
+BYTES_PER_PAIR = 1000
+BYTES_PER_WEIGHT = 8
 
 
 def default_tolerance(dim, n_control_points):
@@ -50,24 +52,22 @@ def estimate_memory(n_control_points, n_cells, dim):
     -------
     int, bytes
     """
-    return int(BYTES_PER_STATE_ENTRY * _state_entries(n_control_points, n_cells, dim))
+    pairs = estimate_pairs(n_control_points, n_cells, dim)
+    return int(BYTES_PER_PAIR * pairs + BYTES_PER_WEIGHT * n_control_points * n_cells)
 
 
-def _state_entries(n_control_points, n_cells, dim):
-    """Entries of the (d F + N, n) ADMM state, the domain's N vertices estimated from its F cells."""
-    return n_control_points * (dim + VERTICES_PER_CELL[dim]) * n_cells
+def estimate_pairs(n_control_points, n_cells, dim):
+    """The (cell, control point) pairs a solve holds at its widest, about."""
+    return PAIRS_SCALE[dim] * n_control_points ** PAIRS_POWER * n_cells
 
 
-# The solve's time, told before it starts: seconds per ADMM iteration and state entry at 8000 cells, iterations
-# about ITERATIONS_SCALE · n^ITERATIONS_POWER, and both growing as (cells / 8000)^CELLS_POWER (a step's cost per entry
-# grows as the state outgrows the caches, the iterations slowly). Fitted to the gargoyle's cages L12, L10, L08 and L09
-# split (27-418 control points) at 4000-32,000 cells on a 2-core x86_64 (bench/RESULTS.md), at the tolerance 2e-4:
-# within 25 % of each solve's time (LOOSE_TOLERANCE_ITERATIONS of those iterations where the tolerance is looser). The
-# cage's shape moves the iterations too (a UV sphere's 290 control points took 830), so this stays
-# rough; the solve itself then reports its time left from its own iterations.
-SECONDS_PER_STATE_ENTRY = 5.5e-9
-ITERATIONS_SCALE, ITERATIONS_POWER = 57, 0.28
-CELLS_POWER = 0.4
+# The solve's time, told before it starts: SECONDS_PER_PAIR_STEP per pair (estimate_pairs) and iteration, all in
+# (the reshapes of the working sets included), and about ITERATIONS_SCALE[d] · n^ITERATIONS_POWER ·
+# (cells / 8000)^CELLS_POWER iterations at the default tolerance. Fitted to the gargoyle's cages L12, L10, L08 and L09
+# split (27-418 control points) at 4000-32,000 cells on a 2-core x86_64 (bench/RESULTS.md, "The locality solver");
+# the cage's shape moves the iterations too, so this stays rough and the solve then reports its time left itself.
+SECONDS_PER_PAIR_STEP = 1.0e-7
+ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 34}, 0.3, 0.25
 # The work at the points after the solve (their location, smooth evaluation and reduction, and in the add-on their
 # thinning), told with the solve's: about 10 µs a point on a 2-core x86_64 (64k gargoyle points 0.69 s, 48k Suzanne
 # points 0.61 s; bench/RESULTS.md, "The bind outside the solve"); a new user was told "roughly 2 s" for a 3.7 s bind.
@@ -103,13 +103,10 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
 
     Returns
     -------
-    str, e.g. "solving 106 control points on about 8000 cells: about 313 MB of memory for the solve and roughly 3 s"
-    (the evaluation at the points after it may need more: a 314-vertex cage's 31,658 points 1.5 GB against the
-    solve's 1.1 GB)
+    str, e.g. "solving 106 control points on about 8000 cells: about 190 MB of memory for the solve and roughly 4 s"
     """
-    entries = _state_entries(n_control_points, n_cells, dim)
-    iterations = forecast_iterations(n_control_points, dim, stretched, aspect)
-    seconds = SECONDS_PER_STATE_ENTRY * entries * iterations * (n_cells / 8000) ** CELLS_POWER * busy
+    iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells)
+    seconds = SECONDS_PER_PAIR_STEP * estimate_pairs(n_control_points, n_cells, dim) * iterations * busy
     if stretched:
         seconds *= STRETCHED_STEP_COST
     text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
@@ -125,10 +122,10 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     return text
 
 
-def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0):
+def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0, n_cells=8000):
     """About how many iterations a solve takes at the default tolerance (see :data:`ITERATIONS_SCALE`,
     :data:`STRETCHED_ITERATIONS`, :data:`THIN_FROM_ASPECT`); the arguments as for :func:`solve_forecast`."""
-    iterations = ITERATIONS_SCALE * n_control_points ** ITERATIONS_POWER
+    iterations = ITERATIONS_SCALE[dim] * n_control_points ** ITERATIONS_POWER * (n_cells / 8000) ** CELLS_POWER
     if stretched:
         iterations *= STRETCHED_ITERATIONS
     elif dim == 3 and aspect > THIN_FROM_ASPECT:

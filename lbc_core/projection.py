@@ -27,6 +27,8 @@ NEWTON_STEPS = 50
 RESIDUAL_TOLERANCE, STEP_TOLERANCE = 1e-13, 1e-10
 # Halvings of a Newton step at most in the line search, and the residual below which it takes the full step.
 LINE_SEARCH_STEPS, LINE_SEARCH_FROM = 30, 1e-6
+# A batch is copied down to its unconverged rows once they are fewer than this share of it.
+COMPACT_BELOW = 0.5
 # What padding slots hold: far below any y + Aᵀν, so they stay 0.
 PADDING_VALUE = -1e30
 
@@ -67,10 +69,8 @@ def project_rows(values, corners, targets, duals=None, steps=NEWTON_STEPS, produ
     weights = np.empty_like(values)
     feasible = np.zeros(len(values), dtype=bool)
     pending = np.arange(len(values))
+    batch = _Batch(values, corners, products, targets)  # the arrays themselves: copying costs a Newton step
     for step in range(steps + 1):
-        # The first pass reads the arrays themselves: copying the whole batch costs as much as a Newton step.
-        batch = _Batch(values, corners, products, targets) if step == 0 else _Batch.of(
-            values, corners, products, targets, pending)
         shifted = batch.values + _apply(batch.corners, nu[pending])
         active = shifted > 0
         rows = np.where(active, shifted, 0.0)
@@ -84,11 +84,12 @@ def project_rows(values, corners, targets, duals=None, steps=NEWTON_STEPS, produ
             break
         if done.all():
             break
-        if done.any():
+        if np.count_nonzero(~done) < COMPACT_BELOW * len(pending):
             keep = ~done
             pending, active, rows, gradient, size = pending[keep], active[keep], rows[keep], gradient[keep], size[keep]
             batch = _Batch.of(values, corners, products, targets, pending)
-        nu[pending] = _newton_step(batch, nu[pending], active, rows, gradient, size)
+            done = np.zeros(len(pending), dtype=bool)
+        nu[pending] = _newton_step(batch, nu[pending], active, rows, gradient, size, done)
     return weights, nu, feasible
 
 
@@ -120,8 +121,9 @@ def _apply_transposed(corners, rows):
     return np.matmul(rows[:, None, :], corners)[:, 0, :]
 
 
-def _newton_step(batch, nu, active, rows, gradient, size):
-    """One guarded semismooth Newton step of the dual ascent on a batch of unconverged rows; returns the new ν."""
+def _newton_step(batch, nu, active, rows, gradient, size, done):
+    """One guarded semismooth Newton step of the dual ascent on a batch; returns the new ν (the rows ``done`` keep
+    theirs)."""
     values, corners, products, targets = batch.values, batch.corners, batch.products, batch.targets
     m = targets.shape[1]
     lower = np.matmul(active[:, None, :].astype(products.dtype), products)[:, 0, :]  # A D Aᵀ's lower triangle
@@ -131,7 +133,7 @@ def _newton_step(batch, nu, active, rows, gradient, size):
     trial = nu + direction
     # Near the solution φ's changes fall below its round-off: there the full step is taken (Newton is exact once the
     # active set is right).
-    searched = np.flatnonzero(size > LINE_SEARCH_FROM)
+    searched = np.flatnonzero((size > LINE_SEARCH_FROM) & ~done)
     if len(searched):
         value = _dual_value(nu[searched], rows[searched], targets[searched])
         slope = np.einsum("nj,nj->n", gradient[searched], direction[searched])
@@ -143,6 +145,7 @@ def _newton_step(batch, nu, active, rows, gradient, size):
                 break
             step[short] *= 0.5
             trial[searched[short]] = nu[searched[short]] + step[short, None] * direction[searched[short]]
+    trial[done] = nu[done]
     return trial
 
 

@@ -15,8 +15,8 @@ def shrink_factor(values, thresholds, epsilon):
     values : (d, F, n) float array
         Gradient vectors, component-major.
     thresholds : (F, n) float array
-    epsilon : float
-        Huber width (0: plain total variation).
+    epsilon : float or (F, n) float array
+        Huber width in the units of ``values`` (0: plain total variation).
 
     Returns
     -------
@@ -24,9 +24,10 @@ def shrink_factor(values, thresholds, epsilon):
     """
     norms = group_norms(values)
     np.maximum(norms, np.finfo(norms.dtype).tiny, out=norms)
-    factor = np.divide(thresholds, norms, out=norms)
+    with np.errstate(over="ignore"):  # a zero gradient: its factor is 1 - ∞, clamped below
+        factor = np.divide(thresholds, norms, out=norms)
     np.subtract(1.0, factor, out=factor)
-    if epsilon > 0:
+    if np.any(epsilon):
         # prox of τ·huber_ε: shrink by τ beyond ε + τ, scale by ε / (ε + τ) inside.
         inside = factor <= epsilon / (epsilon + thresholds)  # |g| <= ε + τ
         factor[inside] = (epsilon / (epsilon + thresholds))[inside]

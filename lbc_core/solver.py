@@ -35,7 +35,7 @@ from .stretch import Stretch
 from .working_sets import MeshData, PairOperators, WorkingSets, feasible_working_sets, first_working_sets
 
 # β: the weight of the W = Z block against the gradient block, on the unit-diagonal cage.
-BETA = {2: 20.0, 3: 1280.0}
+BETA = {2: 1280.0, 3: 1280.0}
 # The starting penalty c_d / n^(1/(d-1)) for n control points: c_d.
 PENALTY_SCALE = {2: 1.3, 3: 0.3}
 # The dual residual's tolerance as a multiple of the primal one (it lags; the objective settles first).
@@ -50,7 +50,7 @@ BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
 # The working sets are reshaped to one ring of vertices around the weights above GROWTH_FLOOR at iterations
 # GROWTH_FIRST_CHECK, then each time GROWTH_SPACING times as many; a solve that meets its tolerance grows them
 # first unless that adds at most END_GROWTH_SHARE of the slots (bench/RESULTS.md, "The locality solver").
-GROWTH_FIRST_CHECK, GROWTH_SPACING, GROWTH_FLOOR, END_GROWTH_SHARE = 10, 3, 1e-3, 0.01
+GROWTH_FIRST_CHECK, GROWTH_SPACING, GROWTH_FLOOR, END_GROWTH_SHARE = 20, 3, 1e-3, 0.01
 # Where each part of the solve ends on its progress range.
 _SETUP_END, _ADMM_END = 0.06, 0.98
 
@@ -146,7 +146,8 @@ def solve_on_mesh(
     anderson_period : int, optional
         Steps per Anderson extrapolation (None: ANDERSON_PERIOD of the dimension).
     single_precision : bool
-        Kept for callers of the earlier solver; the iterations run in float64 (their arrays follow the supports).
+        Iterate in float32 (half the memory and its traffic); the output is projected onto the constraints in
+        float64 either way.
     start : SolverState, optional
         A previous solve's final state (``SolveResult.state``) on the same cells and interior vertices, whose
         vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.rebinding`).
@@ -158,7 +159,6 @@ def solve_on_mesh(
     -------
     SolveResult
     """
-    del single_precision
     clock = _Clock()
     progress = Progress.of(progress, cancel)
     vertices = np.asarray(vertices, dtype=float)
@@ -174,7 +174,8 @@ def solve_on_mesh(
         _check_start(start, cells, n, n_vertices - len(boundary_vertices))
     tolerance = default_tolerance(d, n) if tolerance is None else tolerance
     settings = _Settings(epsilon, tolerance, max_iterations, relaxation or RELAXATION[d], check_every,
-                         anderson_memory, anderson_period or ANDERSON_PERIOD[d])
+                         anderson_memory, anderson_period or ANDERSON_PERIOD[d],
+                         np.float32 if single_precision else np.float64)
 
     # Work on the cage scaled to unit diagonal, so that penalty and tolerances are scale-free.
     centre = vertices.mean(axis=0)
@@ -193,7 +194,7 @@ def solve_on_mesh(
         progress(0.0, "finding where each coordinate may reach")
         sets, first, duals, carried = _starting_point(mesh, start, progress)
         clock.lap("factorisation")
-        expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls))
+        expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls), len(cells))
                     if start is None and tolerance == default_tolerance(d, n) else None)
         run = _Run(mesh, tv_weights, settings, stretch, _starting_penalty(penalty, start, d, n),
                    progress.part(_SETUP_END, _ADMM_END), expected)
@@ -218,6 +219,7 @@ class _Settings:
     check_every: int
     anderson_memory: int
     anderson_period: int
+    dtype: type
 
 
 @dataclass
@@ -271,7 +273,7 @@ class _Run:
             weights = _moved(weights, sets.slot_positions(grown), grown.n_slots)
             sets = grown
         check()
-        ops = PairOperators(self.mesh, sets)
+        ops = PairOperators(self.mesh, sets, self.settings.dtype)
         check()
         step = self._step_map(ops, duals)
         state = step.state_of(weights) if carried is None else carried.state_for(step, sets)
@@ -326,6 +328,7 @@ class _Run:
                 step, positions = self._reshape(step)
                 value = _moved(value, positions, step.size_x + step.ops.sets.n_slots)
                 residual = None if residual is None else _moved(residual, positions, len(value))
+                check()
                 if anderson:
                     anderson.embed(positions, len(value), residual)
                 out = previous = None
@@ -395,7 +398,7 @@ class _Run:
         """The step map on the reshaped working sets, and where each entry of the flat state goes there (-1:
         dropped)."""
         sets = self.pending_growth
-        ops = PairOperators(self.mesh, sets)
+        ops = PairOperators(self.mesh, sets, self.settings.dtype)
         self.progress.check()
         new_step = self._step_map(ops, step.duals)
         pair_positions = step.ops.pair_positions(ops)
@@ -423,7 +426,7 @@ class _Run:
 
 def _moved(values, positions, size):
     """``values`` placed at ``positions`` of a zero array of ``size`` (those at -1 dropped)."""
-    out = np.zeros(size)
+    out = np.zeros(size, dtype=values.dtype)
     kept = positions >= 0
     out[positions[kept]] = values[kept]
     return out
@@ -564,7 +567,7 @@ class SolverState:
         found = positions < ops.n_pairs
         found[found] = (ops.pair_cell[positions[found]] == cells[found]) & \
             (ops.pair_control[positions[found]] == self.pair_control[found])
-        state = np.zeros(step.size_x + sets.n_slots)
+        state = np.zeros(step.size_x + sets.n_slots, dtype=step.dtype)
         v_x, v_w = step.split(state)
         old = self.pair_state[found].T
         thresholds = self.pair_threshold[found]

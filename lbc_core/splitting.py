@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .projection import RESIDUAL_TOLERANCE
+from .projection import NEWTON_STEPS, RESIDUAL_TOLERANCE
 from .shrink import group_norms, shrink_factor, weighted_shrink_factors
 
 
@@ -49,13 +49,16 @@ class DouglasRachford:
     """
 
     def __init__(self, ops, tv_weights, epsilon, alpha, rho, axis_scale=None, tv_scale=1.0, duals=None):
-        self.ops, self.epsilon, self.alpha, self.penalty = ops, epsilon, alpha, rho
+        self.ops, self.alpha, self.penalty = ops, alpha, rho
+        # In scaled variables g̃ = √|c| ∇w the Huber width ε of |∇w| is ε √|c| per pair.
+        self.epsilon = (epsilon * ops.pair_sqrt_cell).astype(ops.dtype) if epsilon > 0 else 0.0
         self.axis_scale, self.tv_scale = axis_scale, tv_scale
         self.pair_weights = tv_weights[ops.pair_cell, ops.pair_control] * tv_scale
-        self.thresholds = ops.pair_sqrt_cell * self.pair_weights / rho
+        self.thresholds = (ops.pair_sqrt_cell * self.pair_weights / rho).astype(ops.dtype)
         self.size_x = ops.d * ops.n_pairs
         self.duals = np.zeros((len(ops.padded.targets), ops.d + 1)) if duals is None else duals
         self.secular_roots = None if axis_scale is None else np.zeros(ops.n_pairs)
+        self.dtype = ops.dtype
 
     def split(self, state):
         """Views of a flat state as v_X (d, P) and v_W (S,)."""
@@ -63,6 +66,7 @@ class DouglasRachford:
 
     def state_of(self, weights):
         """The state whose split variables are ``weights`` (S,) and their gradients, with zero duals."""
+        weights = weights.astype(self.dtype)
         return np.concatenate([self.ops.gradients(weights).ravel(), self.ops.slot_mass * weights])
 
     def shrink_factors(self, v_x, thresholds, remember=False):
@@ -76,11 +80,13 @@ class DouglasRachford:
             self.secular_roots = roots
         return factors
 
-    def projected(self, v_w):
-        """W̃: each vertex's row of v_W / √(βm) projected onto its constraints, scaled back."""
+    def projected(self, v_w, exact=False):
+        """W̃: each vertex's row of v_W / √(βm) projected onto its constraints, scaled back; within a step to the
+        iterations' tolerance, or ``exact`` to round-off."""
         mass = self.ops.slot_mass
-        weights, self.duals, _ = self.ops.project(v_w / mass, self.duals)
-        return weights * mass
+        accuracy = (RESIDUAL_TOLERANCE, NEWTON_STEPS) if exact else ()
+        weights, self.duals, _ = self.ops.project(v_w / mass, self.duals, *accuracy)
+        return (weights * mass).astype(self.dtype)
 
     def __call__(self, state):
         """The next state and this step's :class:`Step`."""
@@ -89,7 +95,7 @@ class DouglasRachford:
         shrink = self.shrink_factors(v_x, self.thresholds, remember=True)
         W = self.projected(v_w)
         reflected_x = v_x * (2.0 * shrink - 1.0) - ops.boundary_part
-        rhs = ops.gradient.T @ reflected_x.ravel()
+        rhs = ops.transposed(reflected_x.ravel())
         rhs += ops.slot_mass * (2.0 * W - v_w)
         z = ops.solve(rhs)
         gradient = ops.gradients(z)
@@ -109,10 +115,10 @@ class DouglasRachford:
         depend on the penalty, so nothing is factorised again."""
         v_x, v_w = self.split(state)
         kept = self.shrink_factors(v_x, self.thresholds)
-        v_x *= kept + (1.0 - kept) / factor
-        self.thresholds = self.thresholds / factor
+        v_x *= (kept + (1.0 - kept) / factor).astype(self.dtype)
+        self.thresholds = (self.thresholds / factor).astype(self.dtype)
         self.penalty *= factor
-        W = self.projected(v_w)
+        W = self.projected(v_w, exact=True)
         v_w -= W
         v_w /= factor
         v_w += W
@@ -129,6 +135,6 @@ class DouglasRachford:
 
     def final_weights(self, state):
         """The weights (S,) of a state, projected onto the constraints to round-off: the solve's output."""
-        weights, self.duals, _ = self.ops.project(self.split(state)[1] / self.ops.slot_mass, self.duals,
-                                                  RESIDUAL_TOLERANCE)
+        values = self.split(state)[1].astype(np.float64) / self.ops.slot_mass
+        weights, self.duals, _ = self.ops.project(values, self.duals, RESIDUAL_TOLERANCE, NEWTON_STEPS)
         return weights

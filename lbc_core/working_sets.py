@@ -20,8 +20,11 @@ import scipy.sparse as sp
 
 from . import fem
 from .factor import Factor
+from .parallel import thread_map, worker_count
 from .projection import PADDING_VALUE, STEP_TOLERANCE, corner_products, project_rows
 
+# Newton steps of the projection within an iteration (bench/RESULTS.md, "The locality solver").
+STEP_NEWTON_STEPS = 3
 # The harmonic coordinates' largest entries a vertex's first working set takes, then twice as many until the vertex's
 # position lies in their control points' hull (bench/RESULTS.md, "The locality solver").
 FIRST_SET_SIZE = 12
@@ -159,6 +162,10 @@ class MeshData:
         Each vertex's position in ``interior``, -1 on the cage.
     fixed : (N, n) CSR matrix
         The boundary values on the cage's vertices (rows of interior vertices empty).
+    boundary_weights : (B, n) float array
+        The boundary values as given, row k for the vertex ``boundary_position`` names k.
+    boundary_position : (N,) int array
+        Each vertex's row in ``boundary_weights``, -1 inside.
     scaled_gradients : (F, d+1, d) float array
         √|c| ∇φ of each cell's corners.
     sqrt_cell : (F,) float array
@@ -177,6 +184,8 @@ class MeshData:
     interior: np.ndarray
     interior_position: np.ndarray
     fixed: sp.csr_matrix
+    boundary_weights: np.ndarray
+    boundary_position: np.ndarray
     scaled_gradients: np.ndarray
     sqrt_cell: np.ndarray
     sqrt_mass: np.ndarray
@@ -202,7 +211,10 @@ class MeshData:
         others = np.tile(cells, (1, cells.shape[1])).ravel()
         adjacency = sp.csr_matrix((np.ones(len(corners)), (corners, others)), shape=(n_vertices, n_vertices))
         adjacency.data[:] = 1.0
-        return cls(vertices, cells, interior, position, fixed, gradients * sqrt_cell[:, None, None], sqrt_cell,
+        boundary_position = np.full(n_vertices, -1)
+        boundary_position[boundary_vertices] = np.arange(len(boundary_vertices))
+        return cls(vertices, cells, interior, position, fixed, boundary_weights, boundary_position,
+                   gradients * sqrt_cell[:, None, None], sqrt_cell,
                    np.sqrt(beta * mass), adjacency, unit_controls, unit_vertices[interior])
 
     def margins(self, sets, weights):
@@ -275,30 +287,36 @@ class PairOperators:
         n = sets.n_controls
         self.pair_cell, self.pair_control = self._pairs(mesh, sets, slot_vertex)
         d = mesh.vertices.shape[1]
-        # Each pair's corners: a slot (its index), or a boundary value, or nothing.
-        corner_vertex = mesh.cells[self.pair_cell]  # (P, d+1)
-        keys = corner_vertex * n + self.pair_control[:, None]
-        slot_keys = slot_vertex * n + sets.controls
-        found = np.minimum(np.searchsorted(slot_keys, keys), len(slot_keys) - 1)
-        corner_slot = np.where(slot_keys[found] == keys, found, -1)
-        fixed = mesh.fixed.tocoo()
-        fixed_keys = fixed.row.astype(np.int64) * n + fixed.col
-        order = np.argsort(fixed_keys)
-        fixed_keys, fixed_values = fixed_keys[order], fixed.data[order]
-        found = np.minimum(np.searchsorted(fixed_keys, keys), max(len(fixed_keys) - 1, 0))
-        corner_fixed = np.where(fixed_keys[found] == keys, fixed_values[found], 0.0) if len(fixed_keys) else \
-            np.zeros(keys.shape)
-        scaled = mesh.scaled_gradients[self.pair_cell]  # (P, d+1, d)
-        self.boundary_part = np.einsum("pc,pck->kp", corner_fixed, scaled)
+        # Each pair's corners: a slot (its index), or a boundary value, or nothing; looked up in dense (N, n)
+        # tables, built for this and dropped (a sorted search of the keys takes ten times as long).
+        corner_vertex = mesh.cells[self.pair_cell].astype(np.int32)  # (P, d+1)
+        control = self.pair_control[:, None]
+        table = np.full((len(mesh.vertices), n), -1, dtype=np.int32)
+        table[slot_vertex, sets.controls] = np.arange(sets.n_slots, dtype=np.int32)
+        corner_slot = table[corner_vertex, control]
+        del table
+        boundary_row = mesh.boundary_position[corner_vertex]
+        corner_fixed = np.where(boundary_row >= 0, mesh.boundary_weights[np.maximum(boundary_row, 0), control], 0.0)
+        scaled = mesh.scaled_gradients[self.pair_cell].astype(dtype)  # (P, d+1, d)
+        self.boundary_part = np.einsum("pc,pck->kp", corner_fixed, scaled).astype(dtype)
+        del corner_vertex, boundary_row, corner_fixed
         self.gradient = _gradient_matrix(scaled, corner_slot, sets.n_slots, dtype)
-        self.slot_mass = mesh.sqrt_mass[sets.vertex_of_slot]
+        del scaled, corner_slot
+        self.slot_mass = mesh.sqrt_mass[sets.vertex_of_slot].astype(dtype)
+        # Control-major order: the matrix is block-diagonal over the control points, which the factorisation's
+        # analysis then sees at once (a quarter faster on the gargoyle's cages).
+        self.order = np.lexsort((sets.vertex_of_slot, sets.controls))
         system = (self.gradient.T @ self.gradient).tocsr()
-        system = (system + sp.diags(self.slot_mass ** 2)).tocoo()
+        system = (system + sp.diags(self.slot_mass.astype(np.float64) ** 2))[self.order][:, self.order].tocoo()
         lower = system.row >= system.col
         self.factor = Factor(sp.coo_matrix((system.data[lower], (system.row[lower], system.col[lower])),
                                            shape=system.shape), dtype)
-        self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell]
+        self.row_blocks = _row_blocks(self.gradient, worker_count())
+        self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell].astype(dtype)
+        self.dtype = dtype
         self.padded = PaddedRows(sets, mesh)
+        bounds = np.linspace(0, len(self.padded.targets), worker_count() + 1).astype(int)
+        self.vertex_blocks = [slice(start, stop) for start, stop in zip(bounds[:-1], bounds[1:])]
         self.d = d
 
     @staticmethod
@@ -319,23 +337,55 @@ class PairOperators:
         return len(self.pair_cell)
 
     def gradients(self, slot_values):
-        """√|c| ∇w (d, P) on the pairs, boundary values included."""
-        return (self.gradient @ slot_values).reshape(self.d, -1) + self.boundary_part
+        """√|c| ∇w (d, P) on the pairs, boundary values included, row blocks one per thread."""
+        out = np.empty((self.d * self.n_pairs,), dtype=np.result_type(self.dtype, slot_values.dtype))
+
+        def rows(block):
+            start, matrix = block
+            out[start:start + matrix.shape[0]] = matrix @ slot_values
+
+        thread_map(rows, self.row_blocks)
+        out = out.reshape(self.d, -1)
+        out += self.boundary_part
+        return out
+
+    def transposed(self, values):
+        """Gᵀ ``values`` (d P,) → (S,), a partial sum per row block and thread."""
+        return sum(thread_map(lambda block: block[1].T @ values[block[0]:block[0] + block[1].shape[0]],
+                              self.row_blocks))
 
     def solve(self, rhs):
-        return self.factor.solve(rhs)
+        """The least-squares step's solve, in slot order."""
+        out = np.empty_like(rhs)
+        out[self.order] = self.factor.solve(rhs[self.order])
+        return out
 
-    def project(self, slot_values, duals, tolerance=STEP_TOLERANCE):
-        """Each vertex's slot values projected onto its constraints: (S,) weights, (N_in, d+1) duals, feasible."""
-        weights, duals, feasible = project_rows(self.padded.gather(slot_values), self.padded.corners,
-                                                self.padded.targets, duals, products=self.padded.products,
-                                                tolerance=tolerance)
-        return self.padded.scatter(weights), duals, feasible
+    def project(self, slot_values, duals, tolerance=STEP_TOLERANCE, steps=STEP_NEWTON_STEPS):
+        """Each vertex's slot values projected onto its constraints: (S,) weights, (N_in, d+1) duals, feasible.
+        Within the iterations a few Newton steps each time suffice: the next projection starts where they ended."""
+        values = self.padded.gather(slot_values.astype(np.float64))
+        padded = self.padded
+        duals = np.zeros(padded.targets.shape) if duals is None else duals
+
+        def block(rows):
+            return project_rows(values[rows], padded.corners[rows], padded.targets[rows], duals[rows],
+                                products=padded.products[rows], tolerance=tolerance, steps=steps)
+
+        parts = thread_map(block, self.vertex_blocks)
+        weights = np.concatenate([part[0] for part in parts])
+        return (padded.scatter(weights), np.concatenate([part[1] for part in parts]),
+                np.concatenate([part[2] for part in parts]))
 
     def pair_positions(self, other):
         """Where each of this layout's pairs sits in ``other``, -1 where ``other`` has no such pair."""
         n = self.sets.n_controls
         return _positions(self.pair_cell * n + self.pair_control, other.pair_cell * n + other.pair_control)
+
+
+def _row_blocks(matrix, count):
+    """(first row, rows) of ``matrix`` in ``count`` blocks, for the products' threads."""
+    bounds = np.linspace(0, matrix.shape[0], count + 1).astype(int)
+    return [(start, matrix[start:stop]) for start, stop in zip(bounds[:-1], bounds[1:])]
 
 
 def _gradient_matrix(scaled, corner_slot, n_slots, dtype):
@@ -345,7 +395,8 @@ def _gradient_matrix(scaled, corner_slot, n_slots, dtype):
     pair, corner = np.nonzero(corner_slot >= 0)  # row-major: each pair's corners in order
     counts = np.bincount(pair, minlength=n_pairs)
     row_starts = np.r_[0, np.cumsum(counts)]
-    indptr = np.concatenate([row_starts[:-1] + k * len(pair) for k in range(d)] + [[d * len(pair)]])
-    indices = np.tile(corner_slot[pair, corner], d)
+    index_type = np.int32 if d * len(pair) < 2**31 else np.int64
+    indptr = np.concatenate([row_starts[:-1] + k * len(pair) for k in range(d)] + [[d * len(pair)]]).astype(index_type)
+    indices = np.tile(corner_slot[pair, corner], d).astype(index_type)
     data = np.concatenate([scaled[pair, corner, k] for k in range(d)]).astype(dtype)
     return sp.csr_matrix((data, indices, indptr), shape=(d * n_pairs, n_slots))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import lbc_core
-from lbc_core import solver
+from lbc_core import forecast
 from lbc_core.errors import CageError
 from lbc_core import BindOptions
 from lbc_core.options import WEIGHTINGS
@@ -27,9 +27,9 @@ def test_defaults():
 
 def test_the_names_agree_with_the_stages_that_use_them():
     # The meshing stage takes DEFAULT_CELLS and METHODS from lbc_core.options, the weighting names come from the
-    # geodesics stage; the tolerances live in the solver, so their keys are checked here.
+    # geodesics stage; the tolerances live beside the cost model (forecast), so their keys are checked here.
     assert WEIGHTINGS[0] == "quadratic"  # the paper's choice, the default
-    assert set(solver.DEFAULT_TOLERANCE) == {2, 3}
+    assert set(forecast.DEFAULT_TOLERANCE) == {2, 3}
 
 
 def test_numbers_are_normalised():
