@@ -30,14 +30,17 @@ def machine():
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
-def bench_3d(level, cells=None, cage_path=None):
+def bench_3d(level, cells=None, cage_path=None, tree=None):
     """Bind the gargoyle mesh to one cage in a child process; return its stage times, counts and peak memory.
 
     ``level`` names a gargoyle cage (``cage_path`` another OBJ cage instead); ``cells`` None is the default
-    resolution."""
+    resolution; ``tree`` a source tree whose lbc_core binds instead of this one (a baseline's checkout)."""
     cage_path = cage_path or GARGOYLE / f"cage_{level}.obj"
     script = f"""
+import sys
+sys.path.insert(0, {str(tree or ROOT)!r})
 import json, resource, time, numpy as np, lbc_core
+assert lbc_core.__file__.startswith({str(tree or ROOT)!r}), lbc_core.__file__
 from lbc_core.io import read_cage, read_mesh
 cage, faces = read_cage({str(cage_path)!r})
 points, _ = read_mesh({str(GARGOYLE / "mesh.off")!r})

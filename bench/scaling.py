@@ -1,13 +1,14 @@
-"""Issue 12, item 3: how a bind's time and peak memory grow with the control points and with the cells.
+"""How a bind's time and peak memory grow with the control points and with the cells, beside a baseline.
 
-    .venv/bin/python bench/scaling.py [--picture PATH] [--quick]
+    .venv/bin/python bench/scaling.py [--baseline DIR] [--picture PATH] [--quick]
 
-The gargoyle mesh (2674 points) bound to its cages L12 (27 control points), L10 (67), L08 (168) and L09 with every
-triangle split in four at its edges' midpoints (418 control points, the same shape), at 4000 to 128,000 cells
-asked; each bind in a child process, so its peak resident memory is its own (`bench/run.py`'s ``bench_3d``). A bind
-the memory check would refuse on this machine is skipped and said so. Prints a table and the exponents of a
-least-squares fit time ∝ cells^a · n^b (and the same for memory), and draws both against cells, one line per cage,
-on log-log axes into PATH (default out/scaling.png).
+The gargoyle mesh (2674 points) bound to its cages L12 (27 control points), L10 (67), L08 (168), L09 with every
+triangle split in four at its edges' midpoints (418) and L10 split twice (1042), at 4000 to 64,000 cells asked;
+each bind in a child process, so its peak resident memory is its own (`bench/run.py`'s ``bench_3d``). With
+``--baseline DIR`` (a tree of an earlier version: ``git archive 5715f72 | tar -x -C DIR``) each bind runs there too,
+in the same run; a bind the memory check would refuse on this machine is skipped and said so. Prints a table and
+the exponents of a least-squares fit time ∝ cells^a · n^b (and the same for memory), and draws time and memory
+against cells, one line per cage, on log-log axes into PATH (default out/scaling.png).
 """
 
 import argparse
@@ -24,12 +25,14 @@ sys.path.insert(0, str(ROOT))
 from bench.run import GARGOYLE, bench_3d  # noqa: E402
 from lbc_core.errors import CageError  # noqa: E402
 from lbc_core.io import read_cage  # noqa: E402
-from lbc_core.solver import check_memory  # noqa: E402
+from lbc_core.forecast import check_memory  # noqa: E402
 
 # (cage, cell counts asked): the larger cages stop where a bind would take many minutes on this 2-core machine.
-PLAN = [("L12", (4000, 8000, 16000, 32000, 64000, 128000)), ("L10", (4000, 8000, 16000, 32000, 64000)),
-        ("L08", (4000, 8000, 16000, 32000)), ("L09 split", (4000, 8000, 16000))]
+PLAN = [("L12", (4000, 16000, 64000)), ("L10", (4000, 16000, 64000)), ("L08", (8000, 32000)),
+        ("L09 split", (8000, 16000)), ("L10 split twice", (32000,))]
 QUICK_PLAN = [("L12", (4000, 8000)), ("L10", (4000, 8000))]
+# The baseline binds only up to this many cells per control point times a thousand (its time grows as cells · n).
+BASELINE_MOST = 6_000_000
 
 
 def split_cage(path, out):
@@ -83,31 +86,58 @@ def draw(rows, path):
     print(f"wrote {path}")
 
 
+def cage_paths(folder):
+    """{cage name: OBJ path} of the planned cages, the split ones written into ``folder``."""
+    paths = {name: GARGOYLE / f"cage_{name}.obj" for name in ("L12", "L10", "L08")}
+    paths["L09 split"] = Path(folder) / "cage_L09_split.obj"
+    split_cage(GARGOYLE / "cage_L09.obj", paths["L09 split"])
+    once = Path(folder) / "cage_L10_split.obj"
+    split_cage(GARGOYLE / "cage_L10.obj", once)
+    paths["L10 split twice"] = Path(folder) / "cage_L10_split_twice.obj"
+    split_cage(once, paths["L10 split twice"])
+    return paths
+
+
+def bind_row(name, path, cells, tree=None):
+    """One bind's row, or None where the memory check refuses it (said)."""
+    n = len(read_cage(path)[0])
+    try:
+        check_memory(n, cells, 3)
+    except CageError as error:
+        print(f"| {name} | {n} | {cells} asked | refused: {error} |", flush=True)
+        return None
+    return dict(bench_3d(name, cells=cells, cage_path=path, tree=tree), cage=name)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--baseline", type=Path, help="a tree of an earlier version to bind beside this one")
     parser.add_argument("--picture", type=Path, default=ROOT / "out" / "scaling.png")
     parser.add_argument("--quick", action="store_true", help="two small cages at two resolutions (a smoke run)")
     args = parser.parse_args(argv)
     print(f"load average {os.getloadavg()[0]:.1f}")
-    print("| cage | control points | tetrahedra | bind s | solve s | iterations | peak memory |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print("| cage | control points | tetrahedra | bind s | solve s | iterations | peak memory | baseline bind s "
+          "| baseline peak | faster | memory |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     rows = []
     with tempfile.TemporaryDirectory() as folder:
-        split_path = Path(folder) / "cage_L09_split.obj"
-        n_split = split_cage(GARGOYLE / "cage_L09.obj", split_path)
+        paths = cage_paths(folder)
         for name, cell_counts in (QUICK_PLAN if args.quick else PLAN):
-            path = split_path if name == "L09 split" else GARGOYLE / f"cage_{name}.obj"
-            n = n_split if name == "L09 split" else len(read_cage(path)[0])
             for cells in cell_counts:
-                try:
-                    check_memory(n, cells, 3)
-                except CageError as error:
-                    print(f"| {name} | {n} | {cells} asked | refused: {error} | | | |", flush=True)
+                r = bind_row(name, paths[name], cells)
+                if r is None:
                     continue
-                r = bench_3d(name, cells=cells, cage_path=path)
-                rows.append(dict(r, cage=name))
-                print(f"| {name} | {r['n']} | {r['cells']} | {r['total']:.1f} | {r['stages']['solve']:.1f} "
-                      f"| {r['iterations']} | {r['peak_mb']:.0f} MB |", flush=True)
+                rows.append(r)
+                line = (f"| {name} | {r['n']} | {r['cells']} | {r['total']:.1f} | {r['stages']['solve']:.1f} "
+                        f"| {r['iterations']} | {r['peak_mb']:.0f} MB |")
+                base = (bind_row(name, paths[name], cells, args.baseline)
+                        if args.baseline and r["n"] * cells <= BASELINE_MOST * 1000 else None)
+                if base is None:
+                    line += " | | | |"
+                else:
+                    line += (f" {base['total']:.1f} | {base['peak_mb']:.0f} MB | {base['total'] / r['total']:.1f}× "
+                             f"| {r['peak_mb'] / base['peak_mb']:.2f} |")
+                print(line, flush=True)
     for key, what in (("total", "bind time"), ("peak_mb", "peak memory")):
         a, b = fit(rows, key)
         print(f"{what} ∝ cells^{a:.2f} · control points^{b:.2f}")

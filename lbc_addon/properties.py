@@ -63,7 +63,8 @@ class BindOptionProperties:
     epsilon: FloatProperty(
         name="Relaxation ε",
         description="C¹ relaxation of the total variation: the gradient's length is smoothed below ε (on a cage "
-        "scaled to unit size). 0: the paper's plain LBC; a few units: smoother weights, slightly less local",
+        "scaled to unit size). 0: the paper's plain LBC; 0.01: a little smoother; 0.1: smoother weights that reach "
+        "much further; 1 and more: close to harmonic coordinates, far less local",
         default=0.0,
         min=0.0,
         soft_max=10.0,

@@ -24,7 +24,7 @@ import numpy as np
 NEWTON_STEPS = 50
 # A vertex is converged when |b − A w| is below this (its entries are weights and unit-frame coordinates), and
 # below STEP_TOLERANCE within a solve's iterations (bench/RESULTS.md, "The locality solver").
-RESIDUAL_TOLERANCE, STEP_TOLERANCE = 1e-13, 1e-10
+RESIDUAL_TOLERANCE, STEP_TOLERANCE = 1e-15, 1e-10
 # Halvings of a Newton step at most in the line search, and the residual below which it takes the full step.
 LINE_SEARCH_STEPS, LINE_SEARCH_FROM = 30, 1e-6
 # A batch is copied down to its unconverged rows once they are fewer than this share of it.

@@ -191,13 +191,12 @@ def solve_on_mesh(
     mesh = MeshData.of(solve_vertices, cells, boundary_vertices, boundary_weights, BETA[d], unit_controls,
                        unit_vertices)
     if len(mesh.interior):
-        progress(0.0, "finding where each coordinate may reach")
+        progress(0.0, "finding where each coordinate may reach (factorising the solver's matrix)")
         sets, first, duals, carried = _starting_point(mesh, start, progress)
         clock.lap("factorisation")
         expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls), len(cells))
                     if start is None and tolerance == default_tolerance(d, n) else None)
-        run = _Run(mesh, tv_weights, settings, stretch, _starting_penalty(penalty, start, d, n),
-                   progress.part(_SETUP_END, _ADMM_END), expected)
+        run = _Run(mesh, tv_weights, settings, stretch, _starting_penalty(penalty, start, d, n), progress, expected)
         solution = run.solve(sets, first, duals, carried)
         iterations, converged, history, state = run.iteration, run.converged, run.history, solution.state
         for record in history:  # objectives in the input's units
@@ -256,7 +255,8 @@ class _Run:
 
     def __init__(self, mesh, tv_weights, settings, stretch, penalty, progress, expected):
         self.mesh, self.tv_weights, self.settings, self.stretch = mesh, tv_weights, settings, stretch
-        self.penalty, self.progress, self.expected = penalty, progress, expected
+        self.penalty, self.expected = penalty, expected
+        self.outer_progress, self.progress = progress, progress.part(_SETUP_END, _ADMM_END)
         self.iteration, self.converged, self.history = 0, False, []
         self.next_growth_check = GROWTH_FIRST_CHECK
 
@@ -283,6 +283,7 @@ class _Run:
         self.checks, self.fraction, self.first_distance = [], 0.0, None
         state, out, step = self._iterate(step, state)
         final = SolverState.of(step, state, self.mesh)
+        self.outer_progress(_ADMM_END, "projecting onto the constraints")
         return _Solution(step.ops.sets, step.final_weights(state), final)
 
     def _iterate(self, step, state):

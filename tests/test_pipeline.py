@@ -52,7 +52,7 @@ def test_a_fine_jittered_cage_at_few_cells_gives_every_point_weights_that_meet_t
     binding = lbc_core.bind(vertices, faces, points, cells=2000)
     weights = binding.weights
     assert not binding.outside.any()
-    assert np.abs(np.asarray(weights.sum(axis=1)).ravel() - 1).max() < 1e-12
+    assert np.abs(np.asarray(weights.sum(axis=1)).ravel() - 1).max() < 1e-10  # the guarantee is 1e-9
     assert np.linalg.norm(weights @ binding.cage.vertices - points, axis=1).max() < 1e-9 * cage.bbox_diagonal
     assert weights.data.min() >= 0
 
@@ -245,7 +245,7 @@ def test_a_scaled_cage_gives_the_same_weights(dim):
 STAGE_MESSAGES = {
     "meshing": "",  # the first message of a bind is the mesher's
     "geodesics": "geodesic distances",
-    "factorisation": "factorising the solver's matrix",
+    "factorisation": "finding where each coordinate may reach",
     "ADMM": "ADMM iteration",
     "projection": "projecting onto the constraints",
     "interpolation": "interpolation:",
