@@ -1,8 +1,8 @@
-"""Issue 12, items 2 and 3: the least time the paper's splitting can take, against each item's budget, one run.
+"""The least time the paper's dense splitting (lbc_core.dense_solver, the solver up to 5715f72) can take, one run.
 
     .venv/bin/python bench/floors.py [--baseline DIR] [--scene l08|gargoyle ...]
 
-The 3D solve is ADMM (``solver._DouglasRachford``): every iteration solves the Y-step (one factorised solve with
+The dense splitting's ADMM (``dense_solver._DouglasRachford``): every iteration solves the Y-step (one factorised solve with
 n − d − 1 right-hand sides) and sweeps the (d, F, n) X block of split gradients, which holds every (cell,
 coordinate) pair. However it were compiled, an iteration cannot take less than its Y-step plus one read-and-write
 pass over that block. Printed per scene: the default bind (lbc_core.bind on the gargoyle's 2674-point mesh) with its
@@ -10,8 +10,9 @@ iterations and stages, then per iteration the numpy step, the Y-step's solve and
 the bind's own mesh (medians of 7), and the floor: iterations × (Y-step + one pass) plus the bind's stages outside
 the solve as they are.
 
---baseline DIR  a tree of the issue's version (``git archive 89a6c11 | tar -x -C DIR``): its bind of cage L08 at 8000
-                cells, in a child process of this run, is item 3's budget.
+--baseline DIR  a tree of an earlier version (``git archive 89a6c11 | tar -x -C DIR``): its bind of cage L08 at 8000
+                cells, in a child process of this run, is the budget a bind of L08 at 32,000 cells is held to.
+The locality solver's own step, part by part: ``bench/solver_step.py``.
 """
 
 import argparse
@@ -27,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import lbc_core  # noqa: E402
-from lbc_core import solver  # noqa: E402
+from lbc_core import dense_solver as solver  # noqa: E402  (the paper's dense splitting, as 5715f72 solved)
 from lbc_core.boundary import boundary_weights  # noqa: E402
 from lbc_core.frame import UnitFrame  # noqa: E402
 from lbc_core.geodesics import geodesic_distances, tv_weights  # noqa: E402
