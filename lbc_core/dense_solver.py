@@ -45,6 +45,7 @@ from .factor import Factor
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
 from .frame import principal_aspect
 from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
+from .solver import _balancing_factor, _check_problem  # the same input checks and balancing rule
 from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
@@ -343,23 +344,6 @@ def _starting_penalty(penalty, start, d, n):
 
 def _default_penalty(d, n):
     return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
-
-
-def _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights):
-    n_vertices, d = vertices.shape
-    if d not in (2, 3) or cells.ndim != 2 or cells.shape[1] != d + 1:
-        raise CageError(f"cells must be (F, {d + 1}) for {d}D vertices, got shape {cells.shape}")
-    if cells.min() < 0 or cells.max() >= n_vertices:
-        raise CageError("cells refer to vertices that do not exist")
-    n = len(control_points)
-    if boundary_weights.shape != (len(boundary_vertices), n):
-        raise CageError(
-            f"boundary_weights must be (B, n) = ({len(boundary_vertices)}, {n}), got {boundary_weights.shape}"
-        )
-    if n < d + 1:
-        raise CageError(f"a {d}D cage needs at least {d + 1} control points, got {n}")
-    if np.shape(tv_weights) != (len(cells), n):
-        raise CageError(f"tv_weights must be (F, n) = ({len(cells)}, {n}), got {np.shape(tv_weights)}")
 
 
 class _Problem:
@@ -852,13 +836,6 @@ def _residuals(step, out, previous, primal_scale, objective=True):
     if objective:
         record["objective"] = step.objective(out.gradient)
     return record
-
-
-def _balancing_factor(residuals, high):
-    """What to multiply the penalty by, from a check's relative residuals: 2 when the primal one lags, 1/2 when the
-    dual one does (beyond the band BALANCE_LOW-``high`` of their ratio), else 1."""
-    ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
-    return 2.0 if ratio > high else 0.5 if ratio < BALANCE_LOW else 1.0
 
 
 class _Timer:
