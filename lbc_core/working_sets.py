@@ -306,11 +306,14 @@ class PairOperators:
         # Control-major order: the matrix is block-diagonal over the control points, which the factorisation's
         # analysis then sees at once (a quarter faster on the gargoyle's cages).
         self.order = np.lexsort((sets.vertex_of_slot, sets.controls))
-        system = (self.gradient.T @ self.gradient).tocsr()
-        system = (system + sp.diags(self.slot_mass.astype(np.float64) ** 2))[self.order][:, self.order].tocoo()
-        lower = system.row >= system.col
-        self.factor = Factor(sp.coo_matrix((system.data[lower], (system.row[lower], system.col[lower])),
-                                           shape=system.shape), dtype)
+        rank = np.empty_like(self.order)
+        rank[self.order] = np.arange(len(self.order))
+        system = (self.gradient.T @ self.gradient + sp.diags(self.slot_mass.astype(np.float64) ** 2)).tocoo()
+        rows, columns = rank[system.row], rank[system.col]  # renumbered as COO: sparse fancy indexing copies twice
+        lower = rows >= columns
+        self.factor = Factor(sp.coo_matrix((system.data[lower], (rows[lower], columns[lower])), shape=system.shape),
+                             dtype)
+        del system, rows, columns, lower
         self.row_blocks = _row_blocks(self.gradient, worker_count())
         self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell].astype(dtype)
         self.dtype = dtype
@@ -385,7 +388,12 @@ class PairOperators:
 def _row_blocks(matrix, count):
     """(first row, rows) of ``matrix`` in ``count`` blocks, for the products' threads."""
     bounds = np.linspace(0, matrix.shape[0], count + 1).astype(int)
-    return [(start, matrix[start:stop]) for start, stop in zip(bounds[:-1], bounds[1:])]
+    blocks = []
+    for start, stop in zip(bounds[:-1], bounds[1:]):  # views of the matrix's arrays, not copies
+        first, last = matrix.indptr[start], matrix.indptr[stop]
+        blocks.append((start, sp.csr_matrix((matrix.data[first:last], matrix.indices[first:last],
+                                             matrix.indptr[start:stop + 1] - first), shape=(stop - start, matrix.shape[1]))))
+    return blocks
 
 
 def _gradient_matrix(scaled, corner_slot, n_slots, dtype):
