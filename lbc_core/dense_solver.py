@@ -45,7 +45,7 @@ from .factor import Factor
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
 from .frame import principal_aspect
 from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
-from .solver import _balancing_factor, _check_problem  # the same input checks and balancing rule
+from .solver import _Clock, _balancing_factor, _check_problem  # the same checks, balancing rule and stage clock
 from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
@@ -253,7 +253,7 @@ def solve_on_mesh(
     -------
     SolveResult
     """
-    timer = _Timer()
+    timer = _Clock()
     progress = Progress.of(progress, cancel)
     vertices = np.asarray(vertices, dtype=float)
     cells = np.asarray(cells, dtype=np.int64)
@@ -836,14 +836,3 @@ def _residuals(step, out, previous, primal_scale, objective=True):
     if objective:
         record["objective"] = step.objective(out.gradient)
     return record
-
-
-class _Timer:
-    def __init__(self):
-        self.seconds = {}
-        self._last = time.perf_counter()
-
-    def lap(self, stage):
-        now = time.perf_counter()
-        self.seconds[stage] = self.seconds.get(stage, 0.0) + now - self._last
-        self._last = now

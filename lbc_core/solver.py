@@ -303,8 +303,8 @@ class _Run:
             count = min(period, settings.max_iterations - self.iteration)
             new_value, new_out, new_previous, last_norm = self._advance(step, start_value, count, out)
             self.iteration += count
-            new_residual = new_value - value if candidate is None else new_value - start_value
-            new_norm = float(np.linalg.norm(new_value - start_value))
+            new_residual = new_value - start_value
+            new_norm = float(np.linalg.norm(new_residual))
             if candidate is not None and new_norm > norm:
                 # Safeguard: the extrapolation did not reduce the residual; take the plain steps instead.
                 anderson.reset()
