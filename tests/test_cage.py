@@ -13,8 +13,10 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 import lbc_core.cage as cage_module
-from lbc_core.cage import MAX_CONTROL_POINTS, Cage, _intersecting_triangles, _overlapping_boxes, make_cage
+import lbc_core.geometry as geometry
+from lbc_core.cage import MAX_CONTROL_POINTS, Cage, make_cage
 from lbc_core.errors import CageError, CageVertexError
+from lbc_core.geometry import intersecting_triangles, overlapping_boxes
 from random_cages import draw_dented_sphere, lengths, sphere_directions, star_polygon, subdivided_cube
 
 DATA = Path(__file__).parent / "data"
@@ -433,8 +435,8 @@ def test_self_intersection_check_tests_only_nearby_triangles(monkeypatch):
     vertices, triangles = sphere(502)  # 1000 triangles
     assert len(triangles) == 1000
     found = []
-    broad_phase = cage_module._overlapping_boxes
-    monkeypatch.setattr(cage_module, "_overlapping_boxes",
+    broad_phase = geometry.overlapping_boxes
+    monkeypatch.setattr(geometry, "overlapping_boxes",
                         lambda *arguments: found.append(broad_phase(*arguments)) or found[-1])
     make_cage(vertices, triangles)
     assert len(found) == 1 and len(found[0]) < 20 * len(triangles)
@@ -500,7 +502,7 @@ def _pair(first, second):
 )
 def test_disjoint_triangle_pairs(second, meets):
     triangles, vertices = _pair([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]], second)
-    assert len(_intersecting_triangles(vertices, triangles, 1e-12)) == int(meets)
+    assert len(intersecting_triangles(vertices, triangles, 1e-12)) == int(meets)
 
 
 @pytest.mark.parametrize(
@@ -525,7 +527,7 @@ def test_neighbouring_triangle_pairs(corners, meets):
     vertices = np.r_[first, extra]
     index = [next(k for k, v in enumerate(vertices) if np.array_equal(v, c)) for c in corners]
     triangles = np.array([[0, 1, 2], index])
-    assert len(_intersecting_triangles(vertices, triangles, 1e-12)) == int(meets)
+    assert len(intersecting_triangles(vertices, triangles, 1e-12)) == int(meets)
 
 
 def test_broad_phase_finds_every_overlapping_box_pair():
@@ -535,7 +537,7 @@ def test_broad_phase_finds_every_overlapping_box_pair():
     overlap = np.all((low[:, None] <= high[None]) & (low[None] <= high[:, None]), axis=2)
     expected = {tuple(p) for p in np.argwhere(np.triu(overlap, k=1)).tolist()}
     for chunk in (7, 2_000_000):  # several chunks, and one
-        assert {tuple(p) for p in _overlapping_boxes(low, high, chunk).tolist()} == expected
+        assert {tuple(p) for p in overlapping_boxes(low, high, chunk).tolist()} == expected
 
 
 def test_every_invalid_face_is_named():
@@ -724,7 +726,7 @@ def test_triangle_intersection_agrees_with_a_linear_program(corners, shared):
         assume(np.all(np.abs(heights) > 1e-6))
     vertices = np.r_[first, second[shared:]]
     triangles = np.array([[0, 1, 2], [0, 1, 2][:shared] + list(range(3, 6 - shared))])
-    found = len(_intersecting_triangles(vertices, triangles, 1e-12)) == 1
+    found = len(intersecting_triangles(vertices, triangles, 1e-12)) == 1
     assert found == _meet_beyond_shared(first, second, shared)
 
 

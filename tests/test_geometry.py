@@ -81,6 +81,18 @@ def test_radius_ratios_are_one_for_a_regular_tetrahedron_and_near_zero_for_a_fla
                                [1.0, 0.0], atol=1e-5)
 
 
+def test_radius_ratios_of_triangles_against_their_inradius_and_circumradius():
+    corners = RNG.normal(size=(30, 3, 2))
+    vertices, triangles = corners.reshape(-1, 2), np.arange(90).reshape(30, 3)
+    a, b, c = (np.linalg.norm(corners[:, i] - corners[:, j], axis=1) for i, j in ((1, 2), (2, 0), (0, 1)))
+    u, v = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    area = 0.5 * np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    inradius, circumradius = 2 * area / (a + b + c), a * b * c / (4 * area)
+    np.testing.assert_allclose(radius_ratios(vertices, triangles), 2 * inradius / circumradius, rtol=1e-9)
+    equilateral = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(0.75)]])
+    assert radius_ratios(equilateral, np.array([[0, 1, 2]]))[0] == pytest.approx(1.0)
+
+
 def test_circumspheres_pass_through_every_corner_in_the_triangles_plane():
     points = RNG.normal(size=(60, 3))
     triangles = np.array([RNG.choice(60, 3, replace=False) for _ in range(40)])
