@@ -28,8 +28,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import storage
-from .core import (DEFAULT_FLOOR, WARM, CageError, CageVertexError, lbc_core, reframed, solved_again_text,
-                   thin_changed_rows, thin_weights)
+from .core import (DEFAULT_FLOOR, BindOptions, CageError, CageVertexError, PointsOutside, bind, make_cage, rebind,
+                   rebind_report, reframed, solved_again, thin_changed_rows, thin_weights)
 
 
 # Beyond this share of a mesh's vertices outside its cage, the cage is too small rather than grazed by a few stray
@@ -158,7 +158,7 @@ def core_options(options):
         ``cells``, ``weighting``, ``epsilon``, ``tolerance`` as stored in ``Object.lbc`` (``thinning`` and
         ``influences`` are the add-on's own: :func:`solve` thins the weights with them).
     """
-    return lbc_core.BindOptions(
+    return BindOptions(
         cells=options["cells"] or None,
         weighting=options["weighting"],
         epsilon=options["epsilon"],
@@ -248,12 +248,11 @@ def solve(request, progress=None, cancel=None, earlier=()):
     cage_vertices, faces, points, column_base = request.solve_geometry()
     try:
         if previous is not None:
-            binding = lbc_core.rebind(previous.binding, cage_vertices, faces, points, progress=progress,
-                                      cancel=cancel)
+            binding = rebind(previous.binding, cage_vertices, faces, points, progress=progress, cancel=cancel)
         else:
-            binding = lbc_core.bind(cage_vertices, faces, points, options=core_options(request.options),
-                                    progress=progress, cancel=cancel)
-    except lbc_core.PointsOutside as error:
+            binding = bind(cage_vertices, faces, points, options=core_options(request.options), progress=progress,
+                           cancel=cancel)
+    except PointsOutside as error:
         raise CageError(f"every vertex of '{request.mesh_name}' lies outside the cage '{request.cage_name}': the cage "
                         "must enclose the mesh. Is it the right cage? (Select the mesh, then the cage last so it is "
                         "active.)") from error
@@ -321,7 +320,7 @@ def _swapped_hint(request):
         return ""
     cage_vertices, faces = request.solve_geometry()[:2]
     try:
-        lbc_core.make_cage(cage_vertices, faces)
+        make_cage(cage_vertices, faces)
         return ""
     except CageError:
         pass
@@ -413,7 +412,7 @@ def _rebind_report(request, previous, binding):
     mesh's, what it reused, and when it bound from scratch, why for a mesh bound to this cage before (its own binding
     no longer in memory: more meshes than KEPT_BINDINGS rebound), nothing for a first bind.
     """
-    report = binding.options.get("rebind", "")
+    report = rebind_report(binding)
     own = _previous.get(request.mesh_uid)
     if previous is None and request.from_scratch:
         return "bound from scratch, as asked (From Scratch)"
@@ -425,11 +424,11 @@ def _rebind_report(request, previous, binding):
                 f"{KEPT_BINDINGS} meshes, not in the .blend: a reopened file or an Unbind forgets it)")
     if previous is None or previous.mesh_uid == request.mesh_uid:
         return report
-    if binding.options.get("start") != WARM:
+    reused = solved_again(binding)
+    if not reused:
         return report if request.bound_to_cage else ""  # why a mesh bound before bound from scratch
-    solved_again = solved_again_text(binding.options["solved_again"])
     made = ", bound from scratch just before (From Scratch)" if request.from_scratch else ""
-    return f"started from the binding of '{previous.mesh_name}' to the same cage{made}: {solved_again}"
+    return f"started from the binding of '{previous.mesh_name}' to the same cage{made}: {reused}"
 
 
 def remember(request, result):

@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 
 from . import storage
-from .core import lbc_core
+from .core import __version__ as core_version
 
 GROUP_NAME = "LBC Deform"
 # A node group's custom property recording what it was built for (see :func:`layout`), so that binding again with the
@@ -398,7 +398,7 @@ def layout(slots, cage_vertex_count, mesh_vertex_count, shared_slots):
     and :data:`LAYOUT_VERSION` (a group of another layout is built again), and whether it has Warning nodes. Groups
     made before LAYOUT_VERSION carried a digest of the add-on's source in its place: they differ, so are rebuilt."""
     shared = slots if shared_slots is None else min(shared_slots, slots)
-    return (f"{lbc_core.__version__} layout {LAYOUT_VERSION} slots {slots} shared {shared} cage {cage_vertex_count} "
+    return (f"{core_version} layout {LAYOUT_VERSION} slots {slots} shared {shared} cage {cage_vertex_count} "
             f"mesh {mesh_vertex_count} warnings {int(HAS_WARNING_NODE)}")
 
 

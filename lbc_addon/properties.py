@@ -8,12 +8,7 @@ from bpy.app.handlers import persistent
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from .core import (
-    DEFAULT_CELLS_2D,
-    DEFAULT_CELLS_3D,
-    DEFAULT_FLOOR,
-    DEFAULT_TOLERANCE,
-)
+from .core import DEFAULT_CELLS, DEFAULT_FLOOR, DEFAULT_TOLERANCE
 
 # Influences per mesh vertex by default (bench/RESULTS.md, "Blender deformer"): every weight lowered by the
 # Thinning floor (DEFAULT_FLOOR) and no cap on the count. A cap ranks the weights of each vertex, and where the ranks
@@ -53,7 +48,7 @@ class BindOptionProperties:
     cells: IntProperty(
         name="Cells",
         description=f"About how many cells (triangles in 2D, tetrahedra in 3D) fill the cage; 0 uses lbc's default "
-        f"({DEFAULT_CELLS_2D} in 2D, {DEFAULT_CELLS_3D} in 3D). More cells: finer weights, slower bind",
+        f"({DEFAULT_CELLS[2]} in 2D, {DEFAULT_CELLS[3]} in 3D). More cells: finer weights, slower bind",
         default=0,
         min=0,
         soft_max=200000,

@@ -1,0 +1,43 @@
+"""What the Blender add-on uses of lbc_core, and nothing more: the one door it comes through.
+
+``lbc_addon.core`` takes every name of :data:`__all__` from here and no other name of lbc_core, and
+tests/test_architecture.py checks that (the list is in docs/ARCHITECTURE.md). A change inside lbc_core that keeps
+these names and their meaning leaves the add-on alone; a name the add-on needs is added here, to the doc's list, and
+to ``lbc_addon.core``.
+"""
+
+from . import forecast, options
+from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
+from .errors import CageError, CageVertexError, Cancelled, PointsOutside
+from .options import BindOptions
+from .pipeline import bind
+from .planar import flatten, reframed
+from .rebinding import WARM, rebind, solved_again_text
+from .thinning import DEFAULT_FLOOR, thin_changed_rows, thin_weights
+from .version import __version__
+
+__all__ = [
+    "BindOptions", "CageError", "CageVertexError", "Cancelled", "DEFAULT_CELLS", "DEFAULT_FLOOR", "DEFAULT_TOLERANCE",
+    "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten", "make_cage", "rebind",
+    "rebind_report", "reframed", "solved_again", "some_indices", "thin_changed_rows", "thin_weights",
+]
+
+DEFAULT_CELLS = options.DEFAULT_CELLS
+"""Cells of the domain mesh when the option is left at its default, by dimension: {2: triangles, 3: tetrahedra}."""
+
+DEFAULT_TOLERANCE = forecast.DEFAULT_TOLERANCE
+"""The solver's tolerance when the option is left at its default, by dimension: {2: ..., 3: ...}."""
+
+
+def rebind_report(binding):
+    """How :func:`rebind` went, for the user: the cells solved again, or why it bound from scratch; "" for a binding
+    from :func:`bind`."""
+    return binding.options.get("rebind", "")
+
+
+def solved_again(binding):
+    """What a warm re-bind solved again, for the user ("s of c cells solved, e of p points evaluated"); "" for any
+    other binding, one bound from scratch included."""
+    if binding.options.get("start") != WARM:
+        return ""
+    return solved_again_text(binding.options["solved_again"])
