@@ -111,7 +111,7 @@ def interpolation_matrix(vertices, cells, points, progress=None, cancel=None):
         lost = np.flatnonzero(cell < 0)
         if lost.size:
             if facet_search is None:
-                facet_search = _FacetSearch(vertices, cells)
+                facet_search = FacetSearch(vertices, cells)
             squared, facet, bary = facet_search.closest(chunk[lost], progress.check)
             gap = np.sqrt(squared)
             values[start + lost, :d] = bary
@@ -411,7 +411,7 @@ def _locate(grid, planes, points, tol):
 # --- boundary facets -----------------------------------------------------------------------------------------------
 
 
-class _FacetSearch:
+class FacetSearch:
     """Exact closest points on the boundary facets of a mesh.
 
     The facet of the nearest centroid (a KD-tree query) gives each point a first distance; a bounding volume

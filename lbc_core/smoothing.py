@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .interpolation import _FacetSearch
+from .interpolation import FacetSearch
 from .progress import Progress
 
 # The fit's radius in median cell edges: wider is smoother and costs more influences per point (bench/RESULTS.md).
@@ -66,7 +66,7 @@ class SmoothInterpolation:
         # The fade follows the P1 interpolation of the vertices' distances to the cage: exactly 0 on it, and found
         # for the corners of the points' cells (at most N) instead of m points.
         corners = np.unique(self.located.indices)
-        boundary = _FacetSearch(self.vertices, np.asarray(cells))
+        boundary = FacetSearch(self.vertices, np.asarray(cells))
         self.cage_distance = np.zeros(len(self.vertices))
         self.cage_distance[corners] = np.sqrt(boundary.closest(self.vertices[corners], self.progress.check).squared)
 
