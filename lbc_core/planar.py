@@ -11,6 +11,7 @@ import numpy as np
 
 from .cage import check_coordinates
 from .errors import CageError
+from .frame import principal_extents
 
 # A cage is flat when its thickness is below this fraction of its bounding-box diagonal; points lie in the cage's
 # plane when every one is this close to it. Image planes and flat meshes are exactly flat, so this is generous.
@@ -58,13 +59,13 @@ def flat_frame(cage_points, points):
     diagonal = np.linalg.norm(np.ptp(cage_points, axis=0))
     if diagonal == 0:
         return None
-    _, _, basis = np.linalg.svd(cage_points - origin, full_matrices=False)
-    normal = basis[2]
+    axes = principal_extents(cage_points)[0]  # columns: the plane's two directions, then its normal
+    normal = axes[:, 2]
     if np.abs((cage_points - origin) @ normal).max() > FLAT_TOLERANCE * diagonal:
         return None
     if len(points) and np.abs((points - origin) @ normal).max() > FLAT_TOLERANCE * diagonal:
         return None
-    return origin, basis[:2]
+    return origin, axes[:, :2].T.copy()
 
 
 def boundary_loop(faces, edges=None):
