@@ -1,6 +1,6 @@
 """Meshing on the cage corpus: cells, meshing time and whole-bind time per cage family, at the default resolution.
 
-Run from the repository root:  python bench/bench_mesher.py [cells]
+Run from the repository root:  python bench/bench_mesher.py [cells] [--quick]
 Prints a markdown table (the README's mesher table) and the tetrahedra's radius ratios. Each cage binds 1000 points
 spread over its middle (points outside a non-convex cage are bound to its closest point, as always). A small cage is
 meshed once first, so that no row pays the process's one-time costs (imports, first calls); binds shorter than
@@ -8,6 +8,7 @@ SHORT seconds are repeated, REPEATS times in all, and the median of each figure 
 short bind can take twice as long as the next).
 """
 
+import argparse
 import sys
 import time
 from pathlib import Path
@@ -48,6 +49,7 @@ FAMILIES = [
 
 SHORT = 5.0
 REPEATS = 3
+QUICK = FAMILIES[:2]  # --quick: a smoke run
 
 
 def middle_points(vertices, rng, count=1000):
@@ -56,13 +58,12 @@ def middle_points(vertices, rng, count=1000):
     return 0.5 * (low + high) + 0.25 * (high - low) * rng.uniform(-1.0, 1.0, (count, 3))
 
 
-def main():
-    cells = int(sys.argv[1]) if len(sys.argv) > 1 else meshing.DEFAULT_CELLS_3D
+def measure(cells, families=FAMILIES, repeats=REPEATS):
+    """Yield one row per cage family: its label, control points, tetrahedra, the medians of meshing and bind seconds
+    and of the meshing's share of the bind, and the tetrahedra's radius ratios (mean and 1st percentile)."""
     rng = np.random.default_rng(0)
     meshing.mesh_domain(lbc_core.make_cage(*cage_corpus.load("cube")), cells=500)  # warm up
-    print(f"| cage | control points | tetrahedra | meshing s | bind s | meshing share | radius ratio mean / 1st pct |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    for label, name, kind in FAMILIES:
+    for label, name, kind in families:
         if kind is None:
             vertices, faces = read_cage(name)
         else:
@@ -70,7 +71,7 @@ def main():
         points = middle_points(vertices, rng)
         cage = lbc_core.make_cage(vertices, faces)
         alone, total, share = [], [], []
-        while len(total) < (REPEATS if not total or total[0] < SHORT else 1):
+        while len(total) < (repeats if not total or total[0] < SHORT else 1):
             clock = time.perf_counter()
             mesh = meshing.mesh_domain(cage, cells=cells)
             alone.append(time.perf_counter() - clock)
@@ -79,9 +80,29 @@ def main():
             total.append(time.perf_counter() - clock)
             share.append(binding.timings["meshing"] / total[-1])
         ratio = radius_ratios(mesh.vertices, mesh.cells)
-        print(f"| {label} | {cage.n_control_points} | {len(mesh.cells)} | {np.median(alone):.2f} | "
-              f"{np.median(total):.1f} | {100 * np.median(share):.0f} % | {ratio.mean():.2f} / "
-              f"{np.percentile(ratio, 1):.2f} |", flush=True)
+        yield dict(label=label, n=cage.n_control_points, cells=len(mesh.cells), meshing=float(np.median(alone)),
+                   bind=float(np.median(total)), share=float(np.median(share)), ratio_mean=float(ratio.mean()),
+                   ratio_low=float(np.percentile(ratio, 1)))
+
+
+HEADER = ("| cage | control points | tetrahedra | meshing s | bind s | meshing share | radius ratio mean / 1st pct |\n"
+          "| --- | --- | --- | --- | --- | --- | --- |")
+
+
+def table_row(row):
+    """One row of :func:`measure` as a line of the markdown table under HEADER."""
+    return (f"| {row['label']} | {row['n']} | {row['cells']} | {row['meshing']:.2f} | {row['bind']:.1f} | "
+            f"{100 * row['share']:.0f} % | {row['ratio_mean']:.2f} / {row['ratio_low']:.2f} |")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("cells", nargs="?", type=int, default=meshing.DEFAULT_CELLS_3D, help="tetrahedra asked")
+    parser.add_argument("--quick", action="store_true", help=f"only the first {len(QUICK)} cages, each bound once")
+    args = parser.parse_args(argv)
+    print(HEADER)
+    for row in measure(args.cells, *((QUICK, 1) if args.quick else ())):
+        print(table_row(row), flush=True)
 
 
 if __name__ == "__main__":
