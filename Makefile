@@ -43,9 +43,10 @@ test: $(BIN)/.installed $(LINE_VENVS:%=%/.installed)
 test-fast: $(BIN)/.installed
 	$(BIN)/python -m pytest -q -m "not slow and not blender"
 
+# The benchmarks a user chooses by, measured again and written into docs/benchmarks.md and its plots into docs/images
+# (about 15 minutes on a quiet 2-core machine). make bench BENCH_ARGS=--quick: a smoke run into out/bench-quick/.
 bench: $(BIN)/.installed
-	$(BIN)/python bench/run.py
-	$(BIN)/python bench/bench_mesher.py
+	$(BIN)/python bench/report.py $(BENCH_ARGS)
 
 # The API reference of lbc_core, from its docstrings (pdoc), into out/docs; it fails on a warning or a broken reference.
 docs: $(BIN)/.installed
