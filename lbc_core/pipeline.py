@@ -4,9 +4,12 @@
     every point lies outside) → geodesic TV weights → solve (ADMM) → smooth evaluation and reduction → back to the
     user's frame
 
-Each stage is a public function of its own module; this module only orders them, gives each its share of the
-progress bar and times it. The baselines (:mod:`lbc_core.baselines`) run the same first stages through
-:func:`check_cage_and_points`.
+Each stage is a public function of its own module; this module orders them, gives each its share of the progress bar
+(one table, :data:`STAGES`) and times it (:class:`StageClock`). The stage functions below (:func:`mesh_cage`,
+:func:`locate`, :func:`geodesic_weights`, :func:`solve`, :func:`evaluate`, :func:`lbc_binding`) are what
+:func:`bind` and the warm re-bind (:mod:`lbc_core.rebinding`) both run: the re-bind carries the previous mesh in
+place of meshing, solves again only part of it and evaluates again only some points, through the same functions.
+The baselines (:mod:`lbc_core.baselines`) run the same first stages through :func:`check_cage_and_points`.
 """
 
 import time
@@ -21,19 +24,60 @@ from .frame import UnitFrame, principal_aspect
 from .geodesics import geodesic_distances, tv_weights
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain, simplex_domain
-from .options import DEFAULT_CELLS, BindOptions
+from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
 from .parallel import busy_factor, counted_in_load
 from .progress import Progress
 from .reduction import interpolate_and_reduce
-from .smoothing import SmoothInterpolation
+from .smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation
 from .forecast import check_memory, solve_forecast, solves_stretched
 from .solver import solve_on_mesh
 
 # Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
 REPRODUCTION_TOLERANCE = 1e-9
-# Share of the progress bar each stage gets (the solve dominates).
-STAGES = {"meshing": (0.0, 0.08), "interpolation": (0.08, 0.13), "geodesics": (0.13, 0.214),
-          "solve": (0.214, 0.97), "reduction": (0.97, 1.0)}
+# Each stage's share of the progress bar (the solve dominates); a run of stages shares the bar among its own in
+# proportion. Binding.timings names the stages alike (the solve by the solver's own parts).
+STAGES = {"checks": 0.0, "meshing": 0.08, "carry": 0.05, "interpolation": 0.05, "geodesics": 0.084, "solve": 0.756,
+          "reduction": 0.03}
+# The stages of a bind, in order. A warm re-bind carries the previous mesh in place of meshing, and locates the
+# points after the solve, which tells it which points to evaluate again.
+BIND_STAGES = ("checks", "meshing", "interpolation", "geodesics", "solve", "reduction")
+REBIND_STAGES = ("checks", "carry", "geodesics", "solve", "interpolation", "reduction")
+
+
+class StageClock:
+    """One run of stages: each stage's part of the progress bar and the seconds it took (``timings``).
+
+    Parameters
+    ----------
+    progress : Progress
+    order : sequence of str
+        The stages of the run, in order (names of :data:`STAGES`).
+    """
+
+    def __init__(self, progress, order):
+        self.progress = progress
+        self.timings = {}
+        self._parts = {}
+        total, start = sum(STAGES[name] for name in order), 0.0
+        for name in order:
+            self._parts[name] = (start, start + STAGES[name] / total)
+            start += STAGES[name] / total
+        self._clock = time.perf_counter()
+
+    def part(self, stage):
+        """The Progress of ``stage``: its part of the bar."""
+        return self.progress.part(*self._parts[stage])
+
+    def done(self, stage):
+        """``stage`` ends: the seconds since the previous one ended are its own."""
+        now = time.perf_counter()
+        self.timings[stage] = self.timings.get(stage, 0.0) + now - self._clock
+        self._clock = now
+
+    def add(self, seconds):
+        """A stage that timed its own parts ends: ``seconds`` ({part: seconds}) are its timings."""
+        self.timings.update(seconds)
+        self._clock = time.perf_counter()
 
 
 @counted_in_load
@@ -84,60 +128,93 @@ def bind(
     CageError
         For any bad option, cage or points, before any meshing or solving.
     """
-    timings = {}
-    clock = time.perf_counter()
-
-    def lap(stage):
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage] = now - clock
-        clock = now
-
-    progress = Progress.of(progress, cancel)
+    clock = StageClock(Progress.of(progress, cancel), BIND_STAGES)
     request = BindOptions.of(options, cells=cells, weighting=weighting, epsilon=epsilon, threshold=threshold,
                              method=method, tolerance=tolerance, max_iterations=max_iterations)
-    cage, points = check_request(cage_vertices, cage_faces, points, request, progress)
-    lap("checks")
-    threshold = request.threshold_for(cage.n_control_points)
+    cage, points = check_request(cage_vertices, cage_faces, points, request, clock.progress)
+    clock.done("checks")
     # Every stage computes in the unit frame; the weights are the same in any frame.
     frame = UnitFrame.of(cage)
     unit_cage = frame.cage_to_unit(cage)
+    domain, fixed = mesh_cage(clock, unit_cage, request)
+    # Located before the solve: points that all lie outside are refused before the long work.
+    located, outside = locate(clock, domain, frame.to_unit(points))
+    omega = geodesic_weights(clock, domain, request.weighting)
+    result = solve(clock, domain.vertices, domain.cells, domain.boundary_vertices, fixed, unit_cage.vertices, omega,
+                   request)
+    weights = evaluate(clock, domain, located, result.weights, unit_cage, request.threshold_for(cage.n_control_points))
+    clock.progress(1.0, "bound")
+    return lbc_binding(frame, cage, domain, result, weights, outside, points, request, clock)
 
+
+def mesh_cage(clock, unit_cage, request):
+    """The meshing stage: the domain mesh of ``unit_cage`` (a simplex is its own one cell) and its boundary values.
+
+    Returns
+    -------
+    domain : DomainMesh
+    fixed : (B, n) float array
+        The boundary values at ``domain.boundary_vertices``.
+    """
     if unit_cage.is_simplex:
         domain = simplex_domain(unit_cage)
     else:
-        domain = mesh_domain(unit_cage, request.cells, request.method, progress=progress.part(*STAGES["meshing"]))
+        domain = mesh_domain(unit_cage, request.cells, request.method, progress=clock.part("meshing"))
     fixed = boundary_weights(domain, unit_cage)
-    lap("meshing")
-
-    # Located before the solve: points that all lie outside are refused before the long work.
-    located, outside, _ = interpolation_matrix(domain.vertices, domain.cells, frame.to_unit(points),
-                                               progress=progress.part(*STAGES["interpolation"]))
-    check_inside(outside)
-    lap("interpolation")
-
-    distances = geodesic_distances(domain.vertices, domain.cells, domain.control_vertices,
-                                   progress.part(*STAGES["geodesics"]))
-    omega = tv_weights(domain.cells, distances, request.weighting)
-    lap("geodesics")
-
-    result = solve_on_mesh(domain.vertices, domain.cells, domain.boundary_vertices, fixed, unit_cage.vertices, omega,
-                           epsilon=request.epsilon, tolerance=request.tolerance,
-                           max_iterations=request.max_iterations, progress=progress.part(*STAGES["solve"]))
-    timings.update(result.seconds)
-    clock = time.perf_counter()
-
-    reduction = progress.part(*STAGES["reduction"])
-    smooth = SmoothInterpolation(domain.vertices, domain.cells, located, progress=reduction)
-    weights = interpolate_and_reduce(smooth, result.weights, unit_cage.vertices, domain.vertices, threshold,
-                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=reduction)
-    lap("reduction")
-    progress(1.0, "bound")
-    return lbc_binding(frame, cage, domain, result, weights, outside, points,
-                       _options_record(request, len(domain.cells), threshold), timings)
+    clock.done("meshing")
+    return domain, fixed
 
 
-def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, options, timings, stale=None):
+def locate(clock, domain, unit_points, refuse_outside=True):
+    """The interpolation stage: each point in its cell of ``domain``, outside points bound to the closest domain point.
+
+    Returns the (m, N) barycentric matrix and the (m,) outside flags; :class:`PointsOutside` when every point lies
+    outside and ``refuse_outside``.
+    """
+    located, outside, _ = interpolation_matrix(domain.vertices, domain.cells, unit_points,
+                                               progress=clock.part("interpolation"))
+    if refuse_outside:
+        check_inside(outside)
+    clock.done("interpolation")
+    return located, outside
+
+
+def geodesic_weights(clock, domain, weighting):
+    """The geodesics stage: ω (F, n) of ``domain``, from the heat-method distances to its control vertices."""
+    distances = geodesic_distances(domain.vertices, domain.cells, domain.control_vertices, clock.part("geodesics"))
+    omega = tv_weights(domain.cells, distances, weighting)
+    clock.done("geodesics")
+    return omega
+
+
+def solve(clock, vertices, cells, fixed, values, control_points, omega, request, start=None):
+    """The solve stage: :func:`~lbc_core.solver.solve_on_mesh` on ``cells`` with the vertices ``fixed`` held at
+    ``values``, as ``request`` (:class:`BindOptions`) asks, from ``start`` (a SolverState) if given; the solver's
+    own stage times are the timings."""
+    result = solve_on_mesh(vertices, cells, fixed, values, control_points, omega, epsilon=request.epsilon,
+                           tolerance=request.tolerance, max_iterations=request.max_iterations, start=start,
+                           progress=clock.part("solve"))
+    clock.add(result.seconds)
+    return result
+
+
+def evaluate(clock, domain, located, domain_weights, unit_cage, threshold, reach=1.0):
+    """The reduction stage: the smooth evaluation at the located points, reduced (weights below ``threshold``
+    dropped, the constraints restored); ``reach`` scales the fit's radius and fade near the cage, in median edges.
+
+    Returns the (m, n) sparse weights.
+    """
+    part = clock.part("reduction")
+    smooth = SmoothInterpolation(domain.vertices, domain.cells, located, radius_edges=RADIUS_EDGES * reach,
+                                 fade_edges=FADE_EDGES * reach, progress=part)
+    weights = interpolate_and_reduce(smooth, domain_weights, unit_cage.vertices, domain.vertices, threshold,
+                                     tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=part)
+    clock.done("reduction")
+    return weights
+
+
+def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, request, clock, account=None,
+                stale=None):
     """The :class:`Binding` of an LBC solve made in the unit ``frame``: the domain and objective in the cage's units.
 
     Parameters
@@ -152,10 +229,15 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, op
     weights : (m, n) scipy.sparse.csr_matrix
     outside : (m,) bool array
     points : (m, d) float array
-    options, timings : dict
+    request : BindOptions
+    clock : StageClock
+        Its timings.
+    account : dict, optional
+        What a re-bind adds to the options record: where the solve started, what it solved again and why.
     stale : (N,) float array, optional
         :attr:`Binding.stale`.
     """
+    options = options_record(request, len(unit_domain.cells), request.threshold_for(cage.n_control_points))
     return Binding(
         cage=cage,
         rest_cage_vertices=cage.vertices.copy(),
@@ -165,8 +247,8 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, op
         outside=outside,
         points=points,
         scheme="lbc",
-        options=options,
-        timings=timings,
+        options=dict(options, **(account or {})),
+        timings=clock.timings,
         iterations=solution.iterations,
         converged=solution.converged,
         objective=solution.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
@@ -175,13 +257,34 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, op
     )
 
 
-def _options_record(request, cells, threshold):
+def options_record(request, cells, threshold):
     """What a binding records of its options (JSON-able): the cell count reached and the one asked (None: the
     default), and the resolved threshold."""
     record = {"weighting": request.weighting, "epsilon": request.epsilon, "max_iterations": request.max_iterations}
     if request.tolerance is not None:
         record["tolerance"] = request.tolerance
     return dict(record, cells=cells, cells_asked=request.cells, threshold=threshold, method=request.method)
+
+
+def request_of(binding):
+    """The :class:`BindOptions` ``binding`` was made with: the cell count asked for, so that a bind from scratch is the
+    bind the artist made (bindings saved before it was recorded give the count they reached).
+
+    Raises
+    ------
+    CageError
+        For a binding saved with a weighting function of its own, which its file names but does not keep.
+    """
+    recorded = dict(binding.options)
+    weighting = recorded.get("weighting")
+    if isinstance(weighting, str) and weighting not in WEIGHTINGS:
+        raise CageError(f"this binding was made with a weighting function of its own ({weighting}), which a saved "
+                        "binding does not keep: bind from scratch with lbc_core.bind(..., weighting=that function)")
+    if "cells_asked" in recorded:
+        recorded["cells"] = recorded["cells_asked"]
+    return BindOptions.of(None, **{key: recorded[key] for key in ("cells", "weighting", "epsilon", "threshold",
+                                                                 "method", "tolerance", "max_iterations")
+                                  if recorded.get(key) is not None})
 
 
 def check_request(cage_vertices, cage_faces, points, options, progress=None):

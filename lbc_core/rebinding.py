@@ -24,10 +24,14 @@ vertex, would leave the cage by more than CHORD_KEPT of a cell), a bent face now
 before, the cage's topology or welding
 changed, or the previous binding has no solver state (one loaded from a file), the re-bind is a cold bind with the
 previous options, and ``Binding.options["rebind"]`` says why.
+
+The stages are :mod:`lbc_core.pipeline`'s, with its one table of progress shares and timings: this module carries
+the previous mesh (in place of meshing), chooses the vertices to solve again and the points to evaluate again, and
+merges the rows it kept; the geodesics, the solve, the interpolation, the evaluation and the binding record are the
+pipeline's stage functions.
 """
 
-import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -39,22 +43,18 @@ from .constraints import padded_rows
 from .errors import CageError
 from .fem import boundary_facets
 from .frame import UnitFrame
-from .geodesics import geodesic_distances
-from .geodesics import tv_weights as make_tv_weights
 from .geometry import (bary_positions, closest_on_facets, orient_positive, radius_ratios, row_keys, signed_measures,
                        triangle_normals, unit)
-from .interpolation import interpolation_matrix
 from .meshing import COPLANAR_ANGLE
 from .meshing.common import cell_edges
 from .meshing.tetrahedra import polish
 from .objective import tv_objective
-from .options import WEIGHTINGS, BindOptions
 from .parallel import counted_in_load
-from .pipeline import REPRODUCTION_TOLERANCE, bind, check_inside, check_points, lbc_binding
+from .pipeline import (REBIND_STAGES, REPRODUCTION_TOLERANCE, StageClock, bind, check_points, evaluate,
+                       geodesic_weights, lbc_binding, locate, request_of, solve)
 from .progress import Progress
-from .reduction import interpolate_and_reduce
-from .smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation, median_edge
-from .solver import SolveResult, solve_on_mesh
+from .smoothing import RADIUS_EDGES, median_edge
+from .solver import SolveResult
 
 # A carried cell must keep at least this share of its shape quality (radius ratio in 3D, the same ratio of in- to
 # circumradius in 2D): a cell squashed further would make the solve on the carried mesh coarser than a fresh mesh.
@@ -65,10 +65,6 @@ QUALITY_KEPT = 0.25
 # its corners stay on the cage, its inside leaves it. Up to this share of the median cell edge, the carried mesh is
 # kept: binds were measured as close to a bind from scratch as two binds from scratch are to each other.
 CHORD_KEPT = 0.5
-# Share of the progress bar each stage gets.
-_STAGES = {"carry": (0.0, 0.05), "solve": (0.05, 0.85), "interpolation": (0.85, 0.9), "reduction": (0.9, 1.0)}
-# Binding.options["start"] of a re-bind: where the solver started.
-WARM, COLD = "previous solution", "harmonic"
 # A cage edge the edit bends is followed by splitting the mesh edges it crosses (following_bent_edges), except within
 # this share of a mesh edge's length from its ends: a split so near a corner would make a sliver, and the mesh
 # follows the cage edge there within that share already.
@@ -88,6 +84,8 @@ STALE = 1e-2
 # fresh one (a subdivided cube's side vertex out and back in Blender: 2 % 0.0011 of the mesh's diagonal from a fresh
 # bind, 5 % 0.013, 10 % 0.020, against 0.0069 between fresh binds at 8000 and 9000 cells).
 CARRY_LIMIT = 0.08
+# Binding.options["start"] of a re-bind: where the solver started.
+WARM, COLD = "previous solution", "harmonic"
 
 
 @counted_in_load
@@ -121,88 +119,104 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     CageError
         For a bad cage or points (as :func:`lbc_core.bind`), or a previous binding that is not an LBC one.
     """
-    clock = time.perf_counter()
-    progress = Progress.of(progress, cancel)
+    clock = StageClock(Progress.of(progress, cancel), REBIND_STAGES)
+    request, cage, points = _checked(previous, cage_vertices, cage_faces, points)
+    clock.done("checks")
+    carry, reason = _carried(previous, cage)
+    if carry is None:
+        clock.progress(0.0, f"binding from scratch: {reason}")
+        binding = bind(cage_vertices, cage_faces, points, options=request, progress=clock.progress)
+        binding.options.update(start=COLD, rebind=f"bound from scratch: {reason}")
+        return binding
+    clock.part("carry")(1.0, "the previous mesh carried onto the edited cage" if carry.moved.any()
+                        else "the previous mesh and solution reused: the cage has not moved")
+    clock.done("carry")
+    omega = geodesic_weights(clock, carry.mesh, request.weighting)
+    result, solved = _solve_near(clock, carry, omega, request)
+    unit_points = carry.frame.to_unit(points)
+    again, stale, reach = _to_evaluate(carry, points, unit_points, result.weights)
+    # New points (e.g. another mesh in this cage) are refused as bind refuses them.
+    located, outside_again = locate(clock, carry.mesh, unit_points[again], refuse_outside=len(again) == len(points))
+    weights_again = evaluate(clock, carry.mesh, located, result.weights, carry.unit_cage,
+                             request.threshold_for(cage.n_control_points), reach)
+    if len(again) == len(points):
+        weights, outside = weights_again, outside_again
+    else:
+        weights, outside = _merged_rows(carry.previous, again, weights_again, outside_again)
+    clock.done("reduction")
+    clock.progress(1.0, "bound again from the previous solution")
+    return lbc_binding(carry.frame, carry.cage, carry.mesh, result, weights, outside, points, request, clock,
+                       _warm_account(carry, solved, len(again), len(points)), stale)
+
+
+@dataclass
+class _Carry:
+    """What a warm re-bind starts from.
+
+    Attributes
+    ----------
+    previous : Binding
+        The previous binding, its mesh split along the cage edges the edit bends (:func:`following_bent_edges`).
+    cage, unit_cage : Cage
+        The edited cage (split into the previous cage's facets), and the same in its unit ``frame``.
+    frame : UnitFrame
+    mesh : DomainMesh
+        The previous mesh carried onto ``unit_cage`` (:func:`carry_domain`), in the unit frame.
+    moved : (n,) bool array
+        The control points the edit moved.
+    touched : (N,) bool array or None
+        The vertices around those the split added.
+    travel : float
+        How far the cage's vertices moved in all since its last bind from scratch, with this edit (each warm
+        re-bind's largest move, over the diagonal, summed).
+    """
+
+    previous: object
+    cage: object
+    unit_cage: object
+    frame: UnitFrame
+    mesh: object
+    moved: np.ndarray
+    touched: np.ndarray
+    travel: float
+
+
+def _checked(previous, cage_vertices, cage_faces, points):
+    """The options ``previous`` was made with, the edited cage and the points: the checks stage of a re-bind."""
     if previous.scheme != "lbc":
         raise CageError(f"a warm re-bind needs an LBC binding to start from, not a {previous.scheme!r} one: bind "
                         "with lbc_core.bind")
-    request = _options_of(previous)
+    request = request_of(previous)
     if cage_faces is None and previous.cage.dim == 3:
         raise CageError("the previous binding is 3D: pass the edited cage's faces too, rebind(previous, vertices, "
                         "faces), as given to lbc_core.bind")
     cage = make_cage(cage_vertices, cage_faces)
     points = previous.points if points is None else check_points(cage, points)
+    return request, cage, points
+
+
+def _carried(previous, cage):
+    """The carry stage: a :class:`_Carry` of ``previous`` onto the edited ``cage``, or None and why not (for the
+    user)."""
     cage, reason = _split_as_before(previous.cage, cage)
-    carried = None
     if previous.cage.is_simplex:
         reason = "a simplex cage has nothing to solve"
     elif previous.solver_state is None:
         reason = "the previous binding's solver state is not at hand (it is kept in memory only, not in files)"
     travel = previous.options.get("travel", 0.0) + _largest_move(previous, cage)
-    touched = None
-    if reason is None:
-        frame = UnitFrame.of(cage)
-        unit_cage = frame.cage_to_unit(cage)
-        previous, touched = following_bent_edges(previous, cage)
-        carried, reason = carry_domain(previous, unit_cage)
-    if carried is not None and travel > CARRY_LIMIT:
-        carried, reason = None, (f"its vertices moved {travel:.0%} of the cage's diagonal in all since it was last "
-                                 "bound from scratch, and a mesh carried that far drifts from a fresh one")
-    if carried is None:
-        progress(0.0, f"binding from scratch: {reason}")
-        binding = bind(cage_vertices, cage_faces, points, options=request, progress=progress)
-        binding.options.update(start=COLD, rebind=f"bound from scratch: {reason}")
-        return binding
+    if reason is not None:
+        return None, reason
+    frame = UnitFrame.of(cage)
+    unit_cage = frame.cage_to_unit(cage)
+    previous, touched = following_bent_edges(previous, cage)
+    mesh, reason = carry_domain(previous, unit_cage)
+    if mesh is not None and travel > CARRY_LIMIT:
+        mesh, reason = None, (f"its vertices moved {travel:.0%} of the cage's diagonal in all since it was last "
+                              "bound from scratch, and a mesh carried that far drifts from a fresh one")
+    if mesh is None:
+        return None, reason
     moved = np.any(cage.vertices != previous.rest_cage_vertices, axis=1)
-    progress.part(*_STAGES["carry"])(1.0, "the previous mesh carried onto the edited cage" if moved.any()
-                                     else "the previous mesh and solution reused: the cage has not moved")
-    timings = {"carry": time.perf_counter() - clock}
-
-    result, objective, state, solved, free = _solve_near(previous, carried, unit_cage, moved, touched,
-                                                         progress.part(*_STAGES["solve"]))
-    timings.update(result.seconds)
-
-    # Points whose evaluation can see no vertex that changed by STALE since they were evaluated keep their weights.
-    old_vertices = frame.to_unit(previous.domain.vertices)
-    # The median cell edge before and after the carry: the unit of a vertex's move, and of the evaluation's reach.
-    old_edge, edge = (median_edge(at, carried.cells) for at in (old_vertices, carried.vertices))
-    stale = _staleness(previous, carried, old_vertices, result.weights, edge)
-    changed = stale > STALE
-    unit_points = frame.to_unit(points)
-    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, moved)
-    stale[changed] = 0.0  # every point within reach of these is evaluated again
-    if len(again) == len(points):
-        stale[:] = 0.0
-    clock = time.perf_counter()
-    located, outside_again, _ = interpolation_matrix(carried.vertices, carried.cells, unit_points[again],
-                                                     progress=progress.part(*_STAGES["interpolation"]))
-    if len(again) == len(points):  # new points (e.g. another mesh in this cage): refused as bind refuses them
-        check_inside(outside_again)
-    timings["interpolation"] = time.perf_counter() - clock
-    clock = time.perf_counter()
-    reduction = progress.part(*_STAGES["reduction"])
-    # The previous evaluation's radius and fade, in this mesh's median edges: kept and new rows fit alike.
-    ratio = old_edge / edge
-    smooth = SmoothInterpolation(carried.vertices, carried.cells, located, radius_edges=RADIUS_EDGES * ratio,
-                                 fade_edges=FADE_EDGES * ratio, progress=reduction)
-    weights_again = interpolate_and_reduce(smooth, result.weights, unit_cage.vertices, carried.vertices,
-                                           previous.options["threshold"],
-                                           tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal,
-                                           progress=reduction)
-    if len(again) == len(points):
-        weights, outside = weights_again, outside_again
-    else:
-        weights, outside = _merged_rows(previous, again, weights_again, outside_again)
-    timings["reduction"] = time.perf_counter() - clock
-    progress(1.0, "bound again from the previous solution")
-    counts = {"cells solved": int(solved), "cells": len(carried.cells), "points evaluated": len(again),
-              "points": len(points)}
-    done = (solved_again_text(counts) if moved.any() or len(again)
-            else "it was made for the cage as it is now, so nothing was solved or evaluated again")
-    options = dict(previous.options, start=WARM, solved_again=counts, travel=travel,
-                   rebind=f"bound again from the previous binding: {done}")
-    return lbc_binding(frame, cage, carried, replace(result, objective=objective, state=state), weights, outside,
-                       points, options, timings, stale)
+    return _Carry(previous, cage, unit_cage, frame, mesh, moved, touched, travel), None
 
 
 def _largest_move(previous, cage):
@@ -214,6 +228,17 @@ def _largest_move(previous, cage):
     return float(np.linalg.norm(cage.vertices - rest, axis=1).max() / previous.cage.bbox_diagonal)
 
 
+def _warm_account(carry, solved, evaluated, points):
+    """What a warm re-bind that solved ``solved`` cells again and evaluated ``evaluated`` of ``points`` points adds
+    to the options record: where it started, those counts, how far the cage moved, and the account for the user."""
+    counts = {"cells solved": int(solved), "cells": len(carry.mesh.cells), "points evaluated": evaluated,
+              "points": points}
+    done = (solved_again_text(counts) if carry.moved.any() or evaluated
+            else "it was made for the cage as it is now, so nothing was solved or evaluated again")
+    return dict(start=WARM, solved_again=counts, travel=carry.travel,
+                rebind=f"bound again from the previous binding: {done}")
+
+
 def solved_again_text(counts):
     """What a warm re-bind solved again, for the user: "s of c cells solved, e of p points evaluated".
 
@@ -223,36 +248,18 @@ def solved_again_text(counts):
             f"{counts['points evaluated']} of {counts['points']} points evaluated")
 
 
-def _solve_near(previous, carried, unit_cage, moved, touched, progress):
-    """Solve again where the moved control points' coordinates reach (their support, grown by FREE_RINGS rings of
-    vertices), and around the vertices ``touched`` ((N,) bool array, or None), the rest of the carried mesh held at the
-    previous solution, from the previous solver state.
-
-    Returns
-    -------
-    result : SolveResult
-        Its weights cover the whole mesh; its objective only the cells solved.
-    objective : float
-        The whole mesh's objective (unit frame).
-    state : SolverState
-        The whole mesh's state, for the next warm re-bind.
-    solved : int
-        How many cells were solved again.
-    free : (N,) bool array
-        The vertices solved again.
-    """
-    clock = time.perf_counter()
-    options = previous.options
-    distances = geodesic_distances(carried.vertices, carried.cells, carried.control_vertices, progress.part(0, 0.1))
-    tv_weights = make_tv_weights(carried.cells, distances, options["weighting"])
-    geodesics_seconds = time.perf_counter() - clock
-    free = np.any(previous.domain_weights[:, moved] > 0, axis=1)
+def _to_solve_again(carry):
+    """The vertices to solve again, (N,) bool: where the moved control points' coordinates reach (their support,
+    grown by FREE_RINGS rings of vertices), around the vertices the split touched and the cells a flip made, and
+    where the carry polished a vertex; none on the cage. And the previous solver state on the carried cells."""
+    previous, carried = carry.previous, carry.mesh
+    free = np.any(previous.domain_weights[:, carry.moved] > 0, axis=1)
     # Vertices the carry polished away from where the previous weights put them (see _polished), and those of cells
     # a flip made (see _flipped_slivers), must be solved again.
-    carried_to = previous.domain_weights @ unit_cage.vertices
+    carried_to = previous.domain_weights @ carry.unit_cage.vertices
     free |= np.linalg.norm(carried.vertices - carried_to, axis=1) > REPRODUCTION_TOLERANCE
-    if touched is not None:
-        free |= touched
+    if carry.touched is not None:
+        free |= carry.touched
     state = previous.solver_state
     if len(carried.cells) != len(previous.domain.cells):  # flips replaced cells: the state follows the cells
         source, new = _cell_sources(previous.domain.cells, carried.cells)
@@ -260,25 +267,63 @@ def _solve_near(previous, carried, unit_cage, moved, touched, progress):
         state = state.for_cells(source)
     free = _grown(free, carried.cells, FREE_RINGS)
     free[carried.boundary_vertices] = False
+    return free, state
+
+
+def _solve_near(clock, carry, omega, request):
+    """The solve stage of a warm re-bind: the vertices of :func:`_to_solve_again` solved again from the previous
+    solver state, the rest of the carried mesh held at the previous solution.
+
+    Returns
+    -------
+    result : SolveResult
+        Its weights, objective (unit frame) and state cover the whole mesh, the state for the next warm re-bind.
+    solved : int
+        How many cells were solved again.
+    """
+    free, state = _to_solve_again(carry)
+    carried = carry.mesh
     cells = np.any(free[carried.cells], axis=1)
     fixed = np.flatnonzero(~free)
     # The boundary values of the edited cage: a convex poked n-gon's follow its outline's shape (boundary.py), so
     # those of an n-gon the edit moved differ from the previous ones; they have weight on a moved control point, and
     # so does the interior around them, which is solved again.
-    held = previous.domain_weights.copy()
-    held[carried.boundary_vertices] = boundary_weights(carried, unit_cage)
+    held = carry.previous.domain_weights.copy()
+    held[carried.boundary_vertices] = boundary_weights(carried, carry.unit_cage)
     if not free.any():  # nothing moved, or only where no coordinate reaches the interior
-        result = SolveResult(held, 0, True, float("nan"), tv_weights)
-        return result, tv_objective(carried.vertices, carried.cells, result.weights, tv_weights), state, 0, free
-    result = solve_on_mesh(
-        carried.vertices, carried.cells[cells], fixed, held[fixed], unit_cage.vertices,
-        tv_weights[cells], start=state.restricted(cells, np.flatnonzero(free)), progress=progress.part(0.1, 0.95),
-        **{key: options[key] for key in ("epsilon", "max_iterations", "tolerance") if key in options},
-    )
-    result.seconds["geodesics"] = geodesics_seconds
-    objective = tv_objective(carried.vertices, carried.cells, result.weights, tv_weights)
+        result = SolveResult(held, 0, True, float("nan"), omega)
+        return replace(result, objective=tv_objective(carried.vertices, carried.cells, held, omega), state=state), 0
+    result = solve(clock, carried.vertices, carried.cells[cells], fixed, held[fixed], carry.unit_cage.vertices,
+                   omega[cells], request, start=state.restricted(cells, np.flatnonzero(free)))
+    objective = tv_objective(carried.vertices, carried.cells, result.weights, omega)
     state = state if result.state is None else state.updated(result.state, cells)
-    return result, objective, state, int(cells.sum()), free
+    return replace(result, objective=objective, state=state), int(cells.sum())
+
+
+def _to_evaluate(carry, points, unit_points, domain_weights):
+    """The points a warm re-bind evaluates again: those whose evaluation can see a vertex that changed by STALE
+    since they were last evaluated (the carried mesh's coordinates ``domain_weights``).
+
+    Returns
+    -------
+    again : (k,) int array
+        Their indices.
+    stale : (N,) float array
+        :attr:`Binding.stale` of the new binding.
+    reach : float
+        The previous evaluation's radius and fade, in this mesh's median edges: kept and new rows fit alike.
+    """
+    previous, carried = carry.previous, carry.mesh
+    old_vertices = carry.frame.to_unit(previous.domain.vertices)
+    # The median cell edge before and after the carry: the unit of a vertex's move, and of the evaluation's reach.
+    old_edge, edge = (median_edge(at, carried.cells) for at in (old_vertices, carried.vertices))
+    stale = _staleness(previous, carried, old_vertices, domain_weights, edge)
+    changed = stale > STALE
+    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, carry.moved)
+    stale[changed] = 0.0  # every point within reach of these is evaluated again
+    if len(again) == len(points):
+        stale[:] = 0.0
+    return again, stale, old_edge / edge
 
 
 def _staleness(previous, carried, old_vertices, domain_weights, edge):
@@ -565,21 +610,6 @@ def _grown(mask, cells, rings):
     for _ in range(rings):
         mask[cells[np.any(mask[cells], axis=1)].ravel()] = True
     return mask
-
-
-def _options_of(previous):
-    """The BindOptions a previous binding was made with: the cell count asked for, so that a bind from scratch is
-    the bind the artist made (bindings saved before it was recorded give the count they reached)."""
-    recorded = dict(previous.options)
-    weighting = recorded.get("weighting")
-    if isinstance(weighting, str) and weighting not in WEIGHTINGS:
-        raise CageError(f"this binding was made with a weighting function of its own ({weighting}), which a saved "
-                        "binding does not keep: bind from scratch with lbc_core.bind(..., weighting=that function)")
-    if "cells_asked" in recorded:
-        recorded["cells"] = recorded["cells_asked"]
-    return BindOptions.of(None, **{key: recorded[key] for key in ("cells", "weighting", "epsilon", "threshold",
-                                                                 "method", "tolerance", "max_iterations")
-                                  if recorded.get(key) is not None})
 
 
 def _split_as_before(old, new):

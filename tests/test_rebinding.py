@@ -96,6 +96,21 @@ def test_warm_rebind_meets_every_guarantee_and_matches_a_cold_solve_on_its_mesh(
     assert np.abs(warm.domain_weights - cold.weights).max() < 0.05
 
 
+def test_a_warm_rebind_runs_the_pipelines_stages_on_one_progress_bar_and_times_them(gargoyle):
+    """The re-bind's stages are the pipeline's (one table of shares, STAGES): the bar runs from 0 to 1 without going
+    back, and the timings name the pipeline's stages (the solve by the solver's own parts)."""
+    from lbc_core.pipeline import REBIND_STAGES, STAGES
+
+    cage, faces, points, first = gargoyle
+    fractions = []
+    warm = rebind(first, moved(cage, [3], 0.01), faces, progress=lambda fraction, message: fractions.append(fraction))
+    assert warm.options["start"] == "previous solution"
+    assert fractions[-1] == pytest.approx(1.0) and np.all(np.diff(fractions) >= -1e-12)
+    assert set(REBIND_STAGES) <= set(STAGES)
+    assert {"checks", "carry", "geodesics", "interpolation", "reduction"} <= set(warm.timings)
+    assert set(first.timings) - set(STAGES) == set(warm.timings) - set(STAGES)  # the solver's parts, named alike
+
+
 def test_warm_rebind_follows_a_cold_bind_of_the_edited_cage(gargoyle):
     cage, faces, points, first = gargoyle
     edited = moved(cage, [5], 0.02)
