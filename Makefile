@@ -59,8 +59,9 @@ docs: $(BIN)/.installed
 	.venv-build/bin/pip install -q --upgrade pip
 	touch $@
 
+# make extension PLATFORM=linux-x64 PYTHON=3.13 builds just that zip (and downloads just its wheels).
 extension: .venv-build/.installed
-	.venv-build/bin/python tools/build_extension.py
+	.venv-build/bin/python tools/build_extension.py $(if $(PLATFORM),--platform $(PLATFORM)) $(if $(PYTHON),--python $(PYTHON))
 
 clean:
 	rm -rf $(VENV) $(LINE_VENVS) .venv-build
