@@ -156,7 +156,7 @@ def scene(name, cage, faces, points, edits):
         warm, warm_seconds = timed(rebind, first, target, faces)
         same, _ = same_mesh_objective(first, target, faces)
         weights, deformation = differences(warm, cold, target)
-        start, note = warm.options["start"], warm.options["rebind"]
+        start, note = warm.outcome.start, warm.outcome.report
         stages = ", ".join(f"{k} {v:.2f}" for k, v in warm.timings.items())
         label = f"{count} × {share:.0%}"
         if start != "previous solution":
@@ -315,10 +315,10 @@ def rings_scene(level):
         for rings in (2, 1, 0):
             rebinding.FREE_RINGS = rings
             warm, seconds = timed(rebind, first, target, faces)
-            if warm.options["start"] != rebinding.WARM:
-                print(f"| {label} | {cold_text} | — | {warm.options['rebind']} | | | | |")
+            if warm.outcome.start != rebinding.WARM:
+                print(f"| {label} | {cold_text} | — | {warm.outcome.report} | | | | |")
                 break
-            counts = warm.options["solved_again"]
+            counts = warm.outcome.solved_again
             largest = np.abs(warm.domain_weights - tight.weights).max(axis=1)
             print(f"| {label} | {cold_text} | {rings} | {seconds:.2f} | {warm.iterations} | {counts['cells solved']} | "
                   f"{counts['points evaluated']} | {largest.max():.4f}, {np.quantile(largest, 0.99):.4f} |", flush=True)

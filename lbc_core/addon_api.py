@@ -32,12 +32,12 @@ DEFAULT_TOLERANCE = forecast.DEFAULT_TOLERANCE
 def rebind_report(binding):
     """How :func:`rebind` went, for the user: the cells solved again, or why it bound from scratch; "" for a binding
     from :func:`bind`."""
-    return binding.options.get("rebind", "")
+    return binding.outcome.report
 
 
 def solved_again(binding):
     """What a warm re-bind solved again, for the user ("s of c cells solved, e of p points evaluated"); "" for any
     other binding, one bound from scratch included."""
-    if binding.options.get("start") != WARM:
+    if binding.outcome.start != WARM:
         return ""
-    return solved_again_text(binding.options["solved_again"])
+    return solved_again_text(binding.outcome.solved_again)

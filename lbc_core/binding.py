@@ -1,12 +1,13 @@
 """Binding: the record of a bind (sparse coordinates of points with respect to a cage), deformation, and files.
 
-:func:`lbc_core.pipeline.bind` makes one; :meth:`Binding.save` and :func:`load_binding` write and read it.
+:func:`lbc_core.pipeline.bind` makes one; :meth:`Binding.save` and :func:`load_binding` write and read it. What the
+bind was asked (``Binding.options``) and how it went (:class:`BindOutcome`) are kept apart.
 """
 
 import json
 import math
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from functools import cached_property, partial
 from pathlib import Path
 
@@ -23,6 +24,40 @@ from .version import __version__
 
 # Deforming fewer points than this is faster on one thread.
 PARALLEL_MIN_POINTS = 50_000
+# BindOutcome.start: where the solver started.
+WARM, COLD = "previous solution", "harmonic"
+# The counts of BindOutcome.solved_again.
+SOLVED_AGAIN = ("cells solved", "cells", "points evaluated", "points")
+
+
+@dataclass(frozen=True)
+class BindOutcome:
+    """How a bind went, apart from what it was asked (``Binding.options``).
+
+    Attributes
+    ----------
+    start : str or None
+        Where the solver started: "harmonic" (:data:`COLD`) for a bind from scratch, "previous solution"
+        (:data:`WARM`) for a warm re-bind; None for a baseline.
+    iterations : int
+        The solver's iterations (0 when there was nothing to iterate).
+    converged : bool
+        Whether the solve met its tolerance before its iteration limit.
+    solved_again : dict or None
+        A warm re-bind's counts, {"cells solved", "cells", "points evaluated", "points"}; None for any other bind.
+    report : str
+        A re-bind's account, for the user: what it solved again, or why it bound from scratch; "" for a bind.
+    travel : float
+        How far the cage's vertices moved in all since its last bind from scratch: each warm re-bind's largest move
+        of a control point, over the cage's diagonal, summed (0 for a bind from scratch).
+    """
+
+    start: str = None
+    iterations: int = 0
+    converged: bool = True
+    solved_again: dict = None
+    report: str = ""
+    travel: float = 0.0
 
 
 @dataclass
@@ -46,10 +81,15 @@ class Binding:
         The points at bind time; deformation is exact at the rest pose.
     scheme : str
         "lbc", or a baseline's name ("mvc", "harmonic", "bbw").
-    options, timings : dict
-        What the binding was computed with, and seconds per stage.
-    iterations : int
-    converged : bool
+    options : dict
+        What the bind was asked, JSON-able: the options it was computed with (the cell count reached, and the one
+        asked as ``cells_asked``; the threshold resolved).
+    outcome : BindOutcome
+        How it went: where the solver started, its iterations, what a re-bind solved again and why.
+    timings : dict
+        Seconds per stage.
+    iterations, converged
+        ``outcome.iterations`` and ``outcome.converged``.
     objective : float
         The weighted total variation of ``domain_weights`` (NaN for baselines).
     solver_state : lbc_core.solver.SolverState or None
@@ -69,12 +109,19 @@ class Binding:
     points: np.ndarray
     scheme: str = "lbc"
     options: dict = field(default_factory=dict)
+    outcome: BindOutcome = field(default_factory=BindOutcome)
     timings: dict = field(default_factory=dict)
-    iterations: int = 0
-    converged: bool = True
     objective: float = float("nan")
     solver_state: object = field(default=None, repr=False)
     stale: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def iterations(self):
+        return self.outcome.iterations
+
+    @property
+    def converged(self):
+        return self.outcome.converged
 
     @property
     def outside_count(self):
@@ -157,6 +204,7 @@ class Binding:
             domain_control_vertices=self.domain.control_vertices,
             domain_weights=self.domain_weights,
             options=np.array(json.dumps(self.options, default=str)),
+            outcome=np.array(json.dumps(_outcome_record(self.outcome))),
             timings=np.array(json.dumps(self.timings)),
             iterations=np.array(self.iterations),
             converged=np.array(self.converged),
@@ -220,6 +268,7 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
                 f"{path} was bound to another cage ({len(cage.vertex_map)} vertices, {len(bound_faces)} faces; this "
                 f"one has {len(given.vertex_map)} vertices, {len(given_faces)} faces{differ}): bind this cage again"
             )
+    options, outcome = _options_and_outcome(arrays, damaged)
     return Binding(
         cage=cage,
         rest_cage_vertices=arrays["rest_cage_vertices"],
@@ -229,10 +278,9 @@ def load_binding(path, cage_vertices=None, cage_faces=None):
         outside=arrays["outside"],
         points=arrays["points"],
         scheme=str(arrays["scheme"]),
-        options=_json_record(arrays, "options", damaged),
+        options=options,
+        outcome=outcome,
         timings=_json_record(arrays, "timings", damaged),
-        iterations=int(arrays["iterations"]),
-        converged=bool(arrays["converged"]),
         objective=float(arrays["objective"]),
     )
 
@@ -249,8 +297,14 @@ FILE_ARRAYS = {
     "converged": ("b", 0), "objective": ("f", 0),
 }
 # Arrays a file may lack: the poked n-gons' control points (their counts, then the points one n-gon after the other),
-# which files written while every n-gon was ear-clipped do not hold.
-OPTIONAL_FILE_ARRAYS = {"cage_centre_sizes": ("iu", 1), "cage_centre_corners": ("iu", 1)}
+# which files written while every n-gon was ear-clipped do not hold; the outcome (JSON), which files written while
+# the options held it do not.
+OPTIONAL_FILE_ARRAYS = {"cage_centre_sizes": ("iu", 1), "cage_centre_corners": ("iu", 1), "outcome": ("U", 0)}
+# What an absent optional array stands for.
+_ABSENT = {"cage_centre_sizes": np.zeros(0, np.int64), "cage_centre_corners": np.zeros(0, np.int64),
+           "outcome": None}
+# The outcome's fields a file's options record held before the outcome had a record of its own, by their key there.
+_OUTCOME_IN_OPTIONS = {"start": "start", "rebind": "report", "solved_again": "solved_again", "travel": "travel"}
 
 
 def _damaged(path, what):
@@ -282,7 +336,7 @@ def _read_archive(path):
             raise
         except Exception as error:  # a damaged member: bad CRC, truncated stream, bad header
             _damaged(path, f"it cannot be read ({_reason(error)})")
-    arrays.update({key: np.zeros(0, np.int64) for key in OPTIONAL_FILE_ARRAYS if key not in arrays})
+    arrays.update({key: _ABSENT[key] for key in OPTIONAL_FILE_ARRAYS if key not in arrays})
     return arrays
 
 
@@ -457,3 +511,44 @@ def _json_record(arrays, key, damaged):
     if not isinstance(record, dict):
         damaged(f"its {key} record is not a JSON object")
     return record
+
+
+def _outcome_record(outcome):
+    """What a file holds of a :class:`BindOutcome` (JSON-able): all but the iterations and convergence, which have
+    arrays of their own."""
+    record = asdict(outcome)
+    del record["iterations"], record["converged"]
+    return record
+
+
+def _options_and_outcome(arrays, damaged):
+    """The options record and the :class:`BindOutcome` of a binding file; a file from before the outcome had a
+    record of its own holds its fields among the options."""
+    options = _json_record(arrays, "options", damaged)
+    if arrays["outcome"] is None:
+        record = {field: options.pop(key) for key, field in _OUTCOME_IN_OPTIONS.items() if key in options}
+        if str(arrays["scheme"]) == "lbc":  # a bind from scratch recorded no start
+            record.setdefault("start", COLD)
+    else:
+        record = _json_record(arrays, "outcome", damaged)
+    _check_outcome(record, damaged)
+    return options, BindOutcome(iterations=int(arrays["iterations"]), converged=bool(arrays["converged"]),
+                                **record)
+
+
+# The fields of a file's outcome record and the types each may have.
+_OUTCOME_FIELDS = {"start": (str, type(None)), "solved_again": (dict, type(None)), "report": (str,),
+                   "travel": (int, float)}
+
+
+def _check_outcome(record, damaged):
+    """A file's outcome record: known fields of their types, a warm re-bind's four counts, a finite travel."""
+    for key, value in record.items():
+        if key not in _OUTCOME_FIELDS or isinstance(value, bool) or not isinstance(value, _OUTCOME_FIELDS[key]):
+            damaged(f"its outcome record holds {key} = {value!r}")
+    counts = record.get("solved_again")
+    if counts is not None and (sorted(counts) != sorted(SOLVED_AGAIN) or not all(
+            isinstance(count, int) and not isinstance(count, bool) for count in counts.values())):
+        damaged(f"its outcome record holds solved_again = {counts!r}")
+    if not math.isfinite(record.get("travel", 0.0)):
+        damaged(f"its outcome record holds travel = {record['travel']!r}")

@@ -13,10 +13,11 @@ The baselines (:mod:`lbc_core.baselines`) run the same first stages through :fun
 """
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
-from .binding import Binding
+from .binding import COLD, Binding, BindOutcome
 from .boundary import boundary_weights
 from .cage import make_cage, real_array, some_indices
 from .errors import CageError, PointsOutside
@@ -213,7 +214,7 @@ def evaluate(clock, domain, located, domain_weights, unit_cage, threshold, reach
     return weights
 
 
-def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, request, clock, account=None,
+def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, request, clock, outcome=None,
                 stale=None):
     """The :class:`Binding` of an LBC solve made in the unit ``frame``: the domain and objective in the cage's units.
 
@@ -232,12 +233,14 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, re
     request : BindOptions
     clock : StageClock
         Its timings.
-    account : dict, optional
-        What a re-bind adds to the options record: where the solve started, what it solved again and why.
+    outcome : BindOutcome, optional
+        Where the solve started and what a re-bind did (None: a bind from scratch); its iterations and convergence
+        are the ``solution``'s.
     stale : (N,) float array, optional
         :attr:`Binding.stale`.
     """
-    options = options_record(request, len(unit_domain.cells), request.threshold_for(cage.n_control_points))
+    outcome = replace(outcome or BindOutcome(start=COLD), iterations=solution.iterations,
+                      converged=solution.converged)
     return Binding(
         cage=cage,
         rest_cage_vertices=cage.vertices.copy(),
@@ -247,10 +250,9 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, re
         outside=outside,
         points=points,
         scheme="lbc",
-        options=dict(options, **(account or {})),
+        options=options_record(request, len(unit_domain.cells), request.threshold_for(cage.n_control_points)),
+        outcome=outcome,
         timings=clock.timings,
-        iterations=solution.iterations,
-        converged=solution.converged,
         objective=solution.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
         solver_state=solution.state,
         stale=stale,

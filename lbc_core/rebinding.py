@@ -23,7 +23,7 @@ moved by more than about a cell's size; a mesh face left across a bent edge, uns
 vertex, would leave the cage by more than CHORD_KEPT of a cell), a bent face now splits into other triangles than
 before, the cage's topology or welding
 changed, or the previous binding has no solver state (one loaded from a file), the re-bind is a cold bind with the
-previous options, and ``Binding.options["rebind"]`` says why.
+previous options, and ``Binding.outcome.report`` says why.
 
 The stages are :mod:`lbc_core.pipeline`'s, with its one table of progress shares and timings: this module carries
 the previous mesh (in place of meshing), chooses the vertices to solve again and the points to evaluate again, and
@@ -37,6 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from .binding import COLD, SOLVED_AGAIN, WARM, BindOutcome  # noqa: F401 (COLD, WARM: the marks of BindOutcome.start)
 from .boundary import boundary_weights
 from .cage import ZERO_LENGTH, edge_pairing, make_cage
 from .constraints import padded_rows
@@ -84,8 +85,6 @@ STALE = 1e-2
 # fresh one (a subdivided cube's side vertex out and back in Blender: 2 % 0.0011 of the mesh's diagonal from a fresh
 # bind, 5 % 0.013, 10 % 0.020, against 0.0069 between fresh binds at 8000 and 9000 cells).
 CARRY_LIMIT = 0.08
-# Binding.options["start"] of a re-bind: where the solver started.
-WARM, COLD = "previous solution", "harmonic"
 
 
 @counted_in_load
@@ -109,10 +108,11 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     Returns
     -------
     Binding
-        ``options["start"]`` is "previous solution" (:data:`WARM`) for a warm re-bind, "harmonic" (:data:`COLD`)
-        for a cold one; ``options["rebind"]`` says, for the user, how many cells were solved again, or why the
-        bind started from scratch; a warm one's ``options["solved_again"]`` holds those counts as numbers (see
-        :func:`solved_again_text`).
+        Its ``outcome`` (:class:`~lbc_core.binding.BindOutcome`): ``start`` is "previous solution" (:data:`WARM`)
+        for a warm re-bind, "harmonic" (:data:`COLD`) for a cold one; ``report`` says, for the user, how many cells
+        were solved again, or why the bind started from scratch; a warm one's ``solved_again`` holds those counts as
+        numbers (see :func:`solved_again_text`), its ``travel`` how far the cage moved since its last bind from
+        scratch.
 
     Raises
     ------
@@ -126,7 +126,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     if carry is None:
         clock.progress(0.0, f"binding from scratch: {reason}")
         binding = bind(cage_vertices, cage_faces, points, options=request, progress=clock.progress)
-        binding.options.update(start=COLD, rebind=f"bound from scratch: {reason}")
+        binding.outcome = replace(binding.outcome, report=f"bound from scratch: {reason}")
         return binding
     clock.part("carry")(1.0, "the previous mesh carried onto the edited cage" if carry.moved.any()
                         else "the previous mesh and solution reused: the cage has not moved")
@@ -146,7 +146,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     clock.done("reduction")
     clock.progress(1.0, "bound again from the previous solution")
     return lbc_binding(carry.frame, carry.cage, carry.mesh, result, weights, outside, points, request, clock,
-                       _warm_account(carry, solved, len(again), len(points)), stale)
+                       _warm_outcome(carry, solved, len(again), len(points)), stale)
 
 
 @dataclass
@@ -167,8 +167,7 @@ class _Carry:
     touched : (N,) bool array or None
         The vertices around those the split added.
     travel : float
-        How far the cage's vertices moved in all since its last bind from scratch, with this edit (each warm
-        re-bind's largest move, over the diagonal, summed).
+        :attr:`BindOutcome.travel` with this edit.
     """
 
     previous: object
@@ -203,7 +202,7 @@ def _carried(previous, cage):
         reason = "a simplex cage has nothing to solve"
     elif previous.solver_state is None:
         reason = "the previous binding's solver state is not at hand (it is kept in memory only, not in files)"
-    travel = previous.options.get("travel", 0.0) + _largest_move(previous, cage)
+    travel = previous.outcome.travel + _largest_move(previous, cage)
     if reason is not None:
         return None, reason
     frame = UnitFrame.of(cage)
@@ -228,21 +227,20 @@ def _largest_move(previous, cage):
     return float(np.linalg.norm(cage.vertices - rest, axis=1).max() / previous.cage.bbox_diagonal)
 
 
-def _warm_account(carry, solved, evaluated, points):
-    """What a warm re-bind that solved ``solved`` cells again and evaluated ``evaluated`` of ``points`` points adds
-    to the options record: where it started, those counts, how far the cage moved, and the account for the user."""
-    counts = {"cells solved": int(solved), "cells": len(carry.mesh.cells), "points evaluated": evaluated,
-              "points": points}
+def _warm_outcome(carry, solved, evaluated, points):
+    """The :class:`BindOutcome` of a warm re-bind that solved ``solved`` cells again and evaluated ``evaluated`` of
+    ``points`` points (its iterations and convergence are filled in with the binding)."""
+    counts = dict(zip(SOLVED_AGAIN, (int(solved), len(carry.mesh.cells), evaluated, points)))
     done = (solved_again_text(counts) if carry.moved.any() or evaluated
             else "it was made for the cage as it is now, so nothing was solved or evaluated again")
-    return dict(start=WARM, solved_again=counts, travel=carry.travel,
-                rebind=f"bound again from the previous binding: {done}")
+    return BindOutcome(start=WARM, solved_again=counts, report=f"bound again from the previous binding: {done}",
+                       travel=carry.travel)
 
 
 def solved_again_text(counts):
     """What a warm re-bind solved again, for the user: "s of c cells solved, e of p points evaluated".
 
-    ``counts`` is its ``Binding.options["solved_again"]``: {"cells solved", "cells", "points evaluated", "points"}.
+    ``counts`` is its ``Binding.outcome.solved_again``: {"cells solved", "cells", "points evaluated", "points"}.
     """
     return (f"{counts['cells solved']} of {counts['cells']} cells solved, "
             f"{counts['points evaluated']} of {counts['points']} points evaluated")

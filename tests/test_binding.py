@@ -30,6 +30,40 @@ def test_save_and_load_give_identical_deformations(gargoyle, tmp_path):
     posed = vertices + np.random.default_rng(2).normal(0, 0.01, vertices.shape)
     np.testing.assert_array_equal(loaded.deform(posed), binding.deform(posed))
     assert loaded.options == binding.options and loaded.cage.fingerprint() == binding.cage.fingerprint()
+    assert loaded.outcome == binding.outcome and loaded.outcome.start == "harmonic"
+
+
+def test_a_warm_rebinds_outcome_is_saved_apart_from_its_options_and_a_file_holding_it_among_them_still_loads(
+        tmp_path):
+    """A binding keeps what it was asked (options) apart from how it went (outcome). Files written while the options
+    record held the outcome's fields ("start", "rebind", "solved_again", "travel") load with them as the outcome."""
+    import json
+
+    first = lbc_core.bind(SQUARE, None, INSIDE, cells=200)
+    edited = SQUARE.copy()
+    edited[2] += 0.01
+    warm = lbc_core.rebind(first, edited)
+    assert warm.outcome.start == "previous solution" and warm.outcome.solved_again is not None
+    assert not {"start", "rebind", "solved_again", "travel"} & set(warm.options)
+    warm.save(tmp_path / "warm.npz")
+    loaded = lbc_core.load_binding(tmp_path / "warm.npz")
+    assert loaded.outcome == warm.outcome and loaded.options == warm.options
+    assert (loaded.iterations, loaded.converged) == (warm.iterations, warm.converged)
+
+    def options_holding_the_outcome(arrays):
+        outcome = json.loads(str(arrays.pop("outcome")))
+        outcome["rebind"] = outcome.pop("report")
+        arrays["options"] = np.array(json.dumps(dict(json.loads(str(arrays["options"])), **outcome)))
+
+    old = lbc_core.load_binding(_rewritten(tmp_path / "warm.npz", tmp_path / "old.npz", options_holding_the_outcome))
+    assert old.outcome == warm.outcome and old.options == warm.options
+
+    def before_the_outcome(arrays):  # a bind from scratch recorded no start
+        del arrays["outcome"]
+
+    first.save(tmp_path / "first.npz")
+    old = lbc_core.load_binding(_rewritten(tmp_path / "first.npz", tmp_path / "old.npz", before_the_outcome))
+    assert old.outcome == first.outcome and old.outcome.start == "harmonic"
 
 
 def test_load_against_another_cage_is_refused(woody, tmp_path):
@@ -190,6 +224,14 @@ def _bad_options_json(arrays):
     arrays["options"] = np.array("{cells: 3")
 
 
+def _bad_outcome(arrays):
+    arrays["outcome"] = np.array('{"start": 5, "report": ""}')
+
+
+def _bad_counts(arrays):
+    arrays["outcome"] = np.array('{"start": "previous solution", "solved_again": {"cells": "all"}}')
+
+
 @pytest.mark.parametrize(
     "edit, message",
     [
@@ -199,8 +241,11 @@ def _bad_options_json(arrays):
         (_missing_key, "it lacks weights_indptr"),
         (_short_indptr, "weights_indptr has shape (5,), not (6,)"),
         (_bad_options_json, "its options record is not valid JSON"),
+        (_bad_outcome, "its outcome record holds start = 5"),
+        (_bad_counts, "its outcome record holds solved_again = {'cells': 'all'}"),
     ],
-    ids=["times-five", "reversed", "index-out-of-range", "missing-key", "short-indptr", "bad-options-json"],
+    ids=["times-five", "reversed", "index-out-of-range", "missing-key", "short-indptr", "bad-options-json",
+         "bad-outcome", "bad-counts"],
 )
 def test_edited_binding_files_are_refused(square_file, tmp_path, edit, message):
     path = _rewritten(square_file[0], tmp_path / "edited.npz", edit)

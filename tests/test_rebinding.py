@@ -81,8 +81,8 @@ def test_warm_rebind_meets_every_guarantee_and_matches_a_cold_solve_on_its_mesh(
     cage, faces, points, first = gargoyle
     edited = moved(cage, [3, 11], 0.01)
     warm = rebind(first, edited, faces)
-    assert warm.options["start"] == "previous solution"
-    assert warm.options["rebind"].startswith("bound again from the previous binding: ")
+    assert warm.outcome.start == "previous solution"
+    assert warm.outcome.report.startswith("bound again from the previous binding: ")
     assert warm.converged
     assert_guarantees(warm, points)
     # The mesh is the previous one, carried: same cells, boundary vertices on the same facets, control vertices on
@@ -104,7 +104,7 @@ def test_a_warm_rebind_runs_the_pipelines_stages_on_one_progress_bar_and_times_t
     cage, faces, points, first = gargoyle
     fractions = []
     warm = rebind(first, moved(cage, [3], 0.01), faces, progress=lambda fraction, message: fractions.append(fraction))
-    assert warm.options["start"] == "previous solution"
+    assert warm.outcome.start == "previous solution"
     assert fractions[-1] == pytest.approx(1.0) and np.all(np.diff(fractions) >= -1e-12)
     assert set(REBIND_STAGES) <= set(STAGES)
     assert {"checks", "carry", "geodesics", "interpolation", "reduction"} <= set(warm.timings)
@@ -126,10 +126,10 @@ def test_points_out_of_reach_of_the_edit_keep_their_weights_and_the_rest_match_a
     cage, faces, points, first = gargoyle_l10
     edited = moved(cage, [4], 0.01)
     warm = rebind(first, edited, faces)
-    counts = warm.options["solved_again"]
+    counts = warm.outcome.solved_again
     evaluated = counts["points evaluated"]
     assert 0 < evaluated < counts["points"] == len(points)
-    assert warm.options["rebind"].endswith(f"{evaluated} of {len(points)} points evaluated")
+    assert warm.outcome.report.endswith(f"{evaluated} of {len(points)} points evaluated")
     kept = np.flatnonzero(np.asarray(abs(warm.weights - first.weights).sum(axis=1)).ravel() == 0)
     assert len(kept) >= len(points) - evaluated
     assert_guarantees(warm, points)
@@ -164,7 +164,7 @@ def test_a_second_warm_rebind_starts_from_the_first(gargoyle):
     cage, faces, points, first = gargoyle
     once = rebind(first, moved(cage, [3], 0.01), faces)
     twice = rebind(once, moved(cage, [3, 20], 0.01), faces)
-    assert twice.options["start"] == "previous solution"
+    assert twice.outcome.start == "previous solution"
     assert_guarantees(twice, points)
     assert twice.iterations <= first.iterations / 2
 
@@ -174,8 +174,8 @@ def test_an_unmoved_cage_gives_the_previous_weights_back(gargoyle):
     again = rebind(first, cage, faces)
     assert again.iterations == 0
     # Said plainly, not as "0 of 2939 cells solved, 0 of 2674 points evaluated" (a colleague's Rebind after Undo).
-    assert again.options["rebind"] == ("bound again from the previous binding: it was made for the cage as it is now, "
-                                       "so nothing was solved or evaluated again")
+    assert again.outcome.report == ("bound again from the previous binding: it was made for the cage as it is now, "
+                                    "so nothing was solved or evaluated again")
     np.testing.assert_array_equal(again.domain_weights, first.domain_weights)
     assert abs(again.weights - first.weights).max() < 1e-9
 
@@ -188,8 +188,8 @@ def test_an_edit_that_would_fold_the_mesh_falls_back_to_a_cold_bind(gargoyle):
     edited[0] += 0.6 * (centre - cage[0])
     messages = []
     warm = rebind(first, edited, faces, progress=lambda fraction, message: messages.append(message))
-    assert warm.options["start"] == "harmonic"
-    reason = warm.options["rebind"]
+    assert warm.outcome.start == "harmonic"
+    reason = warm.outcome.report
     assert reason.startswith("bound from scratch: the edit would turn inside out some of the cells the last "
                               "bind filled the cage with (") and "near cage vertices 0" in reason
     assert any(message.startswith("binding from scratch") for message in messages)
@@ -207,7 +207,7 @@ def test_an_edit_that_squashes_a_cell_rebinds_warm_once_its_free_corners_are_pol
     carried_to = first.domain_weights @ UnitFrame.of(edited_cage).cage_to_unit(edited_cage).vertices
     assert _squashed(first.domain, carried_to).any()
     warm = rebind(first, edited, faces)
-    assert warm.options["start"] == "previous solution"
+    assert warm.outcome.start == "previous solution"
     assert_guarantees(warm, points)
     polished = np.linalg.norm(warm.domain.vertices - first.domain_weights @ warm.cage.vertices, axis=1)
     assert np.any(polished > 1e-9 * warm.cage.bbox_diagonal)
@@ -249,7 +249,7 @@ def test_an_edit_that_turns_a_sliver_on_the_cage_inside_out_rebinds_warm():
     carried_to = first.domain_weights @ UnitFrame.of(edited_cage).cage_to_unit(edited_cage).vertices
     assert np.any(signed_measures(carried_to, first.domain.cells) <= 0)  # the edit folds the carried mesh
     warm = rebind(first, edited, faces)
-    assert warm.options["start"] == "previous solution"
+    assert warm.outcome.start == "previous solution"
     assert len(warm.domain.cells) == len(first.domain.cells) - 1
     assert_guarantees(warm, points)
     cold, frame = cold_on_carried_mesh(first, edited, faces)
@@ -278,7 +278,7 @@ def test_another_topology_or_a_loaded_binding_falls_back_to_a_cold_bind(gargoyle
     assert loaded.solver_state is None
     edited = moved(cage, [3], 0.01)
     again = rebind(loaded, edited, faces)
-    assert again.options["rebind"].startswith("bound from scratch: the previous binding's solver state is not at hand")
+    assert again.outcome.report.startswith("bound from scratch: the previous binding's solver state is not at hand")
     # From scratch is the bind the artist made, at the cells asked for (not those the first mesh reached).
     fresh = lbc_core.bind(edited, faces, points, cells=3000)
     assert len(first.domain.cells) != 3000 and again.options["cells_asked"] == 3000
@@ -288,7 +288,7 @@ def test_another_topology_or_a_loaded_binding_falls_back_to_a_cold_bind(gargoyle
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
     bound = lbc_core.bind(cube, quads, cube * 0.5 + 0.25, cells=300)
     other_split = [triangle for a, b, c, d in quads for triangle in ([a, b, d], [b, c, d])]
-    reason = rebind(bound, cube, other_split).options["rebind"]
+    reason = rebind(bound, cube, other_split).outcome.report
     assert reason == "bound from scratch: the cage's vertices, faces or welding changed"
 
 
@@ -302,7 +302,7 @@ def test_a_quad_bent_out_of_its_plane_rebinds_warm_when_the_mesh_follows_its_dia
     edited = cube.copy()
     edited[7] -= 0.01  # towards the centre: each quad at vertex 7 keeps its split, but bends
     again = rebind(first, edited, quads)
-    assert again.options["rebind"].startswith("bound again from the previous binding"), again.options["rebind"]
+    assert again.outcome.report.startswith("bound again from the previous binding"), again.outcome.report
     assert_guarantees(again, points)
     fresh = lbc_core.bind(edited, quads, points, cells=300)
     assert abs(again.weights - fresh.weights).max() < 0.05  # within the remeshing noise of a 300-cell bind
@@ -341,7 +341,7 @@ def test_a_quad_bent_a_little_rebinds_warm_with_the_mesh_split_along_its_diagona
     edited[7, 0] -= 0.01  # bends the faces at vertex 7 that are not perpendicular to x
     monkeypatch.setattr(rebinding, "CHORD_KEPT", 0.0)
     again = rebind(first, edited, quads)
-    assert again.options["start"] == "previous solution", again.options["rebind"]
+    assert again.outcome.start == "previous solution", again.outcome.report
     assert len(again.domain.vertices) > len(first.domain.vertices)  # the crossed mesh edges split
     assert surface_off_cage(again) < 1e-3
     assert_guarantees(again, points)
@@ -361,7 +361,7 @@ def test_a_side_vertex_of_a_loop_cut_cylinder_moved_out_rebinds_warm_with_the_su
     edited = cylinder.copy()
     edited[40, :2] *= 1.07
     again = rebind(first, edited, faces)
-    assert again.options["start"] == "previous solution", again.options["rebind"]
+    assert again.outcome.start == "previous solution", again.outcome.report
     assert surface_off_cage(again) < 1e-3
     assert_guarantees(again, points)
 
@@ -382,7 +382,7 @@ def test_a_loop_cut_cylinder_rebinds_warm_after_a_loop_is_scaled_or_a_cap_vertex
     lifted[100, 2] += 0.05
     for edited in (scaled, lifted):
         again = rebind(first, edited, faces)
-        assert again.options["start"] == "previous solution", again.options["rebind"]
+        assert again.outcome.start == "previous solution", again.outcome.report
         assert_guarantees(again, points)
 
 
@@ -411,7 +411,7 @@ def test_a_cold_bind_for_many_bent_faces_names_five_and_counts_the_others(monkey
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
     first = lbc_core.bind(cube, quads, cube * 0.5 + 0.25, cells=300)
     monkeypatch.setattr(rebinding, "_faces_off_cage", lambda *args: np.arange(7))
-    assert rebind(first, cube * 1.01, quads).options["rebind"].startswith(
+    assert rebind(first, cube * 1.01, quads).outcome.report.startswith(
         "bound from scratch: cage faces 0, 1, 2, 3, 4 and 2 more bent too far")
 
 
@@ -427,15 +427,15 @@ def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm()
     edited[[1, 3], 1] *= 1.1  # diagonals 2 and 1.54: within QUAD_SPLIT_TIE
     assert lbc_core.make_cage(edited, faces).fingerprint() != first.cage.fingerprint()
     again = rebind(first, edited, faces)
-    assert again.options["start"] == "previous solution", again.options["rebind"]
+    assert again.outcome.start == "previous solution", again.outcome.report
     assert again.cage.fingerprint() == first.cage.fingerprint()
     assert_guarantees(again, points)
     # Bent as well, the base's surface is its split: the previous one would bind another cage than a cold bind.
     edited[1, 2] = 0.05
     again = rebind(first, edited, faces)
-    assert again.options["rebind"] == ("bound from scratch: cage face 0 bent and now split into other triangles (the "
-                                       "edit changed which diagonal a bind splits it along), which the cells the last "
-                                       "bind filled the cage with do not follow")
+    assert again.outcome.report == ("bound from scratch: cage face 0 bent and now split into other triangles (the "
+                                    "edit changed which diagonal a bind splits it along), which the cells the last "
+                                    "bind filled the cage with do not follow")
     assert again.cage.fingerprint() == lbc_core.make_cage(edited, faces).fingerprint()
 
 
@@ -463,7 +463,7 @@ def test_a_2d_polygon_rebinds_warm():
     first = lbc_core.bind(polygon, None, points, cells=800)
     edited = moved(polygon, [2], 0.02)
     warm = rebind(first, edited)
-    assert warm.options["start"] == "previous solution"
+    assert warm.outcome.start == "previous solution"
     assert_guarantees(warm, points)
     assert warm.iterations < first.iterations
 
@@ -474,7 +474,7 @@ def test_a_saved_binding_made_with_a_weighting_function_is_refused_and_told_what
     polygon = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
     points = np.random.default_rng(0).uniform(0.05, 0.95, (50, 2))
     first = lbc_core.bind(polygon, None, points, cells=300, weighting=np.square)
-    assert rebind(first, moved(polygon, [2], 0.02)).options["start"] == "previous solution"  # in memory: kept
+    assert rebind(first, moved(polygon, [2], 0.02)).outcome.start == "previous solution"  # in memory: kept
     path = tmp_path / "custom.npz"
     first.save(path)
     with pytest.raises(lbc_core.CageError, match=r"weighting function of its own \(.*square.*\), which a saved "
@@ -503,7 +503,7 @@ def test_a_simplex_cage_binds_again_from_scratch_and_says_why():
     first = lbc_core.bind(tetrahedron, faces, bary @ tetrahedron)
     edited = tetrahedron + [[0, 0, 0], [0.1, 0, 0], [0, 0, 0], [0, 0, 0]]
     again = rebind(first, edited, faces)
-    assert again.options["rebind"] == "bound from scratch: a simplex cage has nothing to solve"
+    assert again.outcome.report == "bound from scratch: a simplex cage has nothing to solve"
     # The points stay where they were bound: their coordinates in the edited tetrahedron.
     expected = np.linalg.solve(np.c_[edited, np.ones(4)].T, np.c_[bary @ tetrahedron, np.ones(50)].T).T
     np.testing.assert_allclose(again.weights.toarray(), expected, atol=1e-12)
@@ -519,14 +519,14 @@ def test_a_cage_moved_far_in_all_since_its_last_cold_bind_binds_from_scratch(gar
     out = cage.copy()
     out[5, 2] += 0.6 * CARRY_LIMIT * diagonal
     there = rebind(first, out, faces)
-    assert there.options["start"] == "previous solution", there.options["rebind"]
-    assert there.options["travel"] == pytest.approx(0.6 * CARRY_LIMIT)
+    assert there.outcome.start == "previous solution", there.outcome.report
+    assert there.outcome.travel == pytest.approx(0.6 * CARRY_LIMIT)
     back = rebind(there, cage, faces)
-    assert back.options["rebind"] == ("bound from scratch: its vertices moved 10% of the cage's diagonal in all since "
-                                      "it was last bound from scratch, and a mesh carried that far drifts from a "
-                                      "fresh one")
-    assert "travel" not in back.options
-    assert rebind(back, out, faces).options["start"] == "previous solution"  # counted again from the cold bind
+    assert back.outcome.report == ("bound from scratch: its vertices moved 10% of the cage's diagonal in all since "
+                                   "it was last bound from scratch, and a mesh carried that far drifts from a "
+                                   "fresh one")
+    assert back.outcome.travel == 0.0 and back.outcome.solved_again is None
+    assert rebind(back, out, faces).outcome.start == "previous solution"  # counted again from the cold bind
 
 
 def test_an_n_gon_edited_out_of_its_poke_rebinds_from_scratch_and_says_so():
@@ -541,7 +541,7 @@ def test_an_n_gon_edited_out_of_its_poke_rebinds_from_scratch_and_says_so():
     edited[[0, 8], 0] = -0.6
     assert len(first.cage.centres) == 2 and lbc_core.make_cage(edited, faces).centres == ()
     again = rebind(first, edited, faces)
-    assert again.options["rebind"] == (
+    assert again.outcome.report == (
         "bound from scratch: cage faces 0, 1 changed shape so far that their split into triangles changed (from the "
         "middle to one of the vertices, or back), which the cells the last bind filled the cage with do not follow")
     assert_guarantees(again, points)
