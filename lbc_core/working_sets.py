@@ -177,6 +177,9 @@ class MeshData:
         The control points in the frame of the constraints (the unit frame, even where the solve is stretched).
     unit_interior : (N_in, d) float array
         The interior vertices in that frame.
+    system : (N_in, N_in) CSR matrix
+        P1 stiffness + diag(β m) on the interior vertices: each control point's block of the least-squares step's
+        matrix is its principal submatrix on the vertices holding that control point.
     """
 
     vertices: np.ndarray
@@ -192,6 +195,7 @@ class MeshData:
     adjacency: sp.csr_matrix
     unit_controls: np.ndarray
     unit_interior: np.ndarray
+    system: sp.csr_matrix
 
     @classmethod
     def of(cls, vertices, cells, boundary_vertices, boundary_weights, beta, unit_controls, unit_vertices):
@@ -213,9 +217,10 @@ class MeshData:
         adjacency.data[:] = 1.0
         boundary_position = np.full(n_vertices, -1)
         boundary_position[boundary_vertices] = np.arange(len(boundary_vertices))
-        return cls(vertices, cells, interior, position, fixed, boundary_weights, boundary_position,
-                   gradients * sqrt_cell[:, None, None], sqrt_cell,
-                   np.sqrt(beta * mass), adjacency, unit_controls, unit_vertices[interior])
+        scaled = gradients * sqrt_cell[:, None, None]
+        return cls(vertices, cells, interior, position, fixed, boundary_weights, boundary_position, scaled, sqrt_cell,
+                   np.sqrt(beta * mass), adjacency, unit_controls, unit_vertices[interior],
+                   _interior_system(scaled, cells, position, beta * mass))
 
     def margins(self, sets, weights):
         """The slots within one ring and within two rings of mesh vertices around the positive ``weights`` (S,)
@@ -234,6 +239,37 @@ class MeshData:
         counts[self.interior] = np.diff(matrix.indptr)
         return sp.csr_matrix((matrix.data, matrix.indices, np.r_[0, np.cumsum(counts)]),
                              shape=(len(self.vertices), matrix.shape[1]))
+
+
+def _interior_system(scaled_gradients, cells, interior_position, mass):
+    """Σ_c (√|c| ∇φ_u)·(√|c| ∇φ_v) over the interior vertices u, v, plus diag(``mass``): (N_in, N_in) CSR."""
+    corners = cells.shape[1]
+    products = np.einsum("fik,fjk->fij", scaled_gradients, scaled_gradients).ravel()
+    rows = interior_position[np.repeat(cells, corners, axis=1).ravel()]
+    columns = interior_position[np.tile(cells, (1, corners)).ravel()]
+    inside = (rows >= 0) & (columns >= 0)
+    n_interior = len(mass)
+    system = sp.csr_matrix((products[inside], (rows[inside], columns[inside])), shape=(n_interior, n_interior))
+    system.sum_duplicates()
+    return (system + sp.diags(mass)).tocsr()
+
+
+def _block_system(system, sets, rank):
+    """The least-squares step's matrix on the slots, the lower triangle in the order ``rank`` (a permutation of the
+    slots) as COO: each control point's block is ``system``'s principal submatrix on the vertices holding it."""
+    n = sets.n_controls
+    vertex = sets.vertex_of_slot
+    table = np.full((len(sets.indptr) - 1, n), -1, dtype=np.int64)
+    table[vertex, sets.controls] = np.arange(sets.n_slots)
+    counts = np.diff(system.indptr)[vertex]
+    slot = np.repeat(np.arange(sets.n_slots), counts)
+    entry = np.repeat(system.indptr[vertex] - np.r_[0, np.cumsum(counts)[:-1]], counts) + np.arange(counts.sum())
+    other = table[system.indices[entry], sets.controls[slot]]
+    del table
+    rows, columns = rank[slot], np.where(other >= 0, rank[np.maximum(other, 0)], -1)
+    lower = (other >= 0) & (rows >= columns)
+    return sp.coo_matrix((system.data[entry[lower]], (rows[lower], columns[lower])),
+                         shape=(sets.n_slots, sets.n_slots))
 
 
 class PaddedRows:
@@ -308,12 +344,7 @@ class PairOperators:
         self.order = np.lexsort((sets.vertex_of_slot, sets.controls))
         rank = np.empty_like(self.order)
         rank[self.order] = np.arange(len(self.order))
-        system = (self.gradient.T @ self.gradient + sp.diags(self.slot_mass.astype(np.float64) ** 2)).tocoo()
-        rows, columns = rank[system.row], rank[system.col]  # renumbered as COO: sparse fancy indexing copies twice
-        lower = rows >= columns
-        self.factor = Factor(sp.coo_matrix((system.data[lower], (rows[lower], columns[lower])), shape=system.shape),
-                             dtype)
-        del system, rows, columns, lower
+        self.factor = Factor(_block_system(mesh.system, sets, rank), dtype)
         self.row_blocks = _row_blocks(self.gradient, worker_count())
         self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell].astype(dtype)
         self.dtype = dtype
