@@ -135,18 +135,32 @@ def _newton_step(batch, nu, active, rows, gradient, size, done):
     # active set is right).
     searched = np.flatnonzero((size > LINE_SEARCH_FROM) & ~done)
     if len(searched):
-        value = _dual_value(nu[searched], rows[searched], targets[searched])
-        slope = np.einsum("nj,nj->n", gradient[searched], direction[searched])
-        step = np.ones(len(searched))
-        for _ in range(LINE_SEARCH_STEPS):
-            trial_rows = np.maximum(values[searched] + _apply(corners[searched], trial[searched]), 0.0)
-            short = _dual_value(trial[searched], trial_rows, targets[searched]) < value + 1e-4 * step * slope
-            if not short.any():
-                break
-            step[short] *= 0.5
-            trial[searched[short]] = nu[searched[short]] + step[short, None] * direction[searched[short]]
+        rows_of = batch if len(searched) == len(nu) else \
+            _Batch(values[searched], corners[searched], None, targets[searched])
+        _line_search(rows_of, searched, nu, trial, direction, rows[searched], gradient[searched])
     trial[done] = nu[done]
     return trial
+
+
+def _line_search(batch, searched, nu, trial, direction, rows, gradient):
+    """Backtracking (Armijo) on φ for the rows ``searched`` of ``trial`` (in place), ``batch`` holding just those
+    rows; each halving recomputes only the rows still short."""
+    value = _dual_value(nu[searched], rows, batch.targets)
+    slope = np.einsum("nj,nj->n", gradient, direction[searched])
+    step = np.ones(len(searched))
+    short = np.arange(len(searched))
+    for _ in range(LINE_SEARCH_STEPS):
+        every = len(short) == len(searched)  # the first pass reads the batch without copying it
+        values, corners, targets = (batch.values, batch.corners, batch.targets) if every else \
+            (batch.values[short], batch.corners[short], batch.targets[short])
+        moved = trial[searched[short]]
+        trial_rows = np.maximum(values + _apply(corners, moved), 0.0)
+        still = _dual_value(moved, trial_rows, targets) < value[short] + 1e-4 * step[short] * slope[short]
+        if not still.any():
+            break
+        short = short[still]
+        step[short] *= 0.5
+        trial[searched[short]] = nu[searched[short]] + step[short, None] * direction[searched[short]]
 
 
 def _solve_spd(lower, regular, rhs):
