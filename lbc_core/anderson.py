@@ -57,12 +57,15 @@ class Anderson:
     def embed(self, positions, size, residual):
         """Carry the history into another layout of the state, whose entry ``positions[k]`` is this state's entry k
         (-1: dropped; entries no one maps to are 0). ``residual`` is the last pushed residual, already carried."""
-        kept = positions >= 0
+        source = np.flatnonzero(positions >= 0)
+        target = positions[source]
         for name in ("dF", "dG"):
             old = getattr(self, name)
             new = np.zeros((self.memory, size), dtype=old.dtype)
-            new[:, positions[kept]] = old[:, kept]
+            for row in range(self.memory):  # row by row: a 2D fancy assignment takes twice as long
+                new[row, target] = old[row, source]
             setattr(self, name, new)
+            self.check()
         used = min(self.count, self.memory)
         self.gram[:used, :used] = (self.dF[:used] @ self.dF[:used].T).astype(np.float64)
         if self._residual is not None:
