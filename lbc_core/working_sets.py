@@ -334,7 +334,9 @@ class PairOperators:
         boundary_row = mesh.boundary_position[corner_vertex]
         corner_fixed = np.where(boundary_row >= 0, mesh.boundary_weights[np.maximum(boundary_row, 0), control], 0.0)
         scaled = mesh.scaled_gradients[self.pair_cell].astype(dtype)  # (P, d+1, d)
-        self.boundary_part = np.einsum("pc,pck->kp", corner_fixed, scaled).astype(dtype)
+        touching = np.flatnonzero(corner_fixed.any(axis=1))  # pairs of cells on the cage: a few of them
+        self.boundary_part = np.zeros((d, len(self.pair_cell)), dtype=dtype)
+        self.boundary_part[:, touching] = np.einsum("pc,pck->kp", corner_fixed[touching], scaled[touching])
         del corner_vertex, boundary_row, corner_fixed
         self.gradient = _gradient_matrix(scaled, corner_slot, sets.n_slots, dtype)
         del scaled, corner_slot
