@@ -8,17 +8,13 @@ import numpy as np
 from .errors import CageError
 from .stretch import Stretch
 
-# The relative residual a solve stops at by default, per dimension: within 0.03 % of a tight solve's objective on
-# the gargoyle's cages and the paper's 2D cages (bench/RESULTS.md, "The locality solver").
+# Relative primal residual a solve stops at by default, per dimension (bench/RESULTS.md, "The stopping tolerance").
 DEFAULT_TOLERANCE = {2: 1e-4, 3: 5e-4}
 
-
-
-# The solve's size: at its widest it holds about PAIRS_SCALE[d] · n^PAIRS_POWER (cell, control point) pairs per cell,
-# and BYTES_PER_PAIR bytes per pair at its peak (tracemalloc, the gargoyle's cages of 27-418 control points at
-# 4000-32,000 cells: 900-1030), besides the (cells, n) TV weights its caller holds (bench/RESULTS.md, "The locality
-# solver").
+# (cell, control point) pairs per cell at a solve's widest: PAIRS_SCALE[d] · n^PAIRS_POWER for n control points
+# (bench/RESULTS.md, "Memory and the cost model").
 PAIRS_SCALE, PAIRS_POWER = {2: 2.2, 3: 2.5}, 0.5
+# Peak bytes per pair (same section), and per entry of the (cells, n) TV weights the caller holds.
 BYTES_PER_PAIR = 1000
 BYTES_PER_WEIGHT = 8
 
@@ -61,23 +57,18 @@ def estimate_pairs(n_control_points, n_cells, dim):
     return PAIRS_SCALE[dim] * n_control_points ** PAIRS_POWER * n_cells
 
 
-# The solve's time, told before it starts: SECONDS_PER_PAIR_STEP per pair (estimate_pairs) and iteration, all in
-# (the reshapes of the working sets included), and about ITERATIONS_SCALE[d] · n^ITERATIONS_POWER ·
-# (cells / 8000)^CELLS_POWER iterations at the default tolerance. Fitted to the gargoyle's cages L12, L10, L08 and L09
-# split (27-418 control points) at 4000-32,000 cells on a 2-core x86_64 (bench/RESULTS.md, "The locality solver");
-# the cage's shape moves the iterations too, so this stays rough and the solve then reports its time left itself.
+# Seconds per pair and iteration on a 2-core x86_64, the reshapes included (bench/RESULTS.md, "Memory and the cost
+# model"); rough by design: the running solve tells its own time left.
 SECONDS_PER_PAIR_STEP = 1.0e-7
+# Iterations at the default tolerance: ITERATIONS_SCALE[d] · n^ITERATIONS_POWER · (cells / 8000)^CELLS_POWER (same).
 ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 34}, 0.3, 0.25
-# The work at the points after the solve (their location, smooth evaluation and reduction, and in the add-on their
-# thinning), told with the solve's: about 10 µs a point on a 2-core x86_64 (64k gargoyle points 0.69 s, 48k Suzanne
-# points 0.61 s; bench/RESULTS.md, "The bind outside the solve"); a new user was told "roughly 2 s" for a 3.7 s bind.
+# Seconds per point for the work after the solve: location, smooth fit, reduction, thinning (bench/RESULTS.md, "The
+# bind outside the solve").
 SECONDS_PER_POINT = 1e-5
-# A solve in a stretched frame (a very thin cage): about twice the iterations, each 4-6 times the cost of a plain one
-# (bench/RESULTS.md, bench/thin_cages.py).
+# A stretched solve (a very thin cage): factor on the iterations and on each one's cost (bench/thin_cages.py).
 STRETCHED_ITERATIONS, STRETCHED_STEP_COST = 2, 5
-# A thin 3D cage solved in its own frame takes more iterations: about 1 + log10(aspect / THIN_FROM_ASPECT) times
-# those above, the aspect its largest extent over its smallest along its principal axes (five corpus cages of 32-66
-# control points squashed to aspects 5-1000: 1.4x at 20, 2.2-2.8x at 50-200, 3.2x at 1000, at the median).
+# Principal aspect from which a thin cage needs more iterations: 1 + log10(aspect / THIN_FROM_ASPECT) times as many
+# (bench/RESULTS.md, "The forecast told before a solve, on thin cages").
 THIN_FROM_ASPECT = 5
 
 
