@@ -273,8 +273,7 @@ class _Run:
             weights = _moved(weights, sets.slot_positions(grown), grown.n_slots)
             sets = grown
         check()
-        ops = PairOperators(self.mesh, sets, self.settings.dtype)
-        check()
+        ops = PairOperators(self.mesh, sets, self.settings.dtype, check)
         step = self._step_map(ops, duals)
         state = step.state_of(weights) if carried is None else carried.state_for(step, sets)
         if carried is not None:  # a warm start's sets fit already: its first reshape comes later
@@ -399,8 +398,7 @@ class _Run:
         """The step map on the reshaped working sets, and where each entry of the flat state goes there (-1:
         dropped)."""
         sets = self.pending_growth
-        ops = PairOperators(self.mesh, sets, self.settings.dtype)
-        self.progress.check()
+        ops = PairOperators(self.mesh, sets, self.settings.dtype, self.progress.check)
         new_step = self._step_map(ops, step.duals)
         pair_positions = step.ops.pair_positions(ops)
         x_positions = np.arange(ops.d)[:, None] * ops.n_pairs + pair_positions[None, :]

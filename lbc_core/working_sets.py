@@ -25,6 +25,9 @@ from .projection import PADDING_VALUE, STEP_TOLERANCE, corner_products, project_
 
 # Newton steps of the projection within an iteration (bench/RESULTS.md, "The locality solver").
 STEP_NEWTON_STEPS = 3
+# Slots per factorisation at most: the least-squares matrix is factorised in groups of whole control points, so that
+# cancel is heard between them (bench/RESULTS.md, "The step").
+FACTOR_GROUP_SLOTS = 20000
 # The harmonic coordinates' largest entries a vertex's first working set takes, then twice as many until the vertex's
 # position lies in their control points' hull (bench/RESULTS.md, "The locality solver").
 FIRST_SET_SIZE = 12
@@ -272,6 +275,26 @@ def _block_system(system, sets, rank):
                          shape=(sets.n_slots, sets.n_slots))
 
 
+def _group_factors(lower, sets, dtype, check):
+    """Factorisations of a block-diagonal matrix given by its lower triangle in control-major order (COO), in
+    groups of whole control points of about FACTOR_GROUP_SLOTS slots: [(start, stop, Factor)]."""
+    rows = lower.tocsr()
+    ends = np.cumsum(np.bincount(sets.controls, minlength=sets.n_controls))
+    bounds = [0]
+    for end in ends:
+        if end - bounds[-1] >= FACTOR_GROUP_SLOTS:
+            bounds.append(int(end))
+    if bounds[-1] < sets.n_slots:
+        bounds.append(sets.n_slots)
+    factors = []
+    for start, stop in zip(bounds[:-1], bounds[1:]):
+        block = rows[start:stop].tocoo()
+        factors.append((start, stop, Factor(sp.coo_matrix((block.data, (block.row, block.col - start)),
+                                                           shape=(stop - start, stop - start)), dtype)))
+        check()
+    return factors
+
+
 class PaddedRows:
     """The slots as rows padded to a common width, for the per-vertex projection."""
 
@@ -312,12 +335,13 @@ class PairOperators:
         The boundary values' part of √|c| ∇w on the pairs.
     slot_mass : (S,) float array
         √(β m_v) of each slot's vertex.
-    factor : Factor
-        Of gradientᵀ gradient + diag(slot_mass²): the least-squares step's matrix.
+    factors : list of (int, int, Factor)
+        Of gradientᵀ gradient + diag(slot_mass²), the least-squares step's matrix, in control-major order: each
+        factor holds the rows ``start:stop`` of that order, whole control points' blocks.
     padded : PaddedRows
     """
 
-    def __init__(self, mesh, sets, dtype=np.float64):
+    def __init__(self, mesh, sets, dtype=np.float64, check=None):
         self.sets = sets
         slot_vertex = mesh.interior[sets.vertex_of_slot]
         n = sets.n_controls
@@ -346,7 +370,7 @@ class PairOperators:
         self.order = np.lexsort((sets.vertex_of_slot, sets.controls))
         rank = np.empty_like(self.order)
         rank[self.order] = np.arange(len(self.order))
-        self.factor = Factor(_block_system(mesh.system, sets, rank), dtype)
+        self.factors = _group_factors(_block_system(mesh.system, sets, rank), sets, dtype, check or (lambda: None))
         self.row_blocks = _row_blocks(self.gradient, worker_count())
         self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell].astype(dtype)
         self.dtype = dtype
@@ -392,8 +416,11 @@ class PairOperators:
 
     def solve(self, rhs):
         """The least-squares step's solve, in slot order."""
+        ordered = rhs[self.order]
+        for start, stop, factor in self.factors:
+            ordered[start:stop] = factor.solve(ordered[start:stop])
         out = np.empty_like(rhs)
-        out[self.order] = self.factor.solve(rhs[self.order])
+        out[self.order] = ordered
         return out
 
     def project(self, slot_values, duals, tolerance=STEP_TOLERANCE, steps=STEP_NEWTON_STEPS):
