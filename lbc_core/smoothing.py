@@ -9,8 +9,9 @@ vertices, so the fitted coordinates sum to 1 and reproduce the point, before any
 non-negativity where a coordinate's support ends, the reduction restores on each point's support
 (:mod:`lbc_core.reduction`).
 
-Near the cage the fit fades into the plain P1 interpolation: a point on the cage gets the interpolated boundary
-values, and a point on a cage vertex is that vertex's alone (Lagrange).
+Near the cage the fit fades into the plain P1 interpolation, by each point's own distance to the cage: a point on the
+cage gets the interpolated boundary values, and a point on a cage vertex is that vertex's alone (Lagrange). Where the
+cage is one cell across (a finger, a toe) every domain vertex lies on the cage, yet its inner points are fitted.
 """
 
 import numpy as np
@@ -25,7 +26,8 @@ RADIUS_EDGES = 2.0
 # Distance from the cage, in median cell edges, over which the fit fades into the P1 interpolation: a mesh nearer the
 # cage than that creases as P1 does. 0.25 rather than 1: a capsule 0.1 under Blender's Cylinder's cap p99 / max
 # 3.05° / 11.1° → 2.33° / 10.6°, the demo gargoyle bent 60° 2.24° / 14.1° → 2.14° / 9.4° (Mesh Deform 2.10° /
-# 10.2°), the bent capsule of bench/capsule.py unchanged (bench/RESULTS.md).
+# 10.2°), the bent capsule of bench/capsule.py unchanged (bench/RESULTS.md). The distance is the point's own (the P1
+# interpolation of the vertices' distances is 0 where the cage is one cell across, so thin limbs got P1's creases).
 FADE_EDGES = 0.25
 # A fit whose moment matrix is this ill-conditioned (too few or coplanar vertices in reach) is not used.
 MAX_CONDITION = 1e8
@@ -63,12 +65,13 @@ class SmoothInterpolation:
         self.radius = radius_edges * edge
         self.fade = fade_edges * edge
         self.tree = cKDTree(self.vertices)
-        # The fade follows the P1 interpolation of the vertices' distances to the cage: exactly 0 on it, and found
-        # for the corners of the points' cells (at most N) instead of m points.
+        # The fade follows each point's own distance to the cage. The corners' distances (at most N searches) bound
+        # it from below (it is 1-Lipschitz), so only the points that bound leaves within the fade are searched.
         corners = np.unique(self.located.indices)
-        boundary = FacetSearch(self.vertices, np.asarray(cells))
+        self.boundary = FacetSearch(self.vertices, np.asarray(cells))
         self.cage_distance = np.zeros(len(self.vertices))
-        self.cage_distance[corners] = np.sqrt(boundary.closest(self.vertices[corners], self.progress.check).squared)
+        self.cage_distance[corners] = np.sqrt(self.boundary.closest(self.vertices[corners],
+                                                                    self.progress.check).squared)
 
     @property
     def linear(self):
@@ -87,13 +90,39 @@ class SmoothInterpolation:
 
     def _rows(self, linear):
         points = linear @ self.vertices
-        blend = fade_in(linear @ self.cage_distance / self.fade)
+        blend = fade_in(self.distance_to_cage(linear, points) / self.fade)
         fitted, fits = moving_least_squares(self.vertices, self.tree, points, self.radius)
         blend = np.where(fits, blend, 0.0)
         linear = linear.copy()
         linear.data *= np.repeat(1.0 - blend, np.diff(linear.indptr))
         fitted.data *= np.repeat(blend, np.diff(fitted.indptr))
         return (linear + fitted).tocsr()
+
+    def distance_to_cage(self, linear, points):
+        """Each point's distance to the cage where it is below the fade, else a lower bound of it at least the fade.
+
+        Parameters
+        ----------
+        linear : (k, N) CSR
+            The points' barycentric rows.
+        points : (k, d) float array
+            ``linear @ vertices``.
+
+        Returns
+        -------
+        (k,) float array
+        """
+        counts = np.diff(linear.indptr)
+        owner = np.repeat(np.arange(len(points)), counts)
+        below = self.cage_distance[linear.indices] - np.linalg.norm(points[owner] - self.vertices[linear.indices],
+                                                                    axis=1)
+        lower = np.full(len(points), -np.inf)
+        np.maximum.at(lower, owner, below)
+        distance = np.maximum(lower, 0.0)
+        near = np.flatnonzero(lower < self.fade)
+        if len(near):
+            distance[near] = np.sqrt(self.boundary.closest(points[near], self.progress.check).squared)
+        return distance
 
 
 def moving_least_squares(vertices, tree, points, radius):
