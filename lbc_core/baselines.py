@@ -12,7 +12,6 @@ Joshi et al., "Harmonic coordinates for character articulation", SIGGRAPH 2007;
 Jacobson et al., "Bounded biharmonic weights for real-time deformation", SIGGRAPH 2011.
 """
 
-import time
 
 import numpy as np
 import scipy.sparse as sp
@@ -26,7 +25,7 @@ from .geometry import polygon_mean_value_coordinates
 from .interpolation import interpolation_matrix
 from .meshing import mesh_domain
 from .pipeline import check_cage_and_points
-from .progress import Progress
+from .progress import Laps, Progress
 
 # A point closer than this fraction of the cage's bounding-box diagonal to a vertex, edge or face is on it.
 ON_CAGE_TOLERANCE = 1e-10
@@ -267,8 +266,7 @@ def bbw_available():
 
 
 def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, progress, cancel):
-    timings = {}
-    clock = time.perf_counter()
+    laps = Laps()
     progress = Progress.of(progress, cancel)
     cage, points = check_cage_and_points(cage_vertices, cage_faces, points)
     # As in lbc_core.bind, every stage computes in the unit frame.
@@ -277,18 +275,17 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
     if domain is None:
         unit_domain = mesh_domain(unit_cage, cells, progress=progress.part(0.0, 0.4))
         domain = frame.domain_from_unit(unit_domain, cage)
-        timings["meshing"] = time.perf_counter() - clock
+        laps.lap("meshing")
     else:
         unit_domain = frame.domain_to_unit(domain)
-    clock = time.perf_counter()
+    laps.restart()
     if scheme == "mvc":
         domain_weights = mean_value_coordinates(unit_cage, unit_domain.vertices, progress.part(0.4, 0.6))
     else:
         progress(0.4, f"{scheme} coordinates: solving")
         solve = harmonic_weights if scheme == "harmonic" else bbw_weights
         domain_weights = solve(unit_domain, boundary_weights(unit_domain, unit_cage))
-    timings["solve"] = time.perf_counter() - clock
-    clock = time.perf_counter()
+    laps.lap("solve")
     located, outside, _ = interpolation_matrix(
         unit_domain.vertices, unit_domain.cells, unit_points, progress=progress.part(0.6, 0.8)
     )
@@ -296,7 +293,7 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
         weights = mean_value_coordinates(unit_cage, unit_points, progress.part(0.8, 1.0))
     else:
         weights = located @ domain_weights
-    timings["interpolation"] = time.perf_counter() - clock
+    laps.lap("interpolation")
     progress(1.0, "bound")
     return Binding(
         cage=cage,
@@ -308,5 +305,5 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
         points=points,
         scheme=scheme,
         options={"cells": len(domain.cells)},
-        timings=timings,
+        timings=laps.seconds,
     )

@@ -38,14 +38,14 @@ from . import fem
 from .objective import tv_objective
 from .parallel import thread_map, worker_count
 from .errors import CageError
-from .progress import Progress
+from .progress import Laps, Progress
 from .anderson import Anderson
 from .constraints import project_onto_constraints
 from .factor import Factor
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
 from .frame import principal_aspect
 from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
-from .solver import _Clock, _balancing_factor, _check_problem  # the same checks, balancing rule and stage clock
+from .solver import balancing_factor, check_problem  # the same checks and balancing rule
 from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
@@ -253,7 +253,7 @@ def solve_on_mesh(
     -------
     SolveResult
     """
-    timer = _Clock()
+    timer = Laps()
     progress = Progress.of(progress, cancel)
     vertices = np.asarray(vertices, dtype=float)
     cells = np.asarray(cells, dtype=np.int64)
@@ -262,7 +262,7 @@ def solve_on_mesh(
     control_points = np.asarray(control_points, dtype=float)
     n_vertices, d = vertices.shape
     n = len(control_points)
-    _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
+    check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
     if start is not None and (start.thresholds.shape != (len(cells), n) or len(start.interior) + len(boundary_vertices)
                               != n_vertices):
         raise CageError(f"the start state is for {start.thresholds.shape[0]} cells, {start.thresholds.shape[1]} "
@@ -784,7 +784,7 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
         if iteration >= next_balance and iteration <= BALANCE_UNTIL:
             next_balance = iteration + BALANCE_SPACING
-            factor = _balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
+            factor = balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
                                        BALANCE_HIGH[problem.d])
             if factor != 1.0:
                 step.rescale_penalty(value, factor)

@@ -12,7 +12,6 @@ place of meshing, solves again only part of it and evaluates again only some poi
 The baselines (:mod:`lbc_core.baselines`) run the same first stages through :func:`check_cage_and_points`.
 """
 
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -27,7 +26,7 @@ from .interpolation import interpolation_matrix
 from .meshing import mesh_domain, simplex_domain
 from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
 from .parallel import busy_factor, counted_in_load
-from .progress import Progress
+from .progress import Laps, Progress
 from .reduction import interpolate_and_reduce
 from .smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation
 from .forecast import check_memory, solve_forecast, solves_stretched
@@ -57,13 +56,13 @@ class StageClock:
 
     def __init__(self, progress, order):
         self.progress = progress
-        self.timings = {}
+        self._laps = Laps()
+        self.timings = self._laps.seconds
         self._parts = {}
         total, start = sum(STAGES[name] for name in order), 0.0
         for name in order:
             self._parts[name] = (start, start + STAGES[name] / total)
             start += STAGES[name] / total
-        self._clock = time.perf_counter()
 
     def part(self, stage):
         """The Progress of ``stage``: its part of the bar."""
@@ -71,14 +70,12 @@ class StageClock:
 
     def done(self, stage):
         """``stage`` ends: the seconds since the previous one ended are its own."""
-        now = time.perf_counter()
-        self.timings[stage] = self.timings.get(stage, 0.0) + now - self._clock
-        self._clock = now
+        self._laps.lap(stage)
 
     def add(self, seconds):
         """A stage that timed its own parts ends: ``seconds`` ({part: seconds}) are its timings."""
         self.timings.update(seconds)
-        self._clock = time.perf_counter()
+        self._laps.restart()
 
 
 @counted_in_load

@@ -425,7 +425,7 @@ def following_bent_edges(previous, cage):
             after = np.vstack([carried, row @ cage.vertices])
             before = np.vstack([vertices, (1.0 - at) * ends[0] + at * ends[1]])
             if np.any(signed_measures(after, halves) <= 0) or np.any(
-                    _quality(after, halves) < QUALITY_KEPT * _quality(before, halves)):
+                    radius_ratios(after, halves) < QUALITY_KEPT * radius_ratios(before, halves)):
                 continue
             vertices, carried = before, after
             weights = np.vstack([weights, row])
@@ -673,7 +673,7 @@ def _polished(mesh, vertices, squashed):
     movable = np.zeros(len(vertices), dtype=bool)
     movable[mesh.cells[squashed].ravel()] = True
     movable[mesh.boundary_vertices] = False
-    poor_below = np.where(squashed, QUALITY_KEPT * _quality(mesh.vertices, mesh.cells), -np.inf)
+    poor_below = np.where(squashed, QUALITY_KEPT * radius_ratios(mesh.vertices, mesh.cells), -np.inf)
     return polish(vertices, mesh.cells, movable, median_edge(vertices, mesh.cells), np.random.default_rng(0),
                   Progress.of(None, None), poor_below)
 
@@ -683,18 +683,8 @@ def _squashed(mesh, vertices):
     of their shape quality and have a corner off the cage."""
     on_cage = np.zeros(len(vertices), dtype=bool)
     on_cage[mesh.boundary_vertices] = True
-    kept = _quality(vertices, mesh.cells) >= QUALITY_KEPT * _quality(mesh.vertices, mesh.cells)
+    kept = radius_ratios(vertices, mesh.cells) >= QUALITY_KEPT * radius_ratios(mesh.vertices, mesh.cells)
     return ~kept & ~np.all(on_cage[mesh.cells], axis=1)
-
-
-def _quality(vertices, cells):
-    """Shape quality of each cell, 1 for a regular one, 0 for a flat one."""
-    if vertices.shape[1] == 3:
-        return radius_ratios(vertices, cells)
-    a, b, c = (np.linalg.norm(vertices[cells[:, i]] - vertices[cells[:, j]], axis=1) for i, j in ((1, 2), (2, 0),
-                                                                                              (0, 1)))
-    # 2 × inradius / circumradius = (b + c - a)(c + a - b)(a + b - c) / (a b c)
-    return (b + c - a) * (c + a - b) * (a + b - c) / np.maximum(a * b * c, np.finfo(float).tiny)
 
 
 def _faces_off_cage(mesh, vertices, old_cage, cage):

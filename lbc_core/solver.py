@@ -29,7 +29,7 @@ from .factor import Factor
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
 from .frame import principal_aspect
 from .objective import tv_objective
-from .progress import Progress
+from .progress import Laps, Progress
 from .splitting import DouglasRachford
 from .stretch import Stretch
 from .working_sets import MeshData, PairOperators, WorkingSets, feasible_working_sets, first_working_sets
@@ -159,7 +159,7 @@ def solve_on_mesh(
     -------
     SolveResult
     """
-    clock = _Clock()
+    clock = Laps()
     progress = Progress.of(progress, cancel)
     vertices = np.asarray(vertices, dtype=float)
     cells = np.asarray(cells, dtype=np.int64)
@@ -169,7 +169,7 @@ def solve_on_mesh(
     tv_weights = np.asarray(tv_weights, dtype=float)
     n_vertices, d = vertices.shape
     n = len(control_points)
-    _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
+    check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
     if start is not None:
         _check_start(start, cells, n, n_vertices - len(boundary_vertices))
     tolerance = default_tolerance(d, n) if tolerance is None else tolerance
@@ -376,7 +376,7 @@ class _Run:
             return "reshaped"
         if self.iteration <= BALANCE_UNTIL and previous is not None and \
                 self.iteration % BALANCE_SPACING < settings.check_every:
-            factor = _balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
+            factor = balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
                                        BALANCE_HIGH[step.ops.d])
             if factor != 1.0:
                 step.rescale_penalty(value, factor)
@@ -451,7 +451,7 @@ def _residuals(step, out, previous, primal_scale, objective=True):
     return record
 
 
-def _balancing_factor(residuals, high):
+def balancing_factor(residuals, high):
     """2 when the primal residual lags (beyond ``high`` times the dual), 1/2 when the dual one does (below
     BALANCE_LOW times), else 1."""
     ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
@@ -467,7 +467,8 @@ def _starting_penalty(penalty, start, d, n):
     return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
 
 
-def _check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights):
+def check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights):
+    """Refuse arrays whose shapes or indices do not make one solve's problem (:class:`CageError`)."""
     n_vertices, d = vertices.shape
     if d not in (2, 3) or cells.ndim != 2 or cells.shape[1] != d + 1:
         raise CageError(f"cells must be (F, {d + 1}) for {d}D vertices, got shape {cells.shape}")
@@ -650,14 +651,3 @@ def _replace_rows(indptr, arrays, rows, sub_indptr, sub_arrays):
         out[new_sub] = sub_array
         results.append(out)
     return results
-
-
-class _Clock:
-    def __init__(self):
-        self.seconds = {}
-        self._last = time.perf_counter()
-
-    def lap(self, stage):
-        now = time.perf_counter()
-        self.seconds[stage] = self.seconds.get(stage, 0.0) + now - self._last
-        self._last = now
