@@ -44,6 +44,7 @@ FAMILIES = [
     ("cylinder dented by 1e-8", "cylinder-32-ngon", "dented-1e-8"),
     ("cylinder dented by 1e-2", "cylinder-32-ngon", "dented-1e-2"),
     ("gargoyle cage_L12", ROOT / "tests/data/cages-3d/gargoyle/cage_L12.obj", None),
+    ("hand, finger boxes 0.11 % of the diagonal apart", ROOT / "tests/data/cages-3d/hand/cage.obj", None),
 ]
 
 

@@ -7,7 +7,8 @@ a grid-subdivided side of a box, a plane nudged by round-off. The edges between 
 *feature edges*; only they are sampled as edges. Inside a region the split lines of n-gons are no features: a
 cap's skinny triangles and their small angles never reach the tetrahedraliser, which meets only the angles between
 feature edges. Every sample still keeps the facet it lies on and its barycentric coordinates there,
-so boundary values stay exact at every sample.
+so boundary values stay exact at every sample. A region facing another part of the cage (one it shares no vertex with)
+across a gap narrower than the spacing is sampled finer, by the gap (:data:`GAP_SPACING`).
 
 A quad whose two triangles are well shaped for the spacing (:func:`split_facets`) is the exception: each of its
 triangles is a region of its own, its diagonal and edges features. An artist's edit at rest bends the quads around
@@ -23,8 +24,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
-from ..geometry import circumcircles, closest_on_segments, cross2, distance_to_segments, orient_positive
-from ..geometry import triangle_normals, unit
+from ..geometry import circumcircles, closest_on_segments, closest_on_triangles, cross2, distance_to_segments
+from ..geometry import orient_positive, triangle_normals, unit
 from . import COPLANAR_ANGLE
 from .common import bary_positions, far_points, rows_in, split_counts
 
@@ -43,6 +44,17 @@ SPLIT_MIN_EDGE = 1.5
 # along its edges, and joggling once costs less than merging; 300 points 0.78 -> 0.51 ms.
 _QHULL_OPTIONS = "QJ Qbb Q3 Q5 Q8"
 _ROUNDS_2D = 30  # rounds of splitting boundary pieces missing from a region's triangulation
+# Regions facing a part of the cage they share no vertex with, closer than the spacing (fingers boxed side by side),
+# are sampled finer from the start, at GAP_SPACING × sqrt(gap × band): a surface triangle of circumradius r facing a
+# wall at distance g, with the lattice at depth `band` behind it, can be a face of the tetrahedralisation only when
+# r² < g × band. Refining there one missing triangle at a time took 12 to 30 rounds, each a tetrahedralisation; 2
+# leaves a few rounds to refinement, finer spacings make more cells than it needs (bench/RESULTS.md).
+GAP_SPACING = 2.0
+# Facets face each other when their normals are this close to opposite (cosine), and the gap runs along the normal.
+_FACING = 0.7
+# Points per cage facet (barycentric) at which the gaps between facets are measured.
+_GAP_PROBES = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [0.5, 0.5, 0], [0, 0.5, 0.5], [0.5, 0, 0.5],
+                        [1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 SHELL_HAIR = 1e-3  # relative spread of the shells' radii between the edges of one vertex (see Surface._split)
 
 Samples = namedtuple("Samples", "points facet bary triangles triangle_region incidence")
@@ -104,9 +116,12 @@ class Surface:
     split : (E,) bool array, optional
         The facets that are regions of their own (:func:`split_facets`; chosen once per mesh, so that a retry at
         another spacing keeps the same regions); None: every facet merges with its coplanar neighbours.
+    band : float, optional
+        How far the lattice stays from the surface; given, regions facing another part of the cage across a gap
+        narrower than the spacing are sampled finer (:data:`GAP_SPACING`).
     """
 
-    def __init__(self, cage, spacing, rng, budget, deadline, split=None):
+    def __init__(self, cage, spacing, rng, budget, deadline, split=None, band=None):
         self.cage, self.rng, self.spacing, self.budget, self.deadline = cage, rng, spacing, budget, deadline
         facets = cage.facets
         n_facets = len(facets)
@@ -148,6 +163,13 @@ class Surface:
         self.origin /= np.bincount(region)[:, None]
         self.region_facets = [np.flatnonzero(region == r) for r in range(self.n_regions)]
         self.region_vertices = [np.unique(facets[f]) for f in self.region_facets]
+        # Each region's own sample spacing: finer where it nearly touches a part of the cage it shares no vertex with.
+        self.region_spacing = np.full(self.n_regions, spacing)
+        self.near = np.zeros(self.n_regions, dtype=bool)
+        if band is not None:
+            gaps = self._gaps(spacing)
+            self.region_spacing = np.minimum(spacing, GAP_SPACING * np.sqrt(gaps * band))
+            self.near = self.region_spacing < spacing
         feature = region[edge_facets[:, 0]] != region[edge_facets[:, 1]]
         self.edges = edges[feature]  # (K, 2) feature edges, low index first
         self.edge_facet = edge_facets[feature, 0]
@@ -168,11 +190,12 @@ class Surface:
         # Delaunay triangulation is ambiguous, and no sample-free sphere may run through a box's corners.
         # The corner of edge_facet holding each feature edge's lower and higher vertex: (K, 2).
         self.edge_corner = np.argmax(facets[self.edge_facet][:, None, :] == self.edges[:, :, None], axis=2)
-        counts = np.maximum(2, split_counts(lengths, spacing))
+        counts = np.maximum(2, split_counts(lengths, self.region_spacing[self.edge_regions].min(axis=1)))
         self.edge_params = [np.sort((np.arange(1, m) + JITTER * rng.uniform(-1.0, 1.0, m - 1)) / m) for m in counts]
         self.inner = [self._region_lattice(r) for r in range(self.n_regions)]  # (facet, bary) per region
         self.triangulations = [None] * self.n_regions  # per region, local numbering; None when out of date
-        self.trouble = np.arange(self.n_regions)  # the regions refinement worked on last, for error messages
+        # the regions refinement worked on last, for error messages: first those sampled finer, if any
+        self.trouble = np.flatnonzero(self.near) if self.near.any() else np.arange(self.n_regions)
         self._number()
 
     # --- frames and location ---------------------------------------------------------------------------------
@@ -225,10 +248,58 @@ class Surface:
         ends = self.cage.vertices[self.edges[self.region_edges[r]]]
         return self.to_plane(r, ends[:, 0]), self.to_plane(r, ends[:, 1])
 
+    def _gaps(self, reach):
+        """Per region, how far it faces a part of the cage that shares no vertex with it: the distance along its
+        outward normal to an opposite facet where below ``reach``, as a quarter of the region's area sees it at least
+        (inf for a region that faces none over so much: a strip along an edge is left to refinement).
+
+        Measured at a few points of each facet (:data:`_GAP_PROBES`), each point weighing its facet's area."""
+        cage = self.cage
+        corners = cage.vertices[cage.facets]
+        centres = corners.mean(axis=1)
+        radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
+        normals = triangle_normals(corners)
+        areas = 0.5 * np.linalg.norm(normals, axis=1)
+        normals = unit(normals)
+        gaps = np.full(self.n_regions, np.inf)
+        pairs = cKDTree(centres).query_pairs(reach + 2.0 * radii.max(), output_type="ndarray")
+        if len(pairs):
+            first, second = pairs[:, 0], pairs[:, 1]
+            close = np.linalg.norm(centres[first] - centres[second], axis=1) < reach + radii[first] + radii[second]
+            facing = np.einsum("ij,ij->i", normals[first], normals[second]) < -_FACING
+            pairs = pairs[close & facing]
+        touching = np.zeros((len(cage.vertices), self.n_regions), dtype=bool)
+        for r, vertices in enumerate(self.region_vertices):
+            touching[vertices, r] = True
+        shares = (touching.T.astype(np.int64) @ touching.astype(np.int64)) > 0  # regions sharing a cage vertex
+        pairs = pairs[~shares[self.region[pairs[:, 0]], self.region[pairs[:, 1]]]] if len(pairs) else pairs
+        if len(pairs) == 0:
+            return gaps
+        # Both ways: the probes of one facet against the other triangle.
+        probe, target = np.concatenate([pairs, pairs[:, ::-1]]).T
+        points = np.einsum("pk,fkd->fpd", _GAP_PROBES, corners[probe]).reshape(-1, 3)
+        probe, target = np.repeat(probe, len(_GAP_PROBES)), np.repeat(target, len(_GAP_PROBES))
+        squared, bary = closest_on_triangles(points, *corners[target].transpose(1, 0, 2))
+        across = np.einsum("ik,ikd->id", bary, corners[target]) - points
+        distance = np.sqrt(squared)
+        ahead = np.einsum("ij,ij->i", across, normals[probe]) > _FACING * distance
+        distance[~ahead | (distance >= reach)] = np.inf
+        # The least distance at each probe of each facet, then per region the distance a quarter of its area is within.
+        at = np.full((len(cage.facets), len(_GAP_PROBES)), np.inf)
+        np.minimum.at(at, (probe, np.tile(np.arange(len(_GAP_PROBES)), len(probe) // len(_GAP_PROBES))), distance)
+        for r in np.unique(self.region[pairs.ravel()]):
+            facets = self.region_facets[r]
+            values = at[facets].ravel()
+            order = np.argsort(values)
+            weight = np.repeat(areas[facets], len(_GAP_PROBES))[order]
+            quarter = np.searchsorted(np.cumsum(weight), 0.25 * weight.sum())
+            gaps[r] = values[order][min(quarter, len(values) - 1)]
+        return gaps
+
     def _region_lattice(self, r):
         """(facet, bary) of jittered hexagonal lattice points in region r, a margin away from its boundary and from
         the cage vertices in it."""
-        spacing = self.spacing
+        spacing = self.region_spacing[r]
         vertices_xy = self.to_plane(r, self.cage.vertices[self.region_vertices[r]])
         low, high = vertices_xy.min(axis=0), vertices_xy.max(axis=0)
         rows = np.arange(low[1], high[1] + spacing, spacing * np.sqrt(3.0) / 2.0)
