@@ -10,10 +10,8 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
 
 from .core import DEFAULT_CELLS, DEFAULT_FLOOR, DEFAULT_TOLERANCE
 
-# Influences per mesh vertex by default (bench/RESULTS.md, "Blender deformer"): every weight lowered by the
-# Thinning floor (DEFAULT_FLOOR) and no cap on the count. A cap ranks the weights of each vertex, and where the ranks
-# swap the thinned weights bend: even continuous, a cap of 12 creases the bent capsule of bench/capsule.py (p99 3.4°,
-# max 19°), the floor alone does not (1.4° / 2.8°, Mesh Deform 2.1° / 3.3°).
+# Influences per mesh vertex by default, 0 for no cap (the Thinning floor alone): a cap creases where a vertex's weight
+# ranks swap (bench/RESULTS.md, "Second round: the smooth evaluation's weights thinned, continuously").
 DEFAULT_INFLUENCES = 0
 
 # lbc_core's weighting functions ρ of the geodesic distance D in the TV weights ω = ρ(D).

@@ -56,26 +56,19 @@ ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
 # Cylinder's 32-gon caps fanned out from one vertex, whose coordinate summed to 466 over the points inside against
 # 18-166 for the others (bench/RESULTS.md).
 POKE_SIDES = 5
-# An n-gon is poked only when its centre's distance to the line of each of its sides (in the plane of its Newell
-# normal) is at least this share of the centre's largest distance to a vertex: regular polygons have cos(pi / k)
-# (0.81 and more), a five-pointed star 0.31; below it a triangle of the poke would be a sliver or fold. A convex
-# n-gon needs less: its values are its outline's mean value coordinates (boundary.py), whatever the triangles' shape,
-# and its mean lies inside; thin circle segments, lenses and a rectangle with one side cut many times stand 0.07-0.09.
+# Least distance of an n-gon's centre inside each side's line to poke it, a share of its largest distance to a vertex
+# (bench/RESULTS.md, "n-gons poked at their vertices' mean"); a convex n-gon's, less (bench/RESULTS.md, "A convex
+# poked n-gon's values").
 POKE_HEIGHT = 0.1
 POKE_HEIGHT_CONVEX = 0.02
 # n-gons from this many sides that could not be poked and whose ear clipping fans out from one vertex are named in the
 # cage's warnings.
 FAN_NOTICE_SIDES = 8
-# The solve's memory grows as control points × cells (measured: about 0.3 kB per control point and cell in 2D and
-# 0.4 kB in 3D with single-precision iterations, 0.9 and 1.2 kB in double precision) and its time per iteration as mesh
-# vertices × control points². At 2000 control points the 3D default resolution (8000 tetrahedra) needs 6 to 19 GB
-# and the 2D default (3000 triangles) 2 to 6 GB: beyond that no machine binds in reasonable time, so such cages are
-# refused before any work. The solver refuses smaller problems that do not fit the machine's memory.
-# Diagonals of a quad whose lengths differ by less than this share count as equal: the quad splits from its first
-# vertex. Its split then stays when an artist's edit bends it a little, so a bind from scratch splits it as the warm
-# re-bind that carries the previous mesh does (a bent quad's surface depends on its split). With 0.05, 11 of 16
-# edits of the corpus's quad cages re-split a bent quad and bound from scratch; with 0.25, 2 (bench/RESULTS.md).
+# Share by which a quad's diagonals may differ and still split it from its first vertex, so that a small edit keeps
+# its split (bench/RESULTS.md, "Warm re-bind of Blender's quad cages").
 QUAD_SPLIT_TIE = 0.25
+# Control points at most: larger cages are refused before any work, as no machine would bind them in reasonable time
+# (bench/RESULTS.md, "The control-point limit"); pipeline.check_request refuses smaller ones that do not fit memory.
 MAX_CONTROL_POINTS = 2000
 # Closed triangle meshes have about 2 triangles per vertex; 4 leaves room for handles and unwelded input.
 _FACES_PER_CONTROL_POINT = 4

@@ -60,15 +60,9 @@ ANDERSON_PERIOD = {2: 3, 3: 5}
 # Over-relaxation α of each step: in 3D 1.9 takes 8-12 % fewer iterations than 1.6 on cages of 18 control points and
 # more, as many on smaller ones, at the same objectives (2D keeps the α its packs were tuned with; bench/RESULTS.md).
 RELAXATION = {2: 1.6, 3: 1.9}
-# The penalty is then balanced against the residuals (Boyd et al. 2011, §3.4.1) in the first BALANCE_UNTIL
-# iterations: at a scheduled check every BALANCE_SPACING iterations, a relative primal residual above BALANCE_HIGH[d]
-# times the dual doubles it, one below BALANCE_LOW times the dual halves it; then it stays, as ADMM's convergence
-# needs. The band is wide and lopsided: the gargoyle's cages, whose penalty c_d / n^(1/(d-1)) was tuned on, sit at
-# 0.13-0.24 throughout and are left alone, while a UV sphere of 290 control points sat at 2-9 and took 805 iterations
-# (310-335 balanced), and the corpus's thin plate, torus and bent tube start below 0.05 (945, 340 and 320 iterations;
-# 295, 190 and 165 balanced). In 3D a ratio above 0.6 already lags: the corpus's cylinders, prisms and spheres, which
-# sit at 0.6-1.5, take 10-37 % fewer iterations with it doubled (the 64-sided cylinders 245 and 255 → 175 and 160);
-# 2D keeps 2, where its packs were tuned. Objectives stay within the tolerance's 0.06 % (bench/RESULTS.md).
+# Penalty balancing up to iteration BALANCE_UNTIL, every BALANCE_SPACING iterations: doubled where the primal / dual
+# residual ratio passes BALANCE_HIGH[d], halved below BALANCE_LOW (bench/RESULTS.md, "The penalty balanced against the
+# residuals in the first iterations"; 3D's 0.6: "The penalty's band in 3D").
 BALANCE_UNTIL = 300
 BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
 BALANCE_SPACING = 30

@@ -23,11 +23,9 @@ WEIGHTINGS = {
     "sqrt": np.sqrt,
     "constant": lambda d: np.ones_like(d),
 }
-# The heat method's check: of the (vertex, source) pairs farther apart than FAR_SHARE of the largest straight-line
-# distance, at most MOST_BELOW may lie under BELOW_STRAIGHT times it. Every sound cage measured has at most 0.06 % of
-# its pairs there (the heat method smooths within a few percent; the paper's 2D packs none); a cage 1/20 as thick as
-# wide has 88 %, 1/50 99.9 %, a 2D strip 1/500 as wide as long 34 % (bench/RESULTS.md). At most CHECKED_VERTICES
-# vertices, evenly spread, are checked.
+# The heat method's check, in shares: of the pairs farther apart than FAR_SHARE of the largest straight-line distance,
+# at most MOST_BELOW under BELOW_STRAIGHT times their straight line, on at most CHECKED_VERTICES vertices, evenly
+# spread (bench/RESULTS.md, "Geodesic distances on very thin cages").
 FAR_SHARE, BELOW_STRAIGHT, MOST_BELOW = 0.25, 0.8, 0.01
 CHECKED_VERTICES = 2000
 # Sources whose distances are computed together in 3D: bounds the (3 F, sources) gradient arrays and the time between

@@ -402,11 +402,9 @@ def bary_positions(cage, facet, bary):
 
 # ------------------------------------------------------------------------------------------- triangle intersections
 
-# Blender keeps positions in float32, off by up to 6e-8 of the coordinates' size: the triangles of a subdivided cube
-# rotated and applied leave its faces' planes by that much. Two triangles meeting at a vertex count as coplanar within
-# this share of the largest coordinate (a generous multiple of that rounding) if also within NEARLY_FLAT (radians) of
-# each other's plane (far from the origin the share alone would flatten real corners), and are then judged in their
-# plane.
+# Two triangles meeting at a vertex count as coplanar within this share of the largest coordinate (Blender's float32
+# rounding, generously) if also within NEARLY_FLAT radians of each other's plane (bench/RESULTS.md, "A rotated
+# subdivided cube is no self-intersection").
 FLOAT32_ROUNDING = 1e-6
 NEARLY_FLAT = 1e-3
 

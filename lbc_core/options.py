@@ -16,10 +16,8 @@ import numpy as np
 from .errors import CageError
 from .geodesics import WEIGHTINGS as _RHO
 
-# About how many triangles / tetrahedra fill the cage by default. 2D: the reference solver's resolution for the paper's
-# figures. 3D, chosen by fidelity and time: the clothing garment posed with its shipped cage pose moves by up to 48 %
-# of its size; against a 16k-tetrahedra binding it is off by up to 1.3 % of its size at 4k tetrahedra and 0.8 % at
-# 8k, while a bind of the 168-control-point gargoyle cage_L08 on the 2-core test machine took 10 s at 4k, 21 s at 8k.
+# Triangles / tetrahedra filling the cage by default: 2D the paper's reference resolution, 3D chosen by fidelity and
+# time (bench/RESULTS.md, "3D (gargoyle cage L08: 168 control points, 4083 tetrahedra)", "The resolution's price").
 DEFAULT_CELLS = {2: 3000, 3: 8000}
 MIN_CELLS = 10
 # The names of ρ in the geodesic TV weights ω = ρ(D), the paper's first: those lbc_core.geodesics implements.

@@ -57,10 +57,8 @@ from .progress import Progress
 from .smoothing import RADIUS_EDGES, median_edge
 from .solver import SolveResult
 
-# A carried cell must keep at least this share of its shape quality (radius ratio in 3D, the same ratio of in- to
-# circumradius in 2D): a cell squashed further would make the solve on the carried mesh coarser than a fresh mesh.
-# Cells with every corner on the cage are exempt: their values are the cage's boundary values, fixed, so their shape
-# never enters the solve (only folding them is refused).
+# Share of its radius ratio a carried cell with a corner off the cage must keep (bench/RESULTS.md, "The warm re-bind
+# keeps a carried mesh whose squashed cells lie wholly on the cage").
 QUALITY_KEPT = 0.25
 # A carried boundary face may cross a cage face that the edit bent (a quad's diagonal, an n-gon's split) as a chord:
 # its corners stay on the cage, its inside leaves it. Up to this share of the median cell edge, the carried mesh is
@@ -70,20 +68,14 @@ CHORD_KEPT = 0.5
 # this share of a mesh edge's length from its ends: a split so near a corner would make a sliver, and the mesh
 # follows the cage edge there within that share already.
 CROSSING_END = 0.05
-# Rings of mesh vertices around the moved control points' supports that are solved again: room for a support to grow.
-# One ring leaves the weights as close to a tight solve as two (within 0.005, closer on the largest edits) on every
-# gargoyle edit measured, with up to 55 % fewer cells solved; on the paper's 2D cages within 0.006, 5-15 % fewer
-# (bench/RESULTS.md, "One ring around the supports").
+# Rings of mesh vertices around the moved control points' supports solved again, room for a support to grow
+# (bench/RESULTS.md, "A Rebind's fixed costs, and one ring around the supports").
 FREE_RINGS = 1
-# Points near domain vertices whose coordinates and position changed less than this (Binding.stale) since they were
-# evaluated keep their rows: those rows still meet every constraint exactly (the points that have weight on a moved
-# control point are always evaluated again), and they differ from evaluating again by at most about a fifth of this,
-# which is below the solver's own error at its tolerance (bench/RESULTS.md, "Points near small changes").
+# Change (largest coordinate change plus move in median cell edges, Binding.stale) under which the points near a domain
+# vertex keep their rows (bench/RESULTS.md, "Points near small changes keep their rows").
 STALE = 1e-2
-# How far a cage's vertices may move in all, summed over warm re-binds since its last bind from scratch (each edit's
-# largest move, over the diagonal), before a re-bind binds from scratch: a mesh carried out and back drifts from a
-# fresh one (a subdivided cube's side vertex out and back in Blender: 2 % 0.0011 of the mesh's diagonal from a fresh
-# bind, 5 % 0.013, 10 % 0.020, against 0.0069 between fresh binds at 8000 and 9000 cells).
+# Largest moves over the diagonal, summed over warm re-binds since the last bind from scratch, past which a re-bind
+# binds from scratch (bench/RESULTS.md, "Warm re-binds that add up").
 CARRY_LIMIT = 0.08
 
 

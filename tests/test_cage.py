@@ -294,7 +294,7 @@ def test_duplicated_face():
 
 
 def test_every_defect_is_reported_at_once():
-    # The case: 5 duplicated faces and a hole elsewhere were told one at a time (first one pair, then, after
+    # A user's cage: 5 duplicated faces and a hole elsewhere were told one at a time (first one pair, then, after
     # deleting, "open"); every kind, with its count, comes in one message now.
     vertices, triangles = sphere(60)
     top = int(np.argmax(vertices[:, 2]))

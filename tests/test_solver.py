@@ -28,7 +28,7 @@ def solve_pack(pack, **options):
 
 
 def assert_quality(vertices, weights, controls, boundary_vertices=None, boundary_weights=None):
-    """Issue #2 item 7: partition of unity 1e-9, reproduction 1e-9 of the diagonal, weights ≥ -1e-6, Lagrange."""
+    """The guarantees: partition of unity 1e-9, reproduction 1e-9 of the diagonal, weights ≥ -1e-6, Lagrange."""
     diagonal = np.linalg.norm(np.ptp(vertices, axis=0))
     assert np.abs(weights.sum(axis=1) - 1).max() <= 1e-9
     assert np.abs(weights @ controls - vertices).max() <= 1e-9 * diagonal
