@@ -257,17 +257,12 @@ def solve_on_mesh(
     n_vertices, d = vertices.shape
     n = len(control_points)
     check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
-    if start is not None and (start.thresholds.shape != (len(cells), n) or len(start.interior) + len(boundary_vertices)
-                              != n_vertices):
-        raise CageError(f"the start state is for {start.thresholds.shape[0]} cells, {start.thresholds.shape[1]} "
-                        f"control points and {len(start.interior)} interior vertices, not {len(cells)}, {n} and "
-                        f"{n_vertices - len(boundary_vertices)}: start from a solve on this mesh")
-    if tolerance is None:
-        tolerance = default_tolerance(d, n)
-    if anderson_period is None:
-        anderson_period = ANDERSON_PERIOD[d]
-    if relaxation is None:
-        relaxation = RELAXATION[d]
+    if start is not None:
+        _check_start(start, cells, n, n_vertices - len(boundary_vertices))
+    settings = _Settings(epsilon, default_tolerance(d, n) if tolerance is None else tolerance, max_iterations,
+                         RELAXATION[d] if relaxation is None else relaxation, check_every, anderson_memory,
+                         ANDERSON_PERIOD[d] if anderson_period is None else anderson_period,
+                         np.float32 if single_precision else np.float64)
     tv_weights = np.asarray(tv_weights, dtype=float)
 
     # Work on the cage scaled to unit diagonal, so that penalty and tolerances are scale-free.
@@ -287,40 +282,66 @@ def solve_on_mesh(
     interior = np.setdiff1d(np.arange(n_vertices), boundary_vertices)
     weights = np.empty((n_vertices, n))
     weights[boundary_vertices] = boundary_weights
-    iterations, converged, history, state = 0, True, [], None
-    if len(interior):
-        dtype = np.float32 if single_precision else np.float64
-        progress(0.0, "factorising the solver's matrix")
-        problem = _Problem(solve_vertices, cells, boundary_vertices, boundary_weights, solve_controls, interior,
-                           BETA[d], dtype, progress, stretch)
-        timer.lap("factorisation")
-        if problem.M.shape[0] == 0:
-            # n = d + 1: a simplex cage. The constraints leave no freedom; Z = H are its barycentric coordinates.
-            Z = W = problem.H.astype(np.float64)
-        else:
-            # A cold solve at the default tolerance knows about how many iterations to expect, which bounds the time
-            # left it tells early on, while its residual still falls slowly.
-            expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls))
-                        if start is None and tolerance == default_tolerance(d, n) else None)
-            Z, W, iterations, converged, history, state = _admm(
-                problem, tv_weights, epsilon, tolerance, max_iterations,
-                _starting_penalty(penalty, start, d, n), relaxation, check_every, anderson_memory,
-                anderson_period, progress.part(_FACTORISATION_END, _ADMM_END), start, expected,
-            )
-            for record in history:  # objectives in the input's units
-                if "objective" in record:
-                    record["objective"] *= scale ** (d - 1)
-        timer.lap("solve")
-        progress(_ADMM_END, "projecting onto the constraints")
-        weights[interior] = project_onto_constraints(W, Z, unit_controls, unit_vertices[interior], progress.check)
-        progress.check()
-    if len(interior):
-        # From the operators at hand, in float64: TV scales with length^(d-1).
-        objective = problem.objective(weights[interior], tv_weights, progress.check) * scale ** (d - 1)
-    else:
+    if not len(interior):
         objective = tv_objective(vertices, cells, weights, tv_weights)
+        progress(1.0, "solved")
+        return SolveResult(weights, 0, True, objective, tv_weights, [], timer.seconds, None)
+    progress(0.0, "factorising the solver's matrix")
+    problem = _Problem(solve_vertices, cells, boundary_vertices, boundary_weights, solve_controls, interior, BETA[d],
+                       settings.dtype, progress, stretch)
+    timer.lap("factorisation")
+    Z, W, iterations, converged, history, state = _iterate(problem, tv_weights, settings, penalty, start, stretch,
+                                                           unit_controls, progress)
+    for record in history:  # objectives in the input's units
+        if "objective" in record:
+            record["objective"] *= scale ** (d - 1)
+    timer.lap("solve")
+    progress(_ADMM_END, "projecting onto the constraints")
+    weights[interior] = project_onto_constraints(W, Z, unit_controls, unit_vertices[interior], progress.check)
+    progress.check()
+    # From the operators at hand, in float64: TV scales with length^(d-1).
+    objective = problem.objective(weights[interior], tv_weights, progress.check) * scale ** (d - 1)
     progress(1.0, "solved")
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds, state)
+
+
+@dataclass
+class _Settings:
+    """solve_on_mesh's options, the defaults of the dimension filled in."""
+
+    epsilon: float
+    tolerance: float
+    max_iterations: int
+    relaxation: float
+    check_every: int
+    anderson_memory: int
+    anderson_period: int
+    dtype: type
+
+
+def _check_start(start, cells, n, n_interior):
+    """Refuse a warm start made on another mesh."""
+    if start.thresholds.shape != (len(cells), n) or len(start.interior) != n_interior:
+        raise CageError(f"the start state is for {start.thresholds.shape[0]} cells, {start.thresholds.shape[1]} "
+                        f"control points and {len(start.interior)} interior vertices, not {len(cells)}, {n} and "
+                        f"{n_interior}: start from a solve on this mesh")
+
+
+def _iterate(problem, tv_weights, settings, penalty, start, stretch, unit_controls, progress):
+    """Z and W at the interior vertices (float64, unscaled), the iterations, whether converged, the history and the
+    final SolverState: ADMM (:class:`_Admm`), except on a simplex cage."""
+    d, n = problem.d, len(unit_controls)
+    if problem.M.shape[0] == 0:
+        # n = d + 1: a simplex cage. The constraints leave no freedom; Z = H are its barycentric coordinates.
+        Z = W = problem.H.astype(np.float64)
+        return Z, W, 0, True, [], None
+    # A cold solve at the default tolerance knows about how many iterations to expect, which bounds the time left it
+    # tells early on, while its residual still falls slowly.
+    expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls))
+                if start is None and settings.tolerance == default_tolerance(d, n) else None)
+    admm = _Admm(problem, tv_weights, settings, _starting_penalty(penalty, start, d, n),
+                 progress.part(_FACTORISATION_END, _ADMM_END), expected)
+    return admm.solve(start)
 
 
 # Where each part of the solve ends on its progress range (the ADMM iterations take most of the time).
@@ -674,13 +695,71 @@ def _cell_chunks(problem, size_x):
     return chunks
 
 
-def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alpha, check_every, memory, period,
-          progress, start=None, expected=None):
-    step = _DouglasRachford(problem, tv_weights, epsilon, alpha, penalty, progress.check)
-    anderson = (Anderson(step.size_x + step.shape_w[0] * step.shape_w[1], memory, problem.G.dtype, progress.check)
-                if memory else None)
+class _Admm:
+    """One solve's iterations: Douglas-Rachford steps by Anderson periods, the stopping test, the progress and time
+    left it reports, and the penalty's balancing."""
 
-    def advance(start, last, count):
+    def __init__(self, problem, tv_weights, settings, penalty, progress, expected=None):
+        self.problem, self.progress, self.expected = problem, progress, expected
+        self.tolerance, self.max_iterations = settings.tolerance, settings.max_iterations
+        self.alpha, self.check_every, self.period = settings.relaxation, settings.check_every, settings.anderson_period
+        self.step = _DouglasRachford(problem, tv_weights, settings.epsilon, self.alpha, penalty, progress.check)
+        memory = settings.anderson_memory
+        self.anderson = (Anderson(self.step.size_x + self.step.shape_w[0] * self.step.shape_w[1], memory,
+                                  problem.G.dtype, progress.check) if memory else None)
+        self.iteration, self.converged, self.history = 0, False, []
+        # The state after the last period, its residual (None: start afresh) and its norm, and the last step.
+        self.value = self.residual = self.residual_norm = self.out = None
+        # What the progress reports read: the share shown, the first check's distance, the checks since the
+        # penalty last changed, and when the iterations started.
+        self.fraction, self.first_distance, self.checks, self.started = 0.0, None, [], None
+        self.next_check = self.next_balance = settings.check_every  # the first check balances the penalty
+
+    def solve(self, start=None):
+        """Iterate from the harmonic coordinates, or from ``start`` (a SolverState), until the residuals pass the
+        tolerance or the iterations run out. Returns Z and W (float64, unscaled), the iterations, whether converged,
+        the history and the final SolverState."""
+        self.started = time.perf_counter()
+        initial = self._initial_state(start)
+        self.iteration = min(self.period, self.max_iterations)
+        self.value, self.out, _, self.residual, self.residual_norm, _ = self._advance(initial, None, self.iteration)
+        primal_scale, early_check_done = None, False  # the last scheduled check's scale; one early check per window
+        while self.iteration < self.max_iterations:
+            previous, last_norm = self._period()
+            scheduled = self.iteration >= self.next_check or self.iteration >= self.max_iterations
+            if scheduled:
+                self.next_check += self.check_every * ((self.iteration - self.next_check) // self.check_every + 1)
+            if not scheduled and early_check_done:
+                continue
+            # A step's residual is α times its primal residual: the primal test costs one norm. The full check (dual
+            # residual, objective) runs only once it passes, at most once between two scheduled checks.
+            if scheduled:
+                primal_scale = _primal_scale(self.step, self.out)
+            if primal_scale is None:
+                continue
+            passed, distance = self._check(previous, last_norm / (self.alpha * primal_scale), primal_scale, scheduled)
+            if self.converged:
+                break
+            early_check_done = passed and not scheduled
+            if scheduled:
+                self._report(distance)
+                self._balance(previous, primal_scale)
+        # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries
+        # faint tails there until full convergence. Both go back unscaled.
+        problem, out = self.problem, self.out
+        W_unscaled = out.W.astype(np.float64) / problem.sqrt_mass.astype(np.float64)
+        final = SolverState(self.value, self.step.thresholds, problem.sqrt_cell, problem.sqrt_mass, problem.interior,
+                            self.step.penalty)
+        return out.Z.astype(np.float64), W_unscaled, self.iteration, self.converged, self.history, final
+
+    def _initial_state(self, start):
+        if start is None:
+            self.progress(0.0, "ADMM: starting from the harmonic coordinates")
+            return self.step.initial_state()
+        self.progress(0.0, "ADMM: starting from the previous solve")
+        return self.step.carried_state(start)
+
+    def _advance(self, start, last, count):
         """``count`` steps from ``start``. Returns the final state, the last two steps' :class:`_Step`, the residual
         final - start and its norm, and the norm of the last step's own residual (α times its primal residual).
         ``last`` is the step before, needed if count is 1. Only what the final step's checks need is kept alive
@@ -689,109 +768,91 @@ def _admm(problem, tv_weights, epsilon, tolerance, max_iterations, penalty, alph
         for k in range(count):
             previous, previous_state = (last, state) if k == count - 1 else (None, None)
             last = None
-            state, last = step(state)
-            progress.check()
-        residual, residual_norm = _difference(state, start, progress.check)
-        last_norm = residual_norm if count == 1 else _difference(state, previous_state, progress.check, keep=False)[1]
+            state, last = self.step(state)
+            self.progress.check()
+        residual, residual_norm = _difference(state, start, self.progress.check)
+        last_norm = (residual_norm if count == 1 else
+                     _difference(state, previous_state, self.progress.check, keep=False)[1])
         return state, last, previous, residual, residual_norm, float(last_norm)
 
-    started = time.perf_counter()
-    if start is None:
-        progress(0.0, "ADMM: starting from the harmonic coordinates")
-        initial = step.initial_state()
-    else:
-        progress(0.0, "ADMM: starting from the previous solve")
-        initial = step.carried_state(start)
-    iteration = min(period, max_iterations)
-    value, out, _, residual, residual_norm, _ = advance(initial, None, iteration)
-    history = []
-    converged = False
-    fraction, first_distance, checks = 0.0, None, []
-    primal_scale, early_check_done = None, False  # the last scheduled check's scale; one early check per window
-    next_check = check_every
-    next_balance = check_every  # the first check that balances the penalty
-    while iteration < max_iterations:
+    def _period(self):
+        """One Anderson period from the current state: the steps from its extrapolation, or from the state itself
+        where the extrapolation did not reduce the residual. Returns the step before the last and the last step's
+        residual norm."""
+        anderson, value, residual = self.anderson, self.value, self.residual
         candidate = anderson.extrapolate(value, residual) if anderson and residual is not None else None
-        progress.check()  # the extrapolation and the push below each read the whole history
+        self.progress.check()  # the extrapolation and the push below each read the whole history
         if candidate is None:
             candidate = value
-        count = min(period, max_iterations - iteration)
-        before, out = out, None  # the step that made ``value``: a count of 1 needs it for its residuals
-        next_value, out, previous, next_residual, next_norm, last_norm = advance(
+        count = min(self.period, self.max_iterations - self.iteration)
+        before, self.out = self.out, None  # the step that made ``value``: a count of 1 needs it for its residuals
+        next_value, self.out, previous, next_residual, next_norm, last_norm = self._advance(
             candidate, before if count == 1 else None, count)
-        iteration += count
-        retry = min(count, max_iterations - iteration)
-        if candidate is not value and next_norm > residual_norm and retry:
+        self.iteration += count
+        retry = min(count, self.max_iterations - self.iteration)
+        if candidate is not value and next_norm > self.residual_norm and retry:
             # Safeguard: the extrapolation did not reduce the residual; take the plain steps instead (within the
             # iteration limit; without steps left, the extrapolated ones stand).
             anderson.reset()
             candidate = value
-            next_value, out, previous, next_residual, next_norm, last_norm = advance(candidate,
-                                                                                     before if retry == 1 else None,
-                                                                                     retry)
-            iteration += retry
+            next_value, self.out, previous, next_residual, next_norm, last_norm = self._advance(
+                candidate, before if retry == 1 else None, retry)
+            self.iteration += retry
         elif anderson and residual is not None:
             anderson.push(next_value, next_residual, value, residual)
-            progress.check()
-        value, residual, residual_norm = next_value, next_residual, next_norm
-        scheduled = iteration >= next_check or iteration >= max_iterations
-        if scheduled:
-            next_check += check_every * ((iteration - next_check) // check_every + 1)
-        if not scheduled and early_check_done:
-            continue
-        # A step's residual is α times its primal residual: the primal test costs one norm. The full check (dual
-        # residual, objective) runs only once it passes, at most once between two scheduled checks.
-        if scheduled:
-            primal_scale = _primal_scale(step, out)
-        if primal_scale is None:
-            continue
-        primal = last_norm / (alpha * primal_scale)
+            self.progress.check()
+        self.value, self.residual, self.residual_norm = next_value, next_residual, next_norm
+        return previous, last_norm
+
+    def _check(self, previous, primal, primal_scale, scheduled):
+        """The stopping test on a relative primal residual: the full check once it passes (converged when both
+        residuals do), recorded in the history, as a failing one is at a scheduled check. Returns whether it passed
+        and the distance to the tolerance (the residuals over their tolerances, the larger)."""
+        tolerance = self.tolerance
         if primal <= tolerance:
-            record = dict(iteration=iteration, **_residuals(step, out, previous, primal_scale))
-            history.append(record)
+            record = dict(iteration=self.iteration, **_residuals(self.step, self.out, previous, primal_scale))
+            self.history.append(record)
             if record["primal"] <= tolerance and record["dual"] <= DUAL_TOLERANCE_FACTOR * tolerance:
-                converged = True
-                break
-            early_check_done = not scheduled
-            distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
-        else:
-            if scheduled:
-                history.append(dict(iteration=iteration, primal=float(primal)))
-            distance = primal / tolerance
-        if not scheduled:
-            continue
-        early_check_done = False
-        first_distance = first_distance or max(distance, 1.0 + 1e-9)
+                self.converged = True
+            return True, max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
+        if scheduled:
+            self.history.append(dict(iteration=self.iteration, primal=float(primal)))
+        return False, primal / tolerance
+
+    def _report(self, distance):
+        """The progress at a scheduled check: the share of the way to the tolerance, and the time left."""
+        self.first_distance = self.first_distance or max(distance, 1.0 + 1e-9)
         # Residuals fall roughly geometrically: show the share of the way, in log scale, to the tolerance.
-        by_residual = min(0.99, np.log(first_distance / distance) / np.log(first_distance))
-        fraction = max(fraction, iteration / max_iterations, by_residual)
+        by_residual = min(0.99, np.log(self.first_distance / distance) / np.log(self.first_distance))
+        self.fraction = max(self.fraction, self.iteration / self.max_iterations, by_residual)
         # The time left; none until the residual has fallen since the first check (the share of the iteration limit
         # alone said "10 min" for 2 s).
-        elapsed = time.perf_counter() - started
-        checks.append((iteration, distance))
-        time_left = seconds_left(elapsed, fraction, checks, max_iterations)
-        if expected is not None and iteration < expected:
+        elapsed = time.perf_counter() - self.started
+        self.checks.append((self.iteration, distance))
+        time_left = seconds_left(elapsed, self.fraction, self.checks, self.max_iterations)
+        if self.expected is not None and self.iteration < self.expected:
             # The residual's fall early on says up to 20 times the time left (a 314-vertex UV sphere: "2 min" with
             # 8 s to go); the iterations the forecast expects say about it (bench/RESULTS.md).
-            time_left = min(time_left, (expected - iteration) * elapsed / iteration)
+            time_left = min(time_left, (self.expected - self.iteration) * elapsed / self.iteration)
         left = f", {format_remaining(time_left)}" if by_residual > 0 else ""
-        progress(fraction, f"ADMM iteration {iteration}, residual {distance:.1f}× the tolerance{left}")
-        if iteration >= next_balance and iteration <= BALANCE_UNTIL:
-            next_balance = iteration + BALANCE_SPACING
-            factor = balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
-                                       BALANCE_HIGH[problem.d])
-            if factor != 1.0:
-                step.rescale_penalty(value, factor)
-                history.append(dict(iteration=iteration, penalty=step.penalty))
-                checks = checks[-1:]  # the residual falls at another rate from here: the time left reads it anew
-                if anderson:
-                    anderson.reset()
-                residual, residual_norm = None, np.inf  # the next steps start afresh from the rescaled state
-    # W, the clamped split variable, has exact zeros where the solver decided a coordinate vanishes; Z carries faint
-    # tails there until full convergence. Both go back unscaled.
-    W_unscaled = out.W.astype(np.float64) / problem.sqrt_mass.astype(np.float64)
-    final = SolverState(value, step.thresholds, problem.sqrt_cell, problem.sqrt_mass, problem.interior, step.penalty)
-    return out.Z.astype(np.float64), W_unscaled, iteration, converged, history, final
+        self.progress(self.fraction, f"ADMM iteration {self.iteration}, residual {distance:.1f}× the tolerance{left}")
+
+    def _balance(self, previous, primal_scale):
+        """Up to BALANCE_UNTIL, every BALANCE_SPACING iterations: the penalty doubled or halved where the residuals'
+        ratio leaves its band, and the next steps started afresh from the rescaled state."""
+        if self.iteration < self.next_balance or self.iteration > BALANCE_UNTIL:
+            return
+        self.next_balance = self.iteration + BALANCE_SPACING
+        factor = balancing_factor(_residuals(self.step, self.out, previous, primal_scale, objective=False),
+                                  BALANCE_HIGH[self.problem.d])
+        if factor == 1.0:
+            return
+        self.step.rescale_penalty(self.value, factor)
+        self.history.append(dict(iteration=self.iteration, penalty=self.step.penalty))
+        self.checks = self.checks[-1:]  # the residual falls at another rate from here: the time left reads it anew
+        if self.anderson:
+            self.anderson.reset()
+        self.residual, self.residual_norm = None, np.inf
 
 
 def _difference(a, b, check, keep=True):
