@@ -288,6 +288,35 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     check_options(options)
     # As Object.lbc stores them, so that a Rebind, which reads them back, asks for the same solve.
     options.update({key: float(np.float32(options[key])) for key in ("epsilon", "tolerance", "thinning")})
+    _check_roles(mesh_obj, cage_obj)
+    _check_bindable(mesh_obj, cage_obj)
+    points = _mesh_points(mesh_obj)
+    cage_points, cage_faces, flat, cage_topology, world = _cage_geometry(mesh_obj, cage_obj, depsgraph, points, mode)
+    return BindRequest(
+        mesh_uid=mesh_obj.session_uid,
+        cage_uid=cage_obj.session_uid,
+        mesh_name=mesh_obj.name,
+        cage_name=cage_obj.name,
+        bound_to_cage=is_bound(mesh_obj) and mesh_obj.lbc.cage == cage_obj,
+        points=points,
+        cage_points=cage_points,
+        cage_faces=cage_faces,
+        flat=flat,
+        options=options,
+        cage_topology=cage_topology,
+        cage_shape=shape_fingerprint(cage_obj.data),
+        mesh_topology=topology_fingerprint(mesh_obj.data),
+        warnings=[warning for warning in (render_warning(mesh_obj, cage_obj), mirror_warning(mesh_obj),
+                                          cage_pose_warning(cage_obj, depsgraph)) if warning],
+        cage_modifiers=_named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers))),
+        cage_modifiers_off=_named_modifiers(_modifiers_off(cage_obj)),
+        world=world,
+    )
+
+
+def _check_roles(mesh_obj, cage_obj):
+    """Refuse what cannot be a mesh and its cage: not objects, not meshes, one object in both roles, or a cage scaled
+    to 0."""
     for role, obj in (("mesh", mesh_obj), ("cage", cage_obj)):
         if not isinstance(obj, bpy.types.Object):
             raise CageError(f"the {role} to bind is {obj!r}, not an object: pass it as e.g. bpy.data.objects['Name'] "
@@ -304,6 +333,11 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
         raise CageError(f"the cage object '{cage_obj.name}' is scaled to 0 along an axis (Scale "
                         f"{tuple(round(value, 6) for value in cage_obj.scale)}), so it encloses nothing: give it a "
                         "scale other than 0 on every axis (Object properties > Transform)")
+
+
+def _check_bindable(mesh_obj, cage_obj):
+    """Refuse a mesh whose binding cannot be written here and now: linked from a library, its data shared, in Edit
+    Mode, or the cage bound to it."""
     linked = not_editable_here(mesh_obj)
     if linked:
         raise CageError(linked)
@@ -320,6 +354,10 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     if mesh_obj in deformed_by:
         raise CageError(f"the cage '{cage_obj.name}' is itself deformed by '{mesh_obj.name}' (bound to it): binding "
                         f"'{mesh_obj.name}' to it would make each follow the other. Unbind '{cage_obj.name}' first")
+
+
+def _mesh_points(mesh_obj):
+    """The mesh's vertex positions (m, 3); refuses a mesh without vertices, or with NaN or infinite ones."""
     if not len(mesh_obj.data.vertices):
         raise CageError(f"'{mesh_obj.name}' has no vertices: there is nothing to bind")
     points = vertex_positions(mesh_obj.data)
@@ -327,6 +365,13 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
     if len(bad):  # named here: lbc_core's message counts points, not which of the selected meshes holds them
         raise CageError(f"'{mesh_obj.name}' has {len(bad)} {'vertex' if len(bad) == 1 else 'vertices'} with NaN or "
                         f"infinite coordinates ({some_indices(bad)}): fix or delete them")
+    return points
+
+
+def _cage_geometry(mesh_obj, cage_obj, depsgraph, points, mode):
+    """The evaluated cage in the mesh's space: (cage points, outward faces, its flat outline or None, its topology
+    fingerprint, the world-space geometry of the solve); refuses a cage the bind would see otherwise than the
+    deformer, one without faces, and one not flat where ``mode`` is "2D"."""
     cage_eval, mesh_eval = cage_obj.evaluated_get(depsgraph), mesh_obj.evaluated_get(depsgraph)
     changes = _evaluation_changes(cage_obj)
     if not cage_eval.is_evaluated and changes:
@@ -358,26 +403,7 @@ def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsi
             )
     finally:
         cage_eval.to_mesh_clear()
-    return BindRequest(
-        mesh_uid=mesh_obj.session_uid,
-        cage_uid=cage_obj.session_uid,
-        mesh_name=mesh_obj.name,
-        cage_name=cage_obj.name,
-        bound_to_cage=is_bound(mesh_obj) and mesh_obj.lbc.cage == cage_obj,
-        points=points,
-        cage_points=cage_points,
-        cage_faces=cage_faces,
-        flat=flat,
-        options=options,
-        cage_topology=cage_topology,
-        cage_shape=shape_fingerprint(cage_obj.data),
-        mesh_topology=topology_fingerprint(mesh_obj.data),
-        warnings=[warning for warning in (render_warning(mesh_obj, cage_obj), mirror_warning(mesh_obj),
-                                          cage_pose_warning(cage_obj, depsgraph)) if warning],
-        cage_modifiers=_named_modifiers(list(filter(may_change_vertex_count, cage_obj.modifiers))),
-        cage_modifiers_off=_named_modifiers(_modifiers_off(cage_obj)),
-        world=world,
-    )
+    return cage_points, cage_faces, flat, cage_topology, world
 
 
 def changed_since(request, mesh_obj, cage_obj, depsgraph):
