@@ -56,8 +56,22 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     ``cages``: a dict keeping each cage's :func:`geometry.evaluated_cage` for the next bindings checked with the same
     depsgraph, so that the meshes bound to one cage (a body, its clothes, its eyes) evaluate and hash it once.
     """
-    settings = mesh_obj.lbc
     modifier = deformer.find_modifier(mesh_obj)
+    found = (_mesh_fault(mesh_obj, modifier) or _cage_fault(mesh_obj.lbc, depsgraph, cages)
+             or _modifier_fault(mesh_obj, modifier, depsgraph))
+    if found is not None:
+        return found
+    cage = mesh_obj.lbc.cage
+    difference = geometry.render_difference(cage)
+    if difference is not None:
+        return None, (f"Following '{cage.name}' in the viewport, but renders leave the mesh undeformed: the cage's "
+                      f"{difference}. Make them the same and Rebind")
+    return None, f"Following '{cage.name}'"
+
+
+def _mesh_fault(mesh_obj, modifier):
+    """(cause, message) of what went wrong with the bound mesh itself, its modifier or its cached weights, or None."""
+    settings = mesh_obj.lbc
     if modifier is None:
         return "modifier", (
             "The LBC modifier was removed or applied: Unbind to remove the weights it left in the mesh (the mesh keeps "
@@ -79,6 +93,12 @@ def diagnose(mesh_obj, depsgraph, cages=None):
             "Mode): it stays at rest, undeformed (following the cage it would jump). Undo the move, or put the cage "
             "in its rest pose and Rebind (Rebind binds to the cage as it is)"
         )
+    return None
+
+
+def _cage_fault(settings, depsgraph, cages):
+    """(cause, message) of what went wrong with the cage of a binding (its ``settings``, Object.lbc): deleted, no
+    longer a mesh, other vertices or topology, welded vertices posed apart; or None."""
     cage = settings.cage
     if cage is None:
         return "cage deleted", (
@@ -105,6 +125,12 @@ def diagnose(mesh_obj, depsgraph, cages=None):
             f"Cage vertices {apart[0]} and {apart[1]} of '{cage.name}' were one point when bound and are now apart: "
             "the mesh stays at rest. Move them together again, or merge them (Merge by Distance) and Rebind"
         )
+    return None
+
+
+def _modifier_fault(mesh_obj, modifier, depsgraph):
+    """(cause, message) of what holds the modifier back once mesh and cage are sound: a modifier above it that
+    changes the vertex count, an error its node group raised, or the artist switching it off; or None."""
     # What only the modifier sees (Blender 4.3 and newer; the causes above are ruled out): the vertex count reaching
     # it differs. While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone.
     warnings = getattr(modifier, "node_warnings", ()) if deformer.is_enabled(modifier) else ()
@@ -122,14 +148,10 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     if not modifier.show_viewport:
         return "modifier off", (
             f"The modifier '{modifier.name}' is switched off in the viewport (its screen icon): the mesh stays at rest "
-            f"there{'' if modifier.show_render else ' and in renders'}. Switch it on to follow '{cage.name}'"
+            f"there{'' if modifier.show_render else ' and in renders'}. Switch it on to follow "
+            f"'{mesh_obj.lbc.cage.name}'"
         )
-    difference = geometry.render_difference(cage)
-    if difference is not None:
-        return None, (f"Following '{cage.name}' in the viewport, but renders leave the mesh undeformed: the cage's "
-                      f"{difference}. Make them the same and Rebind")
-    return None, f"Following '{cage.name}'"
-
+    return None
 
 def _vertex_count_modifier_above(mesh_obj, modifier, depsgraph):
     """The first modifier shown in the viewport above ``modifier`` that can change the vertex count, or None. A
