@@ -48,27 +48,7 @@ def build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots=N
     """
     group = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
     group.is_modifier = True
-    interface = group.interface
-    interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    interface.new_socket("Cage", in_out="INPUT", socket_type="NodeSocketObject")
-    strength = _single_value(interface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat"))
-    strength.default_value, (strength.min_value, strength.max_value) = 1.0, STRENGTH_RANGE
-    strength.description = "How far the mesh follows the cage: 0 rest, 1 the full deformation"
-    vertex_group = interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
-    vertex_group.description = "Only the vertices of this group follow the cage, by their weight (empty: all)"
-    invert = interface.new_socket("Invert Vertex Group", in_out="INPUT", socket_type="NodeSocketBool")
-    invert.description = "Vertices outside the group follow the cage instead"
-    internal = (
-        ("Cage Vertices", "NodeSocketInt", "Vertex count of the cage at bind time; any other count stops the deformer"),
-        ("Mesh Vertices", "NodeSocketInt", "Vertex count of the mesh at bind time; any other count stops the deformer"),
-        ("Enabled", "NodeSocketBool", "Cleared by the LBC add-on when the cage's topology changed since binding"),
-    )
-    for name, socket_type, description in internal:
-        socket = interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
-        socket.description = description
-        socket.hide_in_modifier = True
-    interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-
+    _add_sockets(group.interface)
     nodes, links = group.nodes, group.links
     group_in = nodes.new("NodeGroupInput")
     group_out = nodes.new("NodeGroupOutput")
@@ -107,6 +87,30 @@ def build_node_group(slots, cage_vertex_count, mesh_vertex_count, shared_slots=N
     group_out.location = (_COLUMN * 11.5, 0)
     links.new(switch.outputs["Output"], _input(group_out, "Geometry"))
     return group
+
+
+def _add_sockets(interface):
+    """The group's inputs (the modifier's: Geometry, Cage, Strength, Vertex Group, Invert Vertex Group; hidden from
+    it: the counts at bind time and Enabled) and its Geometry output."""
+    interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    interface.new_socket("Cage", in_out="INPUT", socket_type="NodeSocketObject")
+    strength = _single_value(interface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat"))
+    strength.default_value, (strength.min_value, strength.max_value) = 1.0, STRENGTH_RANGE
+    strength.description = "How far the mesh follows the cage: 0 rest, 1 the full deformation"
+    vertex_group = interface.new_socket("Vertex Group", in_out="INPUT", socket_type="NodeSocketString")
+    vertex_group.description = "Only the vertices of this group follow the cage, by their weight (empty: all)"
+    invert = interface.new_socket("Invert Vertex Group", in_out="INPUT", socket_type="NodeSocketBool")
+    invert.description = "Vertices outside the group follow the cage instead"
+    internal = (
+        ("Cage Vertices", "NodeSocketInt", "Vertex count of the cage at bind time; any other count stops the deformer"),
+        ("Mesh Vertices", "NodeSocketInt", "Vertex count of the mesh at bind time; any other count stops the deformer"),
+        ("Enabled", "NodeSocketBool", "Cleared by the LBC add-on when the cage's topology changed since binding"),
+    )
+    for name, socket_type, description in internal:
+        socket = interface.new_socket(name, in_out="INPUT", socket_type=socket_type)
+        socket.description = description
+        socket.hide_in_modifier = True
+    interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
 
 
 def shared_slot_count(weight):
