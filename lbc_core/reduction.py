@@ -29,7 +29,9 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     located : (m, N) scipy.sparse.csr_matrix, or any object with ``shape`` whose row slices are one
         Interpolation from the domain's N vertices to the points (barycentric, or
         :class:`lbc_core.smoothing.SmoothInterpolation`, whose ``linear`` barycentric rows are the fallback of a
-        point its fit leaves with no non-negative weights that meet the constraints).
+        point its fit leaves with no non-negative weights that meet the constraints, and whose ``outside`` rows, if
+        any, extrapolate to points outside the cage: those are reduced without the sign constraint, which no
+        weights reproducing such a point can meet).
     domain_weights : (N, n) float array
         Coordinates at the domain's vertices.
     controls : (n, d) float array
@@ -52,11 +54,23 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     # entries (the solver's faint tails) before the product, keeping what a support may need to grow into.
     sparse_domain = sp.csr_matrix(np.where(domain_weights >= threshold / 10, domain_weights, 0.0))
     linear = getattr(located, "linear", located)
+    outside = getattr(located, "outside", None)
     progress = Progress.of(progress, cancel)
 
     def reduce_chunk(rows):
         block = located[rows]  # once: a smooth interpolation computes its rows on demand
         positions = block @ domain_vertices
+        extrapolated = np.zeros(block.shape[0], dtype=bool) if outside is None else outside[rows]
+        inner = np.flatnonzero(~extrapolated)
+        reduced = _reduce_inside(block[inner], linear[rows][inner], positions[inner])
+        if len(inner) == block.shape[0]:
+            return reduced
+        outer = np.flatnonzero(extrapolated)
+        signed = _reduce_signed(block[outer] @ sp.csr_matrix(domain_weights), controls, positions[outer], threshold)
+        return scatter_rows(scatter_rows(sp.csr_matrix((block.shape[0], controls.shape[0])), inner, reduced), outer,
+                            signed)
+
+    def _reduce_inside(block, fallback, positions):
         reduced, met = _reduce_rows(block @ sparse_domain, controls, positions, threshold, tolerance, progress.check)
         if met.all():
             return reduced
@@ -64,14 +78,43 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         # non-negative weights on its support meet the constraints; the barycentric row, a convex combination of the
         # vertices' coordinates, always does.
         failed = np.flatnonzero(~met)
-        fallback = linear[rows][failed]
-        again, _ = _reduce_rows(fallback @ sp.csr_matrix(domain_weights), controls, positions[failed], threshold,
-                                tolerance, progress.check)
+        again, _ = _reduce_rows(fallback[failed] @ sp.csr_matrix(domain_weights), controls, positions[failed],
+                                threshold, tolerance, progress.check)
         kept = sp.diags(met.astype(float)) @ reduced
         kept.eliminate_zeros()
         return scatter_rows(kept, failed, again)
 
     return _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
+
+
+def _reduce_signed(full, controls, positions, threshold):
+    """Rows of points outside the cage, whose weights extrapolate (some negative): weights of magnitude below
+    ``threshold`` dropped, then the least-norm change on the rest that makes them sum to 1 and reproduce the point
+    (where those left span too few directions, the row is kept whole). Returns the (m, n) CSR rows."""
+    n, d = controls.shape
+    kept = full.copy()
+    kept.data[np.abs(kept.data) < threshold] = 0.0
+    kept.eliminate_zeros()
+    values, columns = padded_rows(kept)
+    present = np.arange(values.shape[1])[None, :] < np.diff(kept.indptr)[:, None]
+    centre = positions[:, None, :]
+    # Constraints A w = b with A = [1; c - x] per row (about the point, for conditioning).
+    matrix = np.concatenate([present[:, None, :].astype(float),
+                             np.swapaxes((controls[columns] - centre) * present[:, :, None], 1, 2)], axis=1)
+    residual = -(matrix @ values[:, :, None])[:, :, 0]
+    residual[:, 0] += 1.0
+    gram = matrix @ np.swapaxes(matrix, 1, 2)
+    spectrum = np.linalg.eigvalsh(gram)
+    usable = spectrum[:, 0] > 1e-12 * spectrum[:, -1]
+    solved = np.linalg.solve(np.where(usable[:, None, None], gram, np.eye(d + 1)), residual[:, :, None])
+    corrected = values + (np.swapaxes(matrix, 1, 2) @ solved)[:, :, 0] * present
+    reduced = csr_from_padded(np.where(present, corrected, 0.0), columns, n)
+    if usable.all():
+        return reduced
+    whole = np.flatnonzero(~usable)
+    kept_rows = sp.diags(usable.astype(float)) @ reduced
+    kept_rows.eliminate_zeros()
+    return scatter_rows(kept_rows, whole, sp.csr_matrix(full)[whole])
 
 
 def _by_chunks(m, n, reduce_chunk, progress):

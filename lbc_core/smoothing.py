@@ -38,9 +38,13 @@ class SmoothInterpolation:
     """The (m, N) interpolation matrix from a domain's vertices to points, rows computed on demand.
 
     Row i is (1 - β_i) times the point's P1 barycentric row plus β_i times its moving least-squares row, where β
-    rises smoothly from 0 on the cage to 1 at ``fade`` from it. Every row sums to 1 and reproduces the point (or,
-    for a point outside the cage, the domain point it is bound to). Used like a CSR matrix by
-    :func:`lbc_core.reduction.interpolate_and_reduce`: ``shape`` and row slices.
+    rises smoothly from 0 on the cage to 1 at ``fade`` from it. Every row sums to 1 and reproduces the point. A point
+    outside the cage, bound to its closest domain point q, reproduces q, unless ``points`` and ``outside`` are given:
+    then its row is q's P1 row plus the offset p - q times the gradient of the fit at q (:func:`fit_gradients`), so it
+    reproduces p itself, and the part outside turns with the cage around it instead of only following q (a tip
+    poking out of a curled tentacle's cage stays a tip; bench/RESULTS.md). Such a row may hold negative weights: no
+    non-negative weights reproduce a point outside the hull of their control points. Used like a CSR matrix by
+    :func:`lbc_core.reduction.interpolate_and_reduce`: ``shape``, row slices, ``linear`` and ``outside``.
 
     Parameters
     ----------
@@ -54,12 +58,22 @@ class SmoothInterpolation:
         The fit's radius and the fade's width, in median cell edge lengths.
     progress : Progress, optional
         Checked for cancellation before each chunk of rows (:class:`~lbc_core.errors.Cancelled`).
+    points : (m, d) float array, optional
+        The points themselves (``located`` holds where the outside ones are bound).
+    outside : (m,) bool array, optional
+        The points outside the cage (:func:`~lbc_core.interpolation.interpolation_matrix`'s flags), whose rows
+        extrapolate to the point; with ``points``.
     """
 
-    def __init__(self, vertices, cells, located, radius_edges=RADIUS_EDGES, fade_edges=FADE_EDGES, progress=None):
+    def __init__(self, vertices, cells, located, radius_edges=RADIUS_EDGES, fade_edges=FADE_EDGES, progress=None,
+                 points=None, outside=None):
         self.vertices = np.asarray(vertices, dtype=float)
         self.located = sp.csr_matrix(located)
         self.shape = self.located.shape
+        if (points is None) != (outside is None):
+            raise ValueError("give both the points and their outside flags, or neither")
+        self.outside = None if outside is None else np.asarray(outside, dtype=bool)
+        self.points = None if points is None else np.asarray(points, dtype=float)
         self.progress = Progress.of(progress)
         edge = median_edge(self.vertices, cells)
         self.radius = radius_edges * edge
@@ -82,21 +96,37 @@ class SmoothInterpolation:
     def __getitem__(self, rows):
         """Rows ``rows`` (a slice) of the matrix, as CSR."""
         linear = self.located[rows]
+        first = rows.indices(self.shape[0])[0]
         blocks = []
         for start in range(0, linear.shape[0], _CHUNK):
             self.progress.check()
-            blocks.append(self._rows(linear[start:start + _CHUNK]))
+            blocks.append(self._rows(linear[start:start + _CHUNK], first + start))
         return sp.vstack(blocks, format="csr") if blocks else linear
 
-    def _rows(self, linear):
+    def _rows(self, linear, first):
         points = linear @ self.vertices
         blend = fade_in(self.distance_to_cage(linear, points) / self.fade)
         fitted, fits = moving_least_squares(self.vertices, self.tree, points, self.radius)
         blend = np.where(fits, blend, 0.0)
-        linear = linear.copy()
-        linear.data *= np.repeat(1.0 - blend, np.diff(linear.indptr))
+        rows = linear.copy()
+        rows.data *= np.repeat(1.0 - blend, np.diff(rows.indptr))
         fitted.data *= np.repeat(blend, np.diff(fitted.indptr))
-        return (linear + fitted).tocsr()
+        rows = (rows + fitted).tocsr()
+        if self.outside is None:
+            return rows
+        outside = np.flatnonzero(self.outside[first:first + linear.shape[0]])
+        if not len(outside):
+            return rows
+        # Outside: the bound point's row (P1 there, on the cage) plus the offset times the fit's gradient there.
+        offset = self.points[first + outside] - points[outside]
+        extrapolated = linear[outside]
+        for axis, gradient in enumerate(fit_gradients(self.vertices, self.tree, points[outside], self.radius)):
+            extrapolated = extrapolated + sp.diags(offset[:, axis]) @ gradient
+        inside = sp.diags(np.isin(np.arange(len(points)), outside, invert=True).astype(float)) @ rows
+        inside.eliminate_zeros()
+        placement = sp.csr_matrix((np.ones(len(outside)), (outside, np.arange(len(outside)))),
+                                  shape=(len(points), len(outside)))
+        return (inside + placement @ extrapolated).tocsr()
 
     def distance_to_cage(self, linear, points):
         """Each point's distance to the cage where it is below the fade, else a lower bound of it at least the fade.
@@ -144,6 +174,25 @@ def moving_least_squares(vertices, tree, points, radius):
     fits : (k,) bool array
         Points whose neighbourhood holds enough vertices, not all in a plane, for a well-conditioned fit.
     """
+    (rows,), fits = _fit_rows(vertices, tree, points, radius, [0])
+    return rows, fits
+
+
+def fit_gradients(vertices, tree, points, radius):
+    """The gradient of the moving least-squares linear fit at each point, as rows: ``d`` (k, N) CSR matrices, the
+    k-th giving, applied to values at the vertices, the fit's slope along axis k (per length unit). Each sums to 0,
+    and applied to the vertices' coordinates gives the unit vector of its axis (rows of points with no usable fit:
+    empty). Same parameters as :func:`moving_least_squares`."""
+    d = points.shape[1]
+    rows, _ = _fit_rows(vertices, tree, points, radius, list(range(1, d + 1)))
+    for gradient in rows:
+        gradient.data /= radius
+    return rows
+
+
+def _fit_rows(vertices, tree, points, radius, terms):
+    """Rows giving the fit's coefficients ``terms`` (0: the value at the point; 1 + a: the slope along axis a, per
+    radius) at each point: ([(k, N) CSR per term], fits (k,) bool)."""
     k, d = points.shape
     pairs = cKDTree(points).sparse_distance_matrix(tree, radius, output_type="coo_matrix").tocsr()
     # sparse_distance_matrix leaves out pairs at distance 0: a point on a vertex gets that vertex back.
@@ -166,19 +215,22 @@ def moving_least_squares(vertices, tree, points, radius):
     moments = np.empty((k, d + 1, d + 1))
     moments[:, 0, 0], moments[:, 0, 1:], moments[:, 1:, 0], moments[:, 1:, 1:] = mass, first, first, second
     fits = well_conditioned(moments)
-    # Value at the point of the fit = e₀ᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e₀ (M is symmetric).
+    # Coefficient t of the fit = e_tᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e_t (M is symmetric).
     solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
-                             np.broadcast_to(np.eye(d + 1)[:, :1], (k, d + 1, 1)))[:, :, 0]
+                             np.broadcast_to(np.eye(d + 1)[:, terms], (k, d + 1, len(terms))))
     # Per (point, vertex) pair, coordinate by coordinate: np.repeat over each row's pairs is several times faster
     # than gathering (pairs, d) blocks by row index.
     counts = np.diff(weight.indptr)
-    factor = np.repeat(solved[:, 0] * fits, counts)
-    for axis in range(d):
-        factor += ((local[:, axis][weight.indices] - np.repeat(centre[:, axis], counts))
-                   * np.repeat(solved[:, 1 + axis] * fits, counts))
-    rows = sp.csr_matrix((weight.data * factor, weight.indices, weight.indptr), shape=weight.shape)
-    rows.eliminate_zeros()
-    return rows, fits
+    offsets = [local[:, axis][weight.indices] - np.repeat(centre[:, axis], counts) for axis in range(d)]
+    result = []
+    for term in range(len(terms)):
+        factor = np.repeat(solved[:, 0, term] * fits, counts)
+        for axis in range(d):
+            factor += offsets[axis] * np.repeat(solved[:, 1 + axis, term] * fits, counts)
+        rows = sp.csr_matrix((weight.data * factor, weight.indices, weight.indptr), shape=weight.shape)
+        rows.eliminate_zeros()
+        result.append(rows)
+    return result, fits
 
 
 def well_conditioned(matrices):

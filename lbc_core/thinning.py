@@ -52,7 +52,7 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     Parameters
     ----------
     weights : (m, n) scipy.sparse matrix
-        Non-negative weights that sum to 1 and reproduce ``positions``.
+        Weights that sum to 1 and reproduce ``positions``, non-negative (rows with a negative weight are kept).
     controls : (n, d) float array
         Control points.
     positions : (m, d) float array
@@ -69,7 +69,8 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     -------
     (m, n) scipy.sparse.csr_matrix
         Non-negative rows that sum to 1 and reproduce ``positions`` (to 1e-9 of the controls' extent), each a
-        subset of its input row's support. Where a point's kept weights cannot reproduce it (it lies on the hull of
+        subset of its input row's support; an input row with a negative weight (a point outside the cage, whose
+        weights extrapolate) is kept as it is. Where a point's kept weights cannot reproduce it (it lies on the hull of
         their control points), its threshold is relaxed (floor / 4, K raised by 1, 2, 4, ..., then the least cap
         between the last that failed and the one that did) until they can, and after :data:`RELAXATIONS` times it
         keeps its input row. A cap too low for a point thus ends at the least that reproduces it.
@@ -170,7 +171,9 @@ def _thin_rows(weights, controls, positions, floor, max_influences):
     # the least cap between the last that failed and the one that did.
     raises = np.ones(len(values), dtype=int)
     failed = np.zeros(len(values), dtype=int)  # the largest cap a row failed at
-    pending = np.arange(len(values))
+    # A row with negative weights reproduces a point outside the hull of its control points (a point outside the
+    # cage, extrapolated: lbc_core.smoothing): no non-negative weights can, so it keeps its input.
+    pending = np.flatnonzero(~(values < 0).any(axis=1))
     for _ in range(RELAXATIONS + 1):
         if not len(pending):
             break

@@ -227,3 +227,18 @@ def test_thinning_the_changed_rows_keeps_the_rows_an_extent_change_leaves_within
     off[15, 4] -= 1e-8
     _, count = thin_changed_rows(off.tocsr(), before, before, controls, outward)
     assert count == 11
+
+def test_rows_with_negative_weights_are_kept_as_they_are():
+    """Rows of points outside the cage extrapolate (lbc_core.smoothing), continuously from point to point, with some
+    negative weights: they pass through whole. Thinned, a row whose point lies inside the hull of its positive
+    weights' control points would turn non-negative while its neighbours outside that hull could not, a jump."""
+    controls = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [0.5, 0.5]])
+    inside = np.array([0.2, 0.2, 0.2, 0.2, 0.2])
+    beyond = np.array([-0.1, 0.6, -0.1, 0.6, 0.0])  # reproduces (1.2, 0.5): outside every hull
+    within = np.array([0.3, 0.3, 0.3, 0.3, -0.2])  # reproduces (0.5, 0.5): inside its positive weights' hull
+    weights = sp.csr_matrix(np.vstack([inside, beyond, within, inside]))
+    positions = weights @ controls
+    thinned = thin_weights(weights, controls, positions, floor=0.21)
+    assert np.array_equal(thinned[1:3].toarray(), np.vstack([beyond, within]))
+    expected = thin_weights(sp.csr_matrix(inside[None]), controls, positions[:1], floor=0.21)
+    assert abs(thinned[0] - expected).max() < 1e-15 and abs(thinned[3] - expected).max() < 1e-15
