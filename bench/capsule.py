@@ -1,4 +1,5 @@
-"""The capsule scene of issue 12: a smooth capsule in an 8-sided, 9-ring cylinder cage, bent 90°, and its kinks.
+"""The capsule scene of issue 12: a smooth capsule in an 8-sided, 9-ring cylinder cage, bent 90° (or twisted,
+stretched: :data:`POSES`), and its kinks.
 
 A deformed smooth surface creases where the coordinates are not smooth; the "kink" of an edge of the mesh is the
 change of the dihedral angle between its two faces against the rest shape (degrees). The bend itself changes the
@@ -96,6 +97,43 @@ def bend(vertices, degrees=90.0):
                      -CAGE_HALF_HEIGHT + lever * np.sin(theta)], axis=1)
 
 
+def twist(vertices, degrees=90.0):
+    """Twist about the z axis: z = -CAGE_HALF_HEIGHT stays, z = +CAGE_HALF_HEIGHT turns by ``degrees``, the angle
+    linear in z.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+    degrees : float
+
+    Returns
+    -------
+    (n, 3) float array
+    """
+    angle = np.radians(degrees) * (vertices[:, 2] + CAGE_HALF_HEIGHT) / (2 * CAGE_HALF_HEIGHT)
+    cosine, sine = np.cos(angle), np.sin(angle)
+    return np.stack([cosine * vertices[:, 0] - sine * vertices[:, 1], sine * vertices[:, 0] + cosine * vertices[:, 1],
+                     vertices[:, 2]], axis=1)
+
+
+def stretch(vertices, factor=1.5):
+    """Stretch along z by ``factor`` from z = -CAGE_HALF_HEIGHT, thinning towards the top (x and y scaled by
+    1 / sqrt(factor) there, linearly in z): a taper, smooth but not affine."""
+    share = (vertices[:, 2] + CAGE_HALF_HEIGHT) / (2 * CAGE_HALF_HEIGHT)
+    across = 1.0 + (1.0 / np.sqrt(factor) - 1.0) * share
+    return np.stack([vertices[:, 0] * across, vertices[:, 1] * across,
+                     -CAGE_HALF_HEIGHT + (vertices[:, 2] + CAGE_HALF_HEIGHT) * factor], axis=1)
+
+
+# The capsule's poses in the benchmarks: name → function of the cage's vertices.
+POSES = {
+    "bend 90°": bend,
+    "twist 90°": twist,
+    "bend 45° + twist 45°": lambda vertices: bend(twist(vertices, 45.0), 45.0),
+    "stretch 1.5, tapered": stretch,
+}
+
+
 def kinks(rest, posed, faces):
     """Change of the dihedral angle at every interior edge of a triangle mesh, in degrees.
 
@@ -111,12 +149,7 @@ def kinks(rest, posed, faces):
     (E,) float array, one per edge shared by two faces
     """
     faces = np.asarray(faces)
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    owner = np.tile(np.arange(len(faces)), 3)
-    order = np.lexsort((edges[:, 1], edges[:, 0]))
-    edges, owner = edges[order], owner[order]
-    pair = np.flatnonzero(np.all(edges[1:] == edges[:-1], axis=1))
-    first, second = owner[pair], owner[pair + 1]
+    first, second = _edge_neighbours(faces)
 
     def angles(vertices):
         corners = vertices[faces]
@@ -129,10 +162,50 @@ def kinks(rest, posed, faces):
 
 
 def kink_figures(rest, posed, faces):
-    """mean, p99, max (degrees) and % of edges creased by more than 2° of :func:`kinks`, as a dict."""
+    """mean, p99, max (degrees) and % of edges creased by more than 2° of :func:`kinks`, as a dict; also the number
+    of edges whose angle changed by more than 30° ("folded") and of triangles turned over (:func:`flipped`)."""
     values = kinks(rest, posed, faces)
     return {"mean": float(values.mean()), "p99": float(np.percentile(values, 99)), "max": float(values.max()),
-            "creased": float(100 * np.mean(values > 2.0))}
+            "creased": float(100 * np.mean(values > 2.0)), "folded": int(np.count_nonzero(values > 30.0)),
+            "flipped": flipped(rest, posed, faces)}
+
+
+def flipped(rest, posed, faces):
+    """Triangles turned over: facing the same way as their edge neighbours at rest (positive dot product of the unit
+    normal with the sum of theirs), against them when posed.
+
+    Parameters
+    ----------
+    rest, posed : (m, 3) float array
+    faces : (F, 3) int array, consistently oriented
+
+    Returns
+    -------
+    int
+    """
+    faces = np.asarray(faces)
+    first, second = _edge_neighbours(faces)
+
+    def agreement(vertices):
+        corners = vertices[faces]
+        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+        around = np.zeros_like(normals)
+        np.add.at(around, first, normals[second])
+        np.add.at(around, second, normals[first])
+        return np.einsum("ij,ij->i", normals, around)
+
+    return int(np.count_nonzero((agreement(rest) > 0) & (agreement(posed) <= 0)))
+
+
+def _edge_neighbours(faces):
+    """The two faces of every edge shared by two faces: (first, second) int arrays."""
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(len(faces)), 3)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    edges, owner = edges[order], owner[order]
+    pair = np.flatnonzero(np.all(edges[1:] == edges[:-1], axis=1))
+    return owner[pair], owner[pair + 1]
 
 
 def mesh_deform(mesh_vertices, mesh_faces, cage_vertices, cage_faces, posed_cage, precision=5):
