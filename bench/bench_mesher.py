@@ -18,7 +18,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
-import cage_corpus  # noqa: E402
+from helpers import cage_corpus  # noqa: E402
 import lbc_core  # noqa: E402
 from lbc_core import meshing  # noqa: E402
 from lbc_core.geometry import radius_ratios  # noqa: E402

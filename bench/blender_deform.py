@@ -42,7 +42,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 import bpy  # noqa: E402
 
-from blender_scenes import (  # noqa: E402
+from helpers.blender_scenes import (  # noqa: E402
     evaluated_positions,
     gargoyle_scene,
     positions,

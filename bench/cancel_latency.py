@@ -2,7 +2,7 @@
 
 A whole bind of the gargoyle in one of its cages (by default L08, 168 control points) runs with a ``cancel`` that
 only records when it is polled; the longest time between two polls in a stage is the latency of a cancel turning true
-at the worst moment there (the stages and the instrument are tests/test_binding.py's). The sparse Cholesky
+at the worst moment there (the stages and the instrument are tests/helpers/stages.py's). The sparse Cholesky
 factorisations, which hold the GIL and cannot be interrupted, are timed on their own. ADMM iterations are capped: the
 waits repeat from one iteration to the next.
 
@@ -25,7 +25,7 @@ import lbc_core.geodesics as geodesics  # noqa: E402
 import lbc_core.working_sets as working_sets  # noqa: E402
 from lbc_core.factor import Factor  # noqa: E402
 from lbc_core.io import read_cage, read_mesh  # noqa: E402
-from test_binding import STAGE_MESSAGES, longest_waits  # noqa: E402
+from helpers.stages import STAGE_MESSAGES, longest_waits  # noqa: E402
 
 GARGOYLE = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
 

@@ -3,9 +3,9 @@
     .venv/bin/python bench/penalty_balance.py [CAGE ...] [--cells N]
 
 CAGE: a gargoyle cage (L08 ... L16), ``uv:S:R`` (a UV sphere of S segments and R rings, as Blender makes it: 24:13
-has 290 vertices), ``capsule``, or ``corpus:NAME:VARIANT`` (tests/cage_corpus.py, e.g. corpus:thin-plate:as-made,
-corpus:torus:squashed-1e-3); ``corpus:as-made`` or ``corpus:squashed-1e-3`` stands for every corpus cage in that
-variant. Each cage is meshed once, as the pipeline does; then solved with balancing off (``BALANCE_UNTIL`` 0) and on.
+has 290 vertices), ``capsule``, or ``corpus:NAME:VARIANT`` (tests/helpers/cage_corpus.py, e.g.
+corpus:thin-plate:as-made, corpus:torus:squashed-1e-3); ``corpus:as-made`` or ``corpus:squashed-1e-3`` stands for every
+corpus cage in that variant. Each cage is meshed once, as the pipeline does; then solved with balancing off (``BALANCE_UNTIL`` 0) and on.
 Prints iterations, objective, seconds and the penalty changes of each. ``--lows 0.05,0.1`` solves with balancing
 on at each of these floors of the residuals' ratio (``BALANCE_LOW``) instead.
 """
@@ -53,7 +53,7 @@ def uv_sphere(segments, rings):
 
 def load(name):
     """(vertices, faces) of a cage named as in the module's docstring."""
-    import cage_corpus
+    from helpers import cage_corpus
 
     if name.startswith("uv:"):
         _, segments, rings = name.split(":")
@@ -70,7 +70,7 @@ def load(name):
 
 def expand(names):
     """``corpus:VARIANT`` becomes every corpus cage in that variant."""
-    import cage_corpus
+    from helpers import cage_corpus
 
     for name in names:
         parts = name.split(":")

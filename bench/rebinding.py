@@ -11,8 +11,8 @@ cold solve's: the same problem, so any difference is the solver's tolerance), th
 points, and the largest difference of the points deformed by one pose, over the cage's diagonal. "mesh noise" is the
 same comparison between two cold binds at 8000 and 9000 cells: what remeshing alone changes.
 
---quads  the corpus's quad cages as Blender makes them (tests/cage_corpus.py: a subdivided cube, limbs, a torus, an
-         8-sided prism of 5 rings, Blender's 8- and 16-sided cylinders) and Blender's Cylinder with two loop cuts,
+--quads  the corpus's quad cages as Blender makes them (tests/helpers/cage_corpus.py: a subdivided cube, limbs, a
+         torus, an 8-sided prism of 5 rings, Blender's 8- and 16-sided cylinders) and Blender's Cylinder with two loop cuts,
          3000 points spread inside each, the same table
          (edits 1 × 1 %, 1 × 2 %, 3 × 1 %, 1 × 5 %): any edit bends the quads at the moved vertices.
 --rings  the rings of vertices solved again around the moved coordinates' supports (2, 1 and 0) on the gargoyle
@@ -342,7 +342,7 @@ def main(argv=None):
     arguments = parser.parse_args(argv)
     if arguments.quads:
         sys.path.insert(0, str(ROOT / "tests"))
-        import cage_corpus
+        from helpers import cage_corpus
 
         cages = [(f"corpus {name}", *cage_corpus.load(name)) for name in QUAD_CAGES]
         for name, cage, faces in cages + [("Blender's Cylinder, 2 loop cuts", *loop_cut_cylinder())]:

@@ -353,7 +353,7 @@ def child_mesh_deform(quick):
     import bpy
 
     import demo_blender as demo
-    from blender_scenes import register_addon
+    from helpers.blender_scenes import register_addon
     from lbc_addon import deformer
 
     levels, cells, frames, precision = (0, QUICK_CELLS, 5, 5) if quick else (2, 0, 30, 5)
@@ -399,7 +399,7 @@ def child_per_frame(quick):
     import numpy as np
 
     from bench import blender_deform as bd
-    from blender_scenes import register_addon
+    from helpers.blender_scenes import register_addon
     from lbc_addon import api
 
     scenes, frames, cells = (["suzanne507"], 5, QUICK_CELLS) if quick else (["suzanne", "gargoyle"], 41, 0)

@@ -20,7 +20,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
-import cage_corpus  # noqa: E402
+from helpers import cage_corpus  # noqa: E402
 from lbc_core import solver  # noqa: E402
 from lbc_core.boundary import boundary_weights  # noqa: E402
 from lbc_core.cage import make_cage  # noqa: E402

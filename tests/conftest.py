@@ -9,7 +9,7 @@ import pytest
 
 import lbc_core
 from lbc_core.io import read_cage, read_mesh
-from random_cages import GRID, STAR, inside_polygon
+from helpers.random_cages import GRID, STAR, inside_polygon
 
 DATA = Path(__file__).parent / "data"
 
@@ -43,7 +43,7 @@ class _ExitPastBlenderTeardown:
 def bound_gargoyle_file(tmp_path_factory):
     """A .blend with the gargoyle bound to its L10 cage (67 vertices) through the operator; returns its path."""
     import bpy
-    from blender_scenes import CELLS, bind, gargoyle_scene
+    from helpers.blender_scenes import CELLS, bind, gargoyle_scene
 
     mesh, cage = gargoyle_scene("L10")
     assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
@@ -56,7 +56,7 @@ def bound_gargoyle_file(tmp_path_factory):
 def bound_gargoyle(bound_gargoyle_file):
     """The bound gargoyle scene, freshly opened; returns (mesh, cage)."""
     import bpy
-    from blender_scenes import register_addon
+    from helpers.blender_scenes import register_addon
 
     register_addon()
     bpy.ops.wm.open_mainfile(filepath=str(bound_gargoyle_file))

@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 import pytest
 
-from blender_scenes import bind, evaluated_positions, positions, reset
+from helpers.blender_scenes import bind, evaluated_positions, positions, reset
 
 pytestmark = pytest.mark.blender
 

@@ -13,7 +13,7 @@ from mathutils import Matrix
 
 from lbc_addon import api, deformer, diagnosis, geometry, handlers, node_group, storage
 from lbc_addon.properties import is_bound
-from blender_scenes import (
+from helpers.blender_scenes import (
     CELLS,
     delete_with_x,
     diagonal,
@@ -571,7 +571,7 @@ def test_with_an_event_loop_the_deleted_cage_is_removed_by_a_timer_outside_the_h
 def test_welded_cage_vertices_posed_apart_stop_the_deformer_until_they_meet_again():
     """Two cage vertices at one point are one control point; the deformer reads the first, so moving the other alone
     would be ignored: the add-on stops the deformer and says so, as ``lbc deform`` refuses such a pose."""
-    from blender_scenes import CAGE_MATRIX, bind, mesh_object, sphere_in_box_scene
+    from helpers.blender_scenes import CAGE_MATRIX, bind, mesh_object, sphere_in_box_scene
 
     mesh, box = sphere_in_box_scene()
     corners = [list(v.co) for v in box.data.vertices] + [list(box.data.vertices[7].co)]

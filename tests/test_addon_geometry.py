@@ -8,7 +8,7 @@ import pytest
 
 from lbc_addon import geometry
 from lbc_core import CageError
-from blender_scenes import mesh_object, reset, sphere_in_box_scene
+from helpers.blender_scenes import mesh_object, reset, sphere_in_box_scene
 
 pytestmark = pytest.mark.blender
 

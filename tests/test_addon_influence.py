@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from lbc_addon import influence, storage
-from blender_scenes import (
+from helpers.blender_scenes import (
     mesh_state,
 )
 

@@ -1,7 +1,7 @@
 """The extension as users get it: the manifest lists the pinned wheels and the tested Blender range; this machine's
 zips build and validate with this Blender's builder; the other Python's zip is refused, and the one for this Python
 installs into a fresh user directory through Blender's installer, in a Python holding only what Blender ships, and
-works there end to end (see extension_session.py); the session, a background script, then exits."""
+works there end to end (see helpers/extension_session.py); the session, a background script, then exits."""
 
 import importlib.metadata
 import json
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from blender_scenes import ROOT
+from helpers.blender_scenes import ROOT
 
 pytestmark = pytest.mark.blender
 
@@ -73,7 +73,7 @@ def session(tmp_path_factory):
     environment = {"BLENDER_USER_RESOURCES": str(directory / "user"), "PATH": "/usr/bin:/bin",
                    "PYTHONPATH": str(_blender_like_site(directory / "site-packages"))}
     # -S: no site-packages but the Blender-like one, no .pth files (the project's editable install).
-    command = [sys.executable, "-S", str(ROOT / "tests" / "extension_session.py"), str(archive), str(other),
+    command = [sys.executable, "-S", str(ROOT / "tests" / "helpers" / "extension_session.py"), str(archive), str(other),
                str(result), str(directory / "session.blend")]
     log = (directory / "session.log").open("w")
     process = subprocess.Popen(command, cwd=directory, env=environment, stdout=log, stderr=subprocess.STDOUT)

@@ -9,7 +9,7 @@ from mathutils import Matrix
 
 from lbc_addon import storage
 from lbc_addon.properties import is_bound
-from blender_scenes import (
+from helpers.blender_scenes import (
     bind,
     delete_with_x,
     diagonal,

@@ -5,7 +5,7 @@ import pytest
 
 from lbc_addon.properties import WEIGHTING_ITEMS, is_bound
 from lbc_core.options import WEIGHTINGS
-from blender_scenes import bind, sphere_in_box_scene
+from helpers.blender_scenes import bind, sphere_in_box_scene
 
 pytestmark = pytest.mark.blender
 

@@ -5,7 +5,7 @@ import pytest
 import scipy.sparse as sp
 
 from lbc_addon import storage
-from blender_scenes import mesh_state, sphere_in_box_scene
+from helpers.blender_scenes import mesh_state, sphere_in_box_scene
 
 pytestmark = pytest.mark.blender
 

@@ -10,7 +10,7 @@ import pytest
 from mathutils import Matrix
 
 from lbc_addon import api, ui
-from blender_scenes import (
+from helpers.blender_scenes import (
     delete_with_x,
     register_addon,
     sphere_in_box_scene,

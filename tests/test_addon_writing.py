@@ -10,7 +10,7 @@ import pytest
 from lbc_addon import deformer, geometry, influence, jobs, node_group, storage, writing
 from lbc_addon.properties import is_bound
 from lbc_core import CageError, Cancelled
-from blender_scenes import evaluated_positions, mesh_state, sphere_in_box_scene
+from helpers.blender_scenes import evaluated_positions, mesh_state, sphere_in_box_scene
 
 pytestmark = pytest.mark.blender
 
@@ -223,7 +223,7 @@ def _solved(mesh, cage, **options):
 
 def test_save_shape_key_holds_the_deformation_at_value_0_and_keeps_the_binding():
     """A new user's finding: Blender offers Apply as Shape Key for Mesh Deform, not for a Geometry Nodes modifier."""
-    from blender_scenes import positions
+    from helpers.blender_scenes import positions
 
     mesh, cage = sphere_in_box_scene()
     writing.apply(_request(mesh, cage), jobs.solve(_request(mesh, cage)))

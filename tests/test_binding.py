@@ -15,7 +15,7 @@ import lbc_core
 from lbc_core.binding import FILE_ARRAYS, OPTIONAL_FILE_ARRAYS
 from lbc_core.errors import CageError
 from lbc_core.io import read_mesh
-from random_cages import STAR
+from helpers.random_cages import STAR
 
 pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
 

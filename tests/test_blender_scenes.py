@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from blender_scenes import GARGOYLE, MESH_MATRIX, gargoyle_scene, mesh_state, positions, sphere_in_box_scene
+from helpers.blender_scenes import GARGOYLE, MESH_MATRIX, gargoyle_scene, mesh_state, positions, sphere_in_box_scene
 from lbc_core.io import read_mesh
 
 pytestmark = pytest.mark.blender

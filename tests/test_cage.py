@@ -17,7 +17,7 @@ import lbc_core.geometry as geometry
 from lbc_core.cage import MAX_CONTROL_POINTS, Cage, make_cage
 from lbc_core.errors import CageError, CageVertexError
 from lbc_core.geometry import intersecting_triangles, overlapping_boxes
-from random_cages import draw_dented_sphere, lengths, sphere_directions, star_polygon, subdivided_cube
+from helpers.random_cages import draw_dented_sphere, lengths, sphere_directions, star_polygon, subdivided_cube
 
 DATA = Path(__file__).parent / "data"
 
@@ -747,7 +747,7 @@ def _meet_beyond_shared(first, second, shared):
 def test_an_ngon_cap_left_out_of_plane_by_float32_rounding_is_not_a_self_intersection():
     """Blender's Cylinder after G Z .3 then G Z -.3 on four cap vertices: float32 leaves them 6e-8 below the cap's
     plane, and the 32-gon's triangles were reported as crossing each other (found trying the add-on)."""
-    import cage_corpus
+    from helpers import cage_corpus
 
     vertices, faces = cage_corpus.load("cylinder-32-ngon")
     vertices = np.array(vertices, dtype=np.float32)
@@ -772,7 +772,7 @@ def test_n_gons_are_poked_at_their_mean_whose_boundary_values_are_its_vertices_m
     whole cap (its weights summed to 466 over the points inside, the other rim vertices' to 18-166). Now each cap is
     split from a centre, the mean of its vertices, which is no control point: its boundary values are 1/32 for each,
     so values and positions on the cap are one linear map of the control points (partition of unity, reproduction)."""
-    import cage_corpus
+    from helpers import cage_corpus
 
     cage = make_cage(*cage_corpus.load("cylinder-32-ngon"))
     assert cage.n_control_points == 64 and not cage.warnings

@@ -21,7 +21,7 @@ from lbc_core.errors import CageError, Cancelled
 from lbc_core.fem import boundary_facets
 from lbc_core.io import read_cage
 
-import random_cages
+from helpers import random_cages
 
 DATA = Path(__file__).parent / "data"
 CAGES_2D = sorted(DATA.glob("*-control-edgeset.obj"))

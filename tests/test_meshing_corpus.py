@@ -1,6 +1,6 @@
-"""The cage corpus (tests/cage_corpus.py): Blender's primitives as bpy makes them and artist-style cages, and their
-variants (scaled, moved far away, squashed, dented), each meshed with the DomainMesh contract checked, bound through
-lbc_core.bind, and the meshing loops cancelled from inside.
+"""The cage corpus (tests/helpers/cage_corpus.py): Blender's primitives as bpy makes them and artist-style cages, and
+their variants (scaled, moved far away, squashed, dented), each meshed with the DomainMesh contract checked, bound
+through lbc_core.bind, and the meshing loops cancelled from inside.
 
 Every cage here is valid; none may be refused or hang.
 """
@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-import cage_corpus
+from helpers import cage_corpus
 import lbc_core
 from lbc_core import meshing
 from lbc_core.cage import make_cage

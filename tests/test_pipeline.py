@@ -12,7 +12,9 @@ from hypothesis import strategies as st
 import lbc_core
 from lbc_core.errors import CageError
 from lbc_core.io import read_cage, read_mesh
-from random_cages import GRID, STAR, draw_dented_sphere, inside_polygon, lengths, star_polygon, subdivided_cube
+from helpers.random_cages import (GRID, STAR, draw_dented_sphere, inside_polygon, lengths, star_polygon,
+                                  subdivided_cube)
+from helpers.stages import STAGE_MESSAGES, polls_by_stage
 
 pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
 
@@ -240,19 +242,6 @@ def test_a_scaled_cage_gives_the_same_weights(dim):
     assert large.objective == small.objective * 2.0 ** (20 * (dim - 1))
 
 
-# Each stage of a bind, told by the first progress message it sends. A cancel must stop the stage it comes in (how
-# long that takes is measured by bench/cancel_latency.py).
-STAGE_MESSAGES = {
-    "meshing": "",  # the first message of a bind is the mesher's
-    "geodesics": "geodesic distances",
-    "factorisation": "finding where each coordinate may reach",
-    "ADMM": "ADMM iteration",
-    "projection": "projecting onto the constraints",
-    "interpolation": "interpolation:",
-    "reduction": "reducing the weights",
-}
-
-
 def messages_after_cancel(cage_vertices, cage_faces, points, stage, **options):
     """The progress messages a bind sends once ``cancel()`` turned true at the stage's first message, before it
     raises :class:`Cancelled`."""
@@ -275,23 +264,6 @@ def later_stages(messages, stage):
     """The stages other than ``stage`` that ``messages`` announce."""
     return {name for message in messages for name, prefix in STAGE_MESSAGES.items()
             if prefix and name != stage and message.startswith(prefix)}
-
-
-def polls_by_stage(cage_vertices, cage_faces, points, **options):
-    """How often each stage of a whole bind polls ``cancel``: a poll is the stage's whose message came last before
-    it. (How long the waits between polls are is measured by bench/cancel_latency.py.)"""
-    polls, stage = {}, ["meshing"]
-
-    def progress(fraction, message):
-        stage[0] = next((name for name, prefix in STAGE_MESSAGES.items() if prefix and message.startswith(prefix)),
-                        stage[0])
-
-    def cancel():
-        polls[stage[0]] = polls.get(stage[0], 0) + 1
-        return False
-
-    lbc_core.bind(cage_vertices, cage_faces, points, progress=progress, cancel=cancel, **options)
-    return polls
 
 
 @pytest.fixture(scope="module")
@@ -385,7 +357,7 @@ def test_a_thin_plate_cage_bent_keeps_its_mesh_inside():
     """A new user's 56-vertex plate cage (a box cut twice, 1/50 as thick as wide) bent up at one end: the flat grid
     inside bulged out of it by 0.17 (the half-thickness is 0.02), its middle weighing 0.65 on the far corners. The
     heat method's distances had collapsed on the thin mesh (test_geodesics), so nothing kept the coordinates local."""
-    import cage_corpus
+    from helpers import cage_corpus
 
     vertices, faces = cage_corpus.load("grid-box")
     vertices = np.array(vertices, dtype=float)

@@ -175,7 +175,7 @@ def test_the_time_left_early_on_is_bounded_by_the_iterations_the_forecast_expect
 def _corpus_problem(name, thickness=None, cells=None):
     """The solve_on_mesh arguments of a corpus cage, flattened along z to ``thickness`` × its width if given, meshed
     at ``cells`` (None: the default) and weighted as the pipeline does (unit frame)."""
-    import cage_corpus
+    from helpers import cage_corpus
     from lbc_core.boundary import boundary_weights
     from lbc_core.cage import make_cage
     from lbc_core.frame import UnitFrame

@@ -13,7 +13,7 @@ from mathutils import Matrix
 import lbc_addon
 from lbc_core.io import read_mesh
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 GARGOYLE = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
 CELLS = 2000  # small domain meshes keep each bind at a few seconds
 

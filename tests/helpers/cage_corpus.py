@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-CORPUS = Path(__file__).parent / "data" / "cage-corpus" / "cage-corpus.npz"
+CORPUS = Path(__file__).resolve().parents[1] / "data" / "cage-corpus" / "cage-corpus.npz"
 VARIANTS = ("as-made", "scaled-1e-6", "scaled-1e6", "moved-1e6", "squashed-1e-3", "dented-1e-8", "dented-1e-5",
             "dented-1e-2")
 
