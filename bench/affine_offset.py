@@ -1,4 +1,4 @@
-"""How closely a binding follows an affine map of its cage, against the cage's distance from the origin (issue 11).
+"""How closely a binding follows an affine map of its cage, against the cage's distance from the origin.
 
 An L polygon (2D, meshed by the bundled Delaunay mesher, as in Blender) and a unit cube (3D), moved to each
 offset, bind 300 inside points; the cage is then mapped by a

@@ -1,4 +1,4 @@
-"""How long a cancel can wait in each stage of a bind, and the longest calls that cannot be interrupted (issue 11).
+"""How long a cancel can wait in each stage of a bind, and the longest calls that cannot be interrupted.
 
 A whole bind of the gargoyle in one of its cages (by default L08, 168 control points) runs with a ``cancel`` that
 only records when it is polled; the longest time between two polls in a stage is the latency of a cancel turning true

@@ -97,7 +97,7 @@ def bench_scene(name):
 
 
 def bench_baseline(tree):
-    """The issue's version's bind of L08 at 8000 cells, in a child process on ``tree``."""
+    """The earlier version's bind of L08 at 8000 cells, in a child process on ``tree``."""
     code = ("import sys, time; sys.path.insert(0, sys.argv[1]); import lbc_core; "
             "from lbc_core.io import read_cage, read_mesh; from pathlib import Path; "
             "g = Path(sys.argv[2]); c, f = read_cage(g / 'cage_L08.obj'); p, _ = read_mesh(g / 'mesh.off'); "
@@ -105,7 +105,7 @@ def bench_baseline(tree):
             "print(f'{time.perf_counter() - t:.2f} s, {b.iterations} iterations, {len(b.domain.cells)} tetrahedra')")
     result = subprocess.run([sys.executable, "-c", code, str(Path(tree).resolve()), str(GARGOYLE)],
                             capture_output=True, text=True, check=True)
-    print(f"item 3's budget, {tree} (L08 at 8000 cells): {result.stdout.strip()}; {load()}", flush=True)
+    print(f"budget of a 32,000-cell bind, {tree} (L08 at 8000 cells): {result.stdout.strip()}; {load()}", flush=True)
 
 
 def load():
@@ -114,7 +114,7 @@ def load():
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--baseline", help="a tree of 89a6c11: its L08 bind at 8000 cells is item 3's budget")
+    parser.add_argument("--baseline", help="a tree of 89a6c11: its L08 bind at 8000 cells is the budget at 32,000")
     parser.add_argument("--scene", action="append", choices=sorted(SCENES), help="default: both")
     args = parser.parse_args()
     if args.baseline:

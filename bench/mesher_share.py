@@ -1,4 +1,4 @@
-"""Meshing share of the whole bind on every corpus cage up to N control points, in every variant (issue 11).
+"""Meshing share of the whole bind on every corpus cage up to N control points, in every variant.
 
     PYTHONPATH=. .venv/bin/python bench/mesher_share.py N [variant,variant,...]
 

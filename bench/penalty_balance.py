@@ -1,4 +1,4 @@
-"""Issue 12, item 4: the ADMM penalty balanced against the residuals against the penalty fixed, same meshes.
+"""The ADMM penalty balanced against the residuals against the penalty fixed, same meshes (hard cages converge).
 
     .venv/bin/python bench/penalty_balance.py [CAGE ...] [--cells N]
 

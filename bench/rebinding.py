@@ -1,4 +1,4 @@
-"""Warm re-bind (issue 12, item 5) against a cold bind of the same edited cage, side by side in one process.
+"""Warm re-bind against a cold bind of the same edited cage, side by side in one process.
 
     .venv/bin/python bench/rebinding.py [--skip-64k] [--addon [--cage L10] [--vertex V ...] [--face F ...]]
     .venv/bin/python bench/rebinding.py --rings [--cage L10]
