@@ -69,7 +69,7 @@ def capsule_scene():
 def arm_scene():
     mesh, faces = read_mesh(ARM / "mesh.obj")
     cage, cage_faces = read_mesh(ARM / "cage.obj")
-    poses = {name: np.asarray(read_mesh(ARM / f"cage_pose{k}.obj")[0])
+    poses = {name: np.asarray(read_mesh(ARM / f"pose{k}.obj")[0])
              for k, name in enumerate(("elbow", "elbow + wrist", "fist"), start=1)}
     return np.asarray(mesh), np.asarray(faces), np.asarray(cage), cage_faces, poses
 
