@@ -62,6 +62,10 @@ def estimate_pairs(n_control_points, n_cells, dim):
 SECONDS_PER_PAIR_STEP = 1.0e-7
 # Iterations at the default tolerance: ITERATIONS_SCALE[d] · n^ITERATIONS_POWER · (cells / 8000)^CELLS_POWER (same).
 ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 34}, 0.3, 0.25
+# Seconds per cell of meshing on a 2-core x86_64: 0.03-0.6 s for ordinary cages at 8000 cells, 1.5 s for a hand
+# whose fingers face each other across narrow gaps (bench/RESULTS.md, "Cages whose parts face each other across a
+# narrow gap").
+MESHING_SECONDS_PER_CELL = 5e-5
 # Seconds per point for the work after the solve: location, smooth fit, reduction, thinning (bench/RESULTS.md, "The
 # bind outside the solve").
 SECONDS_PER_POINT = 1e-5
@@ -76,7 +80,8 @@ THIN_FROM_ASPECT = 5
 BUSY_TOLD_FROM = 1.5
 
 
-def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0):
+def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0,
+                   meshing=False):
     """What a solve will take, told before it starts: its memory and roughly its time.
 
     Parameters
@@ -91,6 +96,8 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
         forecasts on a machine loaded 1.4-4 were half the time taken.
     n_points : int
         The points the bind evaluates after the solve (0: the solve alone is told).
+    meshing : bool
+        Whether the bind meshes the cage first (its time is told before the solve's).
 
     Returns
     -------
@@ -100,7 +107,11 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     seconds = SECONDS_PER_PAIR_STEP * estimate_pairs(n_control_points, n_cells, dim) * iterations * busy
     if stretched:
         seconds *= STRETCHED_STEP_COST
-    text = (f"solving {n_control_points} control points on about {n_cells} cells: about "
+    text = ""
+    if meshing:
+        meshing_seconds = MESHING_SECONDS_PER_CELL * n_cells * busy
+        text = f"meshing {'' if meshing_seconds < 1 else 'roughly '}{format_duration(meshing_seconds)}, then "
+    text += (f"solving {n_control_points} control points on about {n_cells} cells: about "
             f"{format_size(estimate_memory(n_control_points, n_cells, dim))} of memory for the solve and "
             f"{'' if seconds < 1 else 'roughly '}{format_duration(seconds)}")
     if n_points:

@@ -310,7 +310,7 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     elif progress is not None:
         progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim,
                                      solves_stretched(cage.vertices, options.epsilon), principal_aspect(cage.vertices),
-                                     busy_factor(), len(points)))
+                                     busy_factor(), len(points), meshing=True))
     return cage, points
 
 

@@ -417,7 +417,7 @@ def test_the_progress_bar_fits_an_80_column_terminal_and_shows_the_forecast_whol
     drawn = terminal.getvalue().replace("\r", "\n").splitlines()
     assert max(map(len, drawn)) <= 80
     forecast = " ".join(line.strip() for line in drawn if not line.startswith("bind (lbc)"))
-    assert "solving 6 control points on about 400 cells: about" in forecast
+    assert "meshing under 1 s, then solving 6 control points on about 400 cells: about" in forecast
 
 
 def test_a_mesh_given_as_the_cage_asks_whether_they_were_swapped(tmp_path):

@@ -263,6 +263,15 @@ def test_the_forecast_knows_a_very_thin_cage_solves_slower():
     assert solve_forecast(56, 8000, 2, aspect=200) == solve_forecast(56, 8000, 2)
 
 
+def test_the_forecast_of_a_bind_counts_its_meshing():
+    """A new user's hand cage spent most of its bind meshing, which the forecast left out."""
+    from lbc_core.forecast import solve_forecast
+
+    assert solve_forecast(44, 8000, 3, meshing=True).startswith("meshing under 1 s, then solving 44 control points")
+    assert solve_forecast(44, 64000, 3, meshing=True).startswith("meshing roughly 3 s, then solving")
+    assert solve_forecast(44, 64000, 3, busy=2.0, meshing=True).startswith("meshing roughly 6 s, then")
+
+
 def test_the_time_left_blends_the_share_of_the_way_and_the_residuals_power_law():
     from lbc_core.forecast import seconds_left as _seconds_left
 
