@@ -66,7 +66,8 @@ class BindOptionProperties:
     tolerance: FloatProperty(
         name="Tolerance",
         description="Stopping tolerance of the solver (relative ADMM residual); 0 uses lbc's default "
-        f"({DEFAULT_TOLERANCE[2]:g} in 2D, {DEFAULT_TOLERANCE[3]:g} in 3D). Smaller: more accurate weights, "
+        f"({DEFAULT_TOLERANCE[2]:g} in 2D, {DEFAULT_TOLERANCE[3]:g} in 3D, tighter for cages of a few vertices). "
+        "Smaller: more accurate weights, "
         "slower bind",
         default=0.0,
         min=0.0,

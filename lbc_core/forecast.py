@@ -8,8 +8,10 @@ import numpy as np
 from .errors import CageError
 from .stretch import Stretch
 
-# Relative primal residual a solve stops at by default, per dimension (bench/RESULTS.md, "The stopping tolerance").
+# Relative primal residual a solve stops at by default, per dimension (bench/RESULTS.md, "The stopping tolerance"),
+# and for 3D cages of at most SMALL_CAGE control points, whose coordinates remeshing hardly changes (same section).
 DEFAULT_TOLERANCE = {2: 1e-4, 3: 5e-4}
+SMALL_CAGE, SMALL_CAGE_TOLERANCE = 12, 2e-4
 
 # (cell, control point) pairs per cell at a solve's widest: PAIRS_SCALE[d] · n^PAIRS_POWER for n control points
 # (bench/RESULTS.md, "Memory and the cost model").
@@ -20,7 +22,8 @@ BYTES_PER_WEIGHT = 8
 
 
 def default_tolerance(dim, n_control_points):
-    """The stopping tolerance of a solve that is given none (DEFAULT_TOLERANCE; the same for any cage).
+    """The stopping tolerance of a solve that is given none: DEFAULT_TOLERANCE, tighter for a 3D cage of at most
+    SMALL_CAGE control points.
 
     Parameters
     ----------
@@ -30,7 +33,8 @@ def default_tolerance(dim, n_control_points):
     -------
     float, a relative primal residual
     """
-    del n_control_points
+    if dim == 3 and n_control_points <= SMALL_CAGE:
+        return SMALL_CAGE_TOLERANCE
     return DEFAULT_TOLERANCE[dim]
 
 

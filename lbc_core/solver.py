@@ -48,9 +48,12 @@ RELAXATION = {2: 1.6, 3: 1.9}
 BALANCE_UNTIL, BALANCE_SPACING = 300, 30
 BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
 # The working sets are reshaped to one ring of vertices around the weights above GROWTH_FLOOR at iterations
-# GROWTH_FIRST_CHECK, then each time GROWTH_SPACING times as many; a solve that meets its tolerance grows them
-# first unless that adds at most END_GROWTH_SHARE of the slots (bench/RESULTS.md, "The locality solver").
-GROWTH_FIRST_CHECK, GROWTH_SPACING, GROWTH_FLOOR, END_GROWTH_SHARE = 20, 3, 1e-3, 0.01
+# GROWTH_FIRST_CHECK, then each time GROWTH_SPACING times as many (bench/RESULTS.md, "Working sets: start, growth,
+# pruning").
+GROWTH_FIRST_CHECK, GROWTH_SPACING, GROWTH_FLOOR = 20, 3, 1e-3
+# A solve that meets its tolerance stops unless growing would add more than END_GROWTH_SHARE of its slots; it then
+# grows around the weights above END_GROWTH_FLOOR, a margin for the next check (same section).
+END_GROWTH_SHARE, END_GROWTH_FLOOR = 0.005, 1e-4
 # Where each part of the solve ends on its progress range.
 _SETUP_END, _ADMM_END = 0.06, 0.98
 
@@ -365,6 +368,7 @@ class _Run:
                         self.pending_growth.n_slots <= (1 + END_GROWTH_SHARE) * step.ops.sets.n_slots:
                     self.pending_growth = None
                     return "converged"
+                self.pending_growth = self._growth(step, out, END_GROWTH_FLOOR, prune=False)
         else:
             self.history.append(dict(iteration=self.iteration, primal=float(primal)))
             distance = primal / tolerance
