@@ -44,7 +44,8 @@ DUAL_TOLERANCE_FACTOR = 10.0
 ANDERSON_PERIOD = {2: 3, 3: 5}
 RELAXATION = {2: 1.6, 3: 1.9}
 # Penalty balancing: up to BALANCE_UNTIL iterations, every BALANCE_SPACING, double the penalty when the primal
-# residual exceeds BALANCE_HIGH times the dual, halve it below BALANCE_LOW times (bench/RESULTS.md, "Penalty").
+# residual exceeds BALANCE_HIGH times the dual, halve it below BALANCE_LOW times (bench/RESULTS.md, "The penalty
+# balanced against the residuals in the first iterations").
 BALANCE_UNTIL, BALANCE_SPACING = 300, 30
 BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
 # The working sets are reshaped to one ring of vertices around the weights above GROWTH_FLOOR at iterations
