@@ -23,11 +23,8 @@ from .progress import Progress
 
 # The fit's radius in median cell edges: wider is smoother and costs more influences per point (bench/RESULTS.md).
 RADIUS_EDGES = 2.0
-# Distance from the cage, in median cell edges, over which the fit fades into the P1 interpolation: a mesh nearer the
-# cage than that creases as P1 does. 0.25 rather than 1: a capsule 0.1 under Blender's Cylinder's cap p99 / max
-# 3.05° / 11.1° → 2.33° / 10.6°, the demo gargoyle bent 60° 2.24° / 14.1° → 2.14° / 9.4° (Mesh Deform 2.10° /
-# 10.2°), the bent capsule of bench/capsule.py unchanged (bench/RESULTS.md). The distance is the point's own (the P1
-# interpolation of the vertices' distances is 0 where the cage is one cell across, so thin limbs got P1's creases).
+# Distance from the cage (median cell edges, each point's own) over which the fit fades into the P1
+# interpolation (bench/RESULTS.md, "The smooth evaluation's fade into P1: over a quarter of a cell edge instead of one").
 FADE_EDGES = 0.25
 # A fit whose moment matrix is this ill-conditioned (too few or coplanar vertices in reach) is not used.
 MAX_CONDITION = 1e8

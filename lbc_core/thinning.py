@@ -32,17 +32,12 @@ TOLERANCE = 1e-9
 # Rows thinned by one thread at a time (about 0.05 s each); cancel is polled between rounds of one chunk per thread.
 ROWS_PER_CHUNK = 8192
 
-# The most of a point's weight the floor may take away, Σ_j min(w_j, τ): where weights spread thin over many control
-# points (the C¹ relaxation ε > 0 makes nearly every weight nonzero; Blender's 32-sided cylinder cage gives 100 per
-# point) the floor 0.005 took 0.2-0.44 of it, and the restoration then moved the bent mesh by up to 5 % of the cage
-# and folded it (a new user's 140-178° folds at ε = 1-5). There τ is lowered until it takes this much: rows of the
-# gargoyle, Suzanne and the capsule, whose floor takes at most 0.09-0.12, keep theirs (bench/RESULTS.md).
+# The most of a point's weight the floor may take away, Σ_j min(w_j, τ); beyond it τ is lowered
+# (bench/RESULTS.md, "The floor never takes more than a tenth of a point's weight").
 MOST_REMOVED = 0.1
 
-# Times a point's threshold is relaxed (floor / 4; a cap K raised by 1, 2, 4, ...) where its kept weights cannot
-# reproduce it, before it keeps its whole row. With 6 raises by one, a cap of 8 on Blender's 32-sided cylinder cage left
-# 61 of 20k points their whole row, so every vertex's deformer evaluated 53 slots; with 12, none (16 slots); a cap of
-# 4 there still kept all 64 weights, where the raises by 1, 2, 4, ... and a bisection give about 23.
+# Times a point's threshold is relaxed (floor / 4; a cap raised by 1, 2, 4, ...) before it keeps its whole row
+# (bench/RESULTS.md, "Constants' notes").
 RELAXATIONS = 12
 
 

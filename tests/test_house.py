@@ -21,17 +21,8 @@ MAX_COMMENT_LINES = 3
 CONSTANT = re.compile(r"_?[A-Z][A-Z0-9_]*")
 
 # "path:name" (a function's qualified name, Class.method, or a constant's) → the reason a reviewer accepted.
-SHORTENED_NEXT = "its file was under other work when the rule came: to shorten next"
 ALLOWED = {
     "lbc_core/meshing/surface.py:Surface.__init__": "its file was under other work when the rule came: to split next",
-    "lbc_core/meshing/surface.py:GAP_SPACING": SHORTENED_NEXT,
-    "lbc_core/meshing/tetrahedra.py:_POLISH_RATIO": SHORTENED_NEXT,
-    "lbc_core/meshing/tetrahedra.py:_CONVEX_FACETS": SHORTENED_NEXT,
-    "lbc_core/meshing/tetrahedra.py:_QHULL_OPTIONS": SHORTENED_NEXT,
-    "lbc_core/meshing/tetrahedra.py:_SECONDS": SHORTENED_NEXT,
-    "lbc_core/smoothing.py:FADE_EDGES": SHORTENED_NEXT,
-    "lbc_core/thinning.py:MOST_REMOVED": SHORTENED_NEXT,
-    "lbc_core/thinning.py:RELAXATIONS": SHORTENED_NEXT,
 }
 
 

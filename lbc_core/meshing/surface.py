@@ -44,11 +44,8 @@ SPLIT_MIN_EDGE = 1.5
 # along its edges, and joggling once costs less than merging; 300 points 0.78 -> 0.51 ms.
 _QHULL_OPTIONS = "QJ Qbb Q3 Q5 Q8"
 _ROUNDS_2D = 30  # rounds of splitting boundary pieces missing from a region's triangulation
-# Regions facing a part of the cage they share no vertex with, closer than the spacing (fingers boxed side by side),
-# are sampled finer from the start, at GAP_SPACING × sqrt(gap × band): a surface triangle of circumradius r facing a
-# wall at distance g, with the lattice at depth `band` behind it, can be a face of the tetrahedralisation only when
-# r² < g × band. Refining there one missing triangle at a time took 12 to 30 rounds, each a tetrahedralisation; 2
-# leaves a few rounds to refinement, finer spacings make more cells than it needs (bench/RESULTS.md).
+# Regions facing another part of the cage across a gap narrower than the spacing are sampled at GAP_SPACING ×
+# sqrt(gap × band) from the start (bench/RESULTS.md, "Cages whose parts face each other across a narrow gap").
 GAP_SPACING = 2.0
 # Facets face each other when their normals are this close to opposite (cosine), and the gap runs along the normal.
 _FACING = 0.7

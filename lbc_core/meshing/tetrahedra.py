@@ -44,35 +44,22 @@ _LATTICE_AXES = np.linalg.qr(np.array([[3.0, 1.0, 2.0], [-1.0, 3.0, 1.0], [1.0, 
 _COUNT_TOLERANCE = 0.15  # beyond this relative miss of the target cell count, mesh again with a corrected size
 _SURFACE_SPACING = 1.0  # surface sample spacing, × the lattice cube side
 _BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage surface
-# Then the lattice corners of poor tetrahedra (radius ratio below _POLISH_RATIO) are moved, the tetrahedra kept, where
-# that raises the least radius ratio around them: _POLISH_ROUNDS rounds of _POLISH_TRIES positions each (the
-# centroid of its neighbours, random ones up to _POLISH_STEP × the lattice cube side away per coordinate). Measured at
-# 8000 cells on the cube, the gargoyle's L12 and L08 and the clothing: 1 to 6 slivers (radius ratio < 0.1), 0 to 4
-# with a corner off the cage; ratio 0.25, 4 rounds of 16 left 0 to 3, for 2 to 4 times the time.
+# Lattice corners of tetrahedra below this radius ratio are moved to raise the least ratio around them, in
+# _POLISH_ROUNDS rounds of _POLISH_TRIES tries up to _POLISH_STEP cube sides away (RESULTS.md, "Constants' notes").
 _POLISH_RATIO = 0.2
 _FLAT = 1e-9  # a tetrahedron of at most this share of the median volume is flat (see _flip_flat)
 _POLISH_ROUNDS = 3
 _POLISH_TRIES = 8
 _POLISH_STEP = 0.3
-# Convex cages with at most this many facets keep their lattice points by the distance to the facets' planes (see
-# _depth_in_convex): 0.9-1.7 ms against 5-15 ms for the general band and inside tests at 8000 cells (cube, cones,
-# cylinders of 3 to 64 sides; the same points), 1.5-4.4 ms against 7-11 ms at 188-256 facets. Cage vertices up to
-# _CONVEX_SLACK (in the unit-diagonal meshing frame) outside a facet's plane still count as convex, so that dents
-# up to 1e-4 of the cage's size keep the fast test (the corpus's dents of 1e-8 and 1e-5: the same points as the
-# general test); the distances are then off by as little, against a band of about 2e-2 at 8000 cells.
+# Convex cages of at most this many facets test their lattice points by the facets' planes, cage vertices up to
+# _CONVEX_SLACK (unit-diagonal frame) outside a plane still convex (bench/RESULTS.md, "Constants' notes").
 _CONVEX_FACETS = 256
 _CONVEX_SLACK = 1e-4
 # Other cages with at most this many facets measure the lattice band against their facets directly, found plane by
 # plane (see _surface_distance), instead of against the regions' small triangles through a search tree.
 _FEW_FACETS = 32
-# qhull joggles its input (QJ: its own copy, by about 1e-11 of the coordinates, the same way each run) instead
-# of merging the facets of degenerate input (scipy's default "Qbb Qc Qz Q12" with Qt): the surface samples of a
-# planar region are coplanar, the jittered lattice nearly cospherical, and merging them costs more than joggling
-# once. Q3 Q5 Q8 skip work for merged or coplanar output. The tetrahedra are checked as before (every sample used,
-# the surface conforming, no flat cell kept), so a tie broken otherwise only changes which of two valid meshes comes
-# out: measured on the whole corpus (39 cages x 8 variants, 8000 cells), all 312 mesh and pass the contract, the
-# same cell counts on the 15 compared one by one, slivers (radius ratio < 0.1) 7441 -> 7437 in all; qhull on
-# cone-3's 1620 points 26 -> 19 ms (medians of 15, interleaved).
+# qhull joggles its input (QJ) instead of merging degenerate facets; Q3 Q5 Q8 skip work on merged output; the
+# tetrahedra are checked as before (bench/RESULTS.md, "Constants' notes").
 _QHULL_OPTIONS = "QJ Qbb Q3 Q5 Q8"
 _RECOVERY_ROUNDS = 40  # rounds of surface refinement per tetrahedralisation
 # Refinement may make at most this many times the initial surface samples (plus a few thousand for small cages).
@@ -82,10 +69,8 @@ _SAMPLE_BUDGET = 6
 # a 1e-4 slot passes it after 2 (measured at 2000 and 8000 cells).
 _GROWING_ROUNDS = 2
 _ATTEMPTS = 3  # fresh jitter and a coarser surface (× 1.5 spacing each time) before a cage is refused
-# Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells), the last guard: nearly
-# touching parts are refused earlier, when refinement runs away. The slowest valid mesh measured, a 1e-3 slot, takes
-# 13 to 17 s at 8000 cells on a loaded machine (twice a conforming mesh: the refinement along the slot puts the
-# cell count 56 to 77 % over the target, and the second, coarser lattice cannot bring it back), half the deadline.
+# Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells): the last guard,
+# after the runaway test (bench/RESULTS.md, "Constants' notes").
 _SECONDS = 10.0
 _SECONDS_PER_1000 = 2.0
 
