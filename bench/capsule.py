@@ -1,4 +1,4 @@
-"""The capsule scene of issue 12: a smooth capsule in an 8-sided, 9-ring cylinder cage, bent 90° (or twisted,
+"""The capsule scene: a smooth capsule in an 8-sided, 9-ring cylinder cage, bent 90° (or twisted,
 stretched: :data:`POSES`), and its kinks.
 
 A deformed smooth surface creases where the coordinates are not smooth; the "kink" of an edge of the mesh is the

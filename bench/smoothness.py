@@ -1,4 +1,4 @@
-"""Issue 12's figures, measured in one process: smoothness on the bent capsule, and where speed and locality stand.
+"""The smoothness figures, measured in one process: smoothness on the bent capsule, and where speed and locality stand.
 
     .venv/bin/python bench/smoothness.py [--capsule] [--addon] [--thinning] [--speed] [--l08] [--iterations]
                                          [--tolerance]
@@ -10,7 +10,7 @@
 --addon       the capsule bound through the Blender add-on (lbc_addon.api.bind, its thinned weights in float32
               slots) and deformed by its Geometry Nodes deformer: its defaults and other Threshold / Max Influences
               settings (``--settings 0.002:0,0.005:12``), against Mesh Deform precision 5 in the same process.
---thinning    the add-on's thinning levers (issue 10, item 6) on the weights of lbc_core binds (float64): the capsule,
+--thinning    the add-on's thinning levers on the weights of lbc_core binds (float64): the capsule,
               Suzanne in its box cage and the demo gargoyle (bench/blender_deform.py's scenes); per setting
               ``--thinnings floor:cap`` (lbc_core.thinning.thin_weights) the influences per point, the capsule's
               kinks, the kinks a 60° bend of Suzanne's and the gargoyle's cage gains over every weight (Mesh Deform's
@@ -119,7 +119,7 @@ def bench_addon(settings):
     import bpy
 
     sys.path.insert(0, str(ROOT / "tests"))
-    from blender_scenes import evaluated_positions, register_addon
+    from helpers.blender_scenes import evaluated_positions, register_addon
 
     from lbc_addon import api
 
@@ -230,7 +230,7 @@ def bench_speed(baseline):
     import bpy
 
     sys.path.insert(0, str(ROOT / "tests"))
-    from blender_scenes import register_addon
+    from helpers.blender_scenes import register_addon
 
     from lbc_addon import geometry, jobs, writing
 
