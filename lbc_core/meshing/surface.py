@@ -96,6 +96,29 @@ def split_facets(cage, spacing):
     return (face_facets[cage.facet_face] == 2) & face_well_shaped[cage.facet_face]
 
 
+def _planar_regions(normals, areas, edge_facets, split):
+    """Each facet's region: facets joined across edges flatter than COPLANAR_ANGLE (none across a facet ``split``
+    marks), a region whose facets stray from its mean plane by over 4 × COPLANAR_ANGLE taken apart: (F,) int."""
+    n_facets = len(normals)
+    flat = np.einsum("ij,ij->i", normals[edge_facets[:, 0]], normals[edge_facets[:, 1]]) > np.cos(COPLANAR_ANGLE)
+    if split is not None:
+        flat &= ~split[edge_facets[:, 0]] & ~split[edge_facets[:, 1]]
+    links = edge_facets[flat]
+    graph = sp.coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(n_facets, n_facets))
+    _, region = connected_components(graph, directed=False)
+    # Small bends add up along a curved surface: a region whose facets stray from its mean plane is taken apart
+    # into single facets.
+    mean = np.zeros((region.max() + 1, 3))
+    np.add.at(mean, region, normals * areas[:, None])
+    mean = unit(mean)
+    straying = np.unique(region[np.einsum("ij,ij->i", normals, mean[region]) < np.cos(4 * COPLANAR_ANGLE)])
+    if len(straying):
+        apart = np.isin(region, straying)
+        region[apart] = region.max() + 1 + np.arange(np.count_nonzero(apart))
+        region = np.unique(region, return_inverse=True)[1].ravel()
+    return region
+
+
 class Surface:
     """The cage's planar regions and their samples, refined on request.
 
@@ -121,7 +144,6 @@ class Surface:
     def __init__(self, cage, spacing, rng, budget, deadline, split=None, band=None):
         self.cage, self.rng, self.spacing, self.budget, self.deadline = cage, rng, spacing, budget, deadline
         facets = cage.facets
-        n_facets = len(facets)
         corners = cage.vertices[facets]
         normals = triangle_normals(corners)
         areas = np.linalg.norm(normals, axis=1)
@@ -130,23 +152,25 @@ class Surface:
         edges, inverse = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
         inverse = inverse.ravel()
         # A closed manifold cage: every edge has exactly two facets.
-        edge_facets = np.repeat(np.arange(n_facets), 3)[np.argsort(inverse, kind="stable")].reshape(-1, 2)
-        flat = np.einsum("ij,ij->i", normals[edge_facets[:, 0]], normals[edge_facets[:, 1]]) > np.cos(COPLANAR_ANGLE)
-        if split is not None:
-            flat &= ~split[edge_facets[:, 0]] & ~split[edge_facets[:, 1]]
-        links = edge_facets[flat]
-        graph = sp.coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(n_facets, n_facets))
-        _, region = connected_components(graph, directed=False)
-        # Small bends add up along a curved surface: a region whose facets stray from its mean plane is taken
-        # apart into single facets.
-        mean = np.zeros((region.max() + 1, 3))
-        np.add.at(mean, region, normals * areas[:, None])
-        mean = unit(mean)
-        straying = np.unique(region[np.einsum("ij,ij->i", normals, mean[region]) < np.cos(4 * COPLANAR_ANGLE)])
-        if len(straying):
-            apart = np.isin(region, straying)
-            region[apart] = region.max() + 1 + np.arange(np.count_nonzero(apart))
-            region = np.unique(region, return_inverse=True)[1].ravel()
+        edge_facets = np.repeat(np.arange(len(facets)), 3)[np.argsort(inverse, kind="stable")].reshape(-1, 2)
+        region = _planar_regions(normals, areas, edge_facets, split)
+        self._region_frames(region, facets, corners, normals, areas)
+        # Each region's own sample spacing: finer where it nearly touches a part of the cage it shares no vertex with.
+        self.region_spacing = np.full(self.n_regions, spacing)
+        self.near = np.zeros(self.n_regions, dtype=bool)
+        if band is not None:
+            gaps = self._gaps(spacing)
+            self.region_spacing = np.minimum(spacing, GAP_SPACING * np.sqrt(gaps * band))
+            self.near = self.region_spacing < spacing
+        self._feature_edges(cage, facets, directed, edges, inverse, edge_facets, rng)
+        self.inner = [self._region_lattice(r) for r in range(self.n_regions)]  # (facet, bary) per region
+        self.triangulations = [None] * self.n_regions  # per region, local numbering; None when out of date
+        # the regions refinement worked on last, for error messages: first those sampled finer, if any
+        self.trouble = np.flatnonzero(self.near) if self.near.any() else np.arange(self.n_regions)
+        self._number()
+
+    def _region_frames(self, region, facets, corners, normals, areas):
+        """Each region's facets and vertices, and its plane: normal, in-plane axes (u, v) and origin."""
         self.region = region
         self.n_regions = region.max() + 1
         mean = np.zeros((self.n_regions, 3))
@@ -160,13 +184,10 @@ class Surface:
         self.origin /= np.bincount(region)[:, None]
         self.region_facets = [np.flatnonzero(region == r) for r in range(self.n_regions)]
         self.region_vertices = [np.unique(facets[f]) for f in self.region_facets]
-        # Each region's own sample spacing: finer where it nearly touches a part of the cage it shares no vertex with.
-        self.region_spacing = np.full(self.n_regions, spacing)
-        self.near = np.zeros(self.n_regions, dtype=bool)
-        if band is not None:
-            gaps = self._gaps(spacing)
-            self.region_spacing = np.minimum(spacing, GAP_SPACING * np.sqrt(gaps * band))
-            self.near = self.region_spacing < spacing
+
+    def _feature_edges(self, cage, facets, directed, edges, inverse, edge_facets, rng):
+        """The edges between regions, each region's boundary and convexity, and the edges' first samples."""
+        region = self.region
         feature = region[edge_facets[:, 0]] != region[edge_facets[:, 1]]
         self.edges = edges[feature]  # (K, 2) feature edges, low index first
         self.edge_facet = edge_facets[feature, 0]
@@ -189,11 +210,6 @@ class Surface:
         self.edge_corner = np.argmax(facets[self.edge_facet][:, None, :] == self.edges[:, :, None], axis=2)
         counts = np.maximum(2, split_counts(lengths, self.region_spacing[self.edge_regions].min(axis=1)))
         self.edge_params = [np.sort((np.arange(1, m) + JITTER * rng.uniform(-1.0, 1.0, m - 1)) / m) for m in counts]
-        self.inner = [self._region_lattice(r) for r in range(self.n_regions)]  # (facet, bary) per region
-        self.triangulations = [None] * self.n_regions  # per region, local numbering; None when out of date
-        # the regions refinement worked on last, for error messages: first those sampled finer, if any
-        self.trouble = np.flatnonzero(self.near) if self.near.any() else np.arange(self.n_regions)
-        self._number()
 
     # --- frames and location ---------------------------------------------------------------------------------
 
