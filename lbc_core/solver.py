@@ -396,6 +396,7 @@ class _Run:
         ``prune``) rid of the slots beyond two rings; None where they already hold that."""
         weights = step.weights(out)
         one_ring, two_rings = self.mesh.margins(step.ops.sets, np.where(weights > floor, weights, 0.0))
+        self.progress.check()
         sets = step.ops.sets
         return sets.reshaped(one_ring, one_ring) if prune else sets.grown(one_ring)
 

@@ -342,10 +342,12 @@ class PairOperators:
     """
 
     def __init__(self, mesh, sets, dtype=np.float64, check=None):
+        check = check or (lambda: None)  # between the parts of a layout, each well under half a second
         self.sets = sets
         slot_vertex = mesh.interior[sets.vertex_of_slot]
         n = sets.n_controls
         self.pair_cell, self.pair_control = self._pairs(mesh, sets, slot_vertex)
+        check()
         d = mesh.vertices.shape[1]
         # Each pair's corners: a slot (its index), or a boundary value, or nothing; looked up in dense (N, n)
         # tables, built for this and dropped (a sorted search of the keys takes ten times as long).
@@ -355,6 +357,7 @@ class PairOperators:
         table[slot_vertex, sets.controls] = np.arange(sets.n_slots, dtype=np.int32)
         corner_slot = table[corner_vertex, control]
         del table
+        check()
         boundary_row = mesh.boundary_position[corner_vertex]
         corner_fixed = np.where(boundary_row >= 0, mesh.boundary_weights[np.maximum(boundary_row, 0), control], 0.0)
         scaled = mesh.scaled_gradients[self.pair_cell].astype(dtype)  # (P, d+1, d)
@@ -362,15 +365,20 @@ class PairOperators:
         self.boundary_part = np.zeros((d, len(self.pair_cell)), dtype=dtype)
         self.boundary_part[:, touching] = np.einsum("pc,pck->kp", corner_fixed[touching], scaled[touching])
         del corner_vertex, boundary_row, corner_fixed
+        check()
         self.gradient = _gradient_matrix(scaled, corner_slot, sets.n_slots, dtype)
         del scaled, corner_slot
+        check()
         self.slot_mass = mesh.sqrt_mass[sets.vertex_of_slot].astype(dtype)
         # Control-major order: the matrix is block-diagonal over the control points, which the factorisation's
         # analysis then sees at once (a quarter faster on the gargoyle's cages).
         self.order = np.lexsort((sets.vertex_of_slot, sets.controls))
         rank = np.empty_like(self.order)
         rank[self.order] = np.arange(len(self.order))
-        self.factors = _group_factors(_block_system(mesh.system, sets, rank), sets, dtype, check or (lambda: None))
+        system = _block_system(mesh.system, sets, rank)
+        check()
+        self.factors = _group_factors(system, sets, dtype, check)
+        del system
         self.row_blocks = _row_blocks(self.gradient, worker_count())
         self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell].astype(dtype)
         self.dtype = dtype
