@@ -45,7 +45,7 @@ from .factor import Factor
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
 from .frame import principal_aspect
 from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
-from .solver import balancing_factor, check_problem  # the same checks and balancing rule
+from .solver import SolveSettings, balancing_factor, check_problem  # the same options, checks and balancing
 from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
@@ -259,7 +259,7 @@ def solve_on_mesh(
     check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
     if start is not None:
         _check_start(start, cells, n, n_vertices - len(boundary_vertices))
-    settings = _Settings(epsilon, default_tolerance(d, n) if tolerance is None else tolerance, max_iterations,
+    settings = SolveSettings(epsilon, default_tolerance(d, n) if tolerance is None else tolerance, max_iterations,
                          RELAXATION[d] if relaxation is None else relaxation, check_every, anderson_memory,
                          ANDERSON_PERIOD[d] if anderson_period is None else anderson_period,
                          np.float32 if single_precision else np.float64)
@@ -303,20 +303,6 @@ def solve_on_mesh(
     objective = problem.objective(weights[interior], tv_weights, progress.check) * scale ** (d - 1)
     progress(1.0, "solved")
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds, state)
-
-
-@dataclass
-class _Settings:
-    """solve_on_mesh's options, the defaults of the dimension filled in."""
-
-    epsilon: float
-    tolerance: float
-    max_iterations: int
-    relaxation: float
-    check_every: int
-    anderson_memory: int
-    anderson_period: int
-    dtype: type
 
 
 def _check_start(start, cells, n, n_interior):

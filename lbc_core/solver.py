@@ -177,7 +177,7 @@ def solve_on_mesh(
     if start is not None:
         _check_start(start, cells, n, n_vertices - len(boundary_vertices))
     tolerance = default_tolerance(d, n) if tolerance is None else tolerance
-    settings = _Settings(epsilon, tolerance, max_iterations, relaxation or RELAXATION[d], check_every,
+    settings = SolveSettings(epsilon, tolerance, max_iterations, relaxation or RELAXATION[d], check_every,
                          anderson_memory, anderson_period or ANDERSON_PERIOD[d],
                          np.float32 if single_precision else np.float64)
 
@@ -214,7 +214,9 @@ def solve_on_mesh(
 
 
 @dataclass
-class _Settings:
+class SolveSettings:
+    """solve_on_mesh's options, the defaults of the dimension filled in (the dense reference takes them too)."""
+
     epsilon: float
     tolerance: float
     max_iterations: int
