@@ -146,7 +146,9 @@ def _until_feasible(mesh, base, order, values, duals, check, first_size=None):
         weights, duals_out, feasible = project_rows(padded.gather(values[sets.vertex_of_slot, sets.controls]),
                                                     padded.corners, padded.targets, duals,
                                                     products=padded.products)
-        if feasible.all() or (size >= n).all():
+        # Rows that hold every control point already can grow no further (a cage so thin that the projection's
+        # tolerance is out of reach there): doubling the others' would loop for ever.
+        if feasible.all() or (size[~feasible] >= n).all():
             return sets, padded.scatter(weights), duals_out
         size[~feasible] = np.minimum(np.maximum(2 * size[~feasible], size[~feasible] + 4), n)
 

@@ -384,3 +384,29 @@ def test_a_state_follows_its_cells_restricted_updated_and_replaced():
     np.testing.assert_array_equal(moved.pair_state, pair_state[[3, 4, 3, 4, 0]])
     np.testing.assert_array_equal(moved.sqrt_cell, state.sqrt_cell[source])
     np.testing.assert_array_equal(moved.slot_state, state.slot_state)
+
+
+def test_first_working_sets_end_where_a_row_cannot_grow_further():
+    """A cage squashed to aspect 1e-3 looped for ever: a vertex whose projection misses its tolerance even with every
+    control point held kept the others' sets doubling, unchanged, round after round."""
+    from types import SimpleNamespace
+
+    import scipy.sparse as sp
+
+    from lbc_core.working_sets import _until_feasible
+
+    controls = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [2, 2, 2]])
+    interior = np.array([[0.2, 0.2, 0.2], [3.0, 3.0, 3.0]])  # the second outside every hull
+    mesh = SimpleNamespace(unit_controls=controls, unit_interior=interior)
+    values = np.full((2, len(controls)), 1.0 / len(controls))
+    order = np.argsort(np.linalg.norm(interior[:, None] - controls[None], axis=2), axis=1)
+    rounds = []
+
+    def check():
+        rounds.append(1)
+        if len(rounds) > 20:
+            raise RuntimeError("the working sets went on doubling")
+
+    sets, weights, _ = _until_feasible(mesh, sp.csr_matrix(values.shape), order, values, None, check,
+                                       first_size=np.array([4, 4]))
+    assert len(rounds) <= 3 and np.diff(sets.indptr).tolist() == [4, 6]
