@@ -116,6 +116,8 @@ def gap(a, b, diagonal):
 
 
 def main(argv=None):
+    from lbc_core.io import read_cage
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--baseline", type=Path, required=True, help="a checkout of 5715f72")
     parser.add_argument("--cages", nargs="+", default=["L12", "L10", "L08"])
@@ -130,8 +132,8 @@ def main(argv=None):
     print("| --- | --- | --- | --- | --- |")
     for name in args.cages:
         cage_path = GARGOYLE / f"cage_{name}.obj"
-        from_path = np.loadtxt(cage_path, comments=("#", "f", "vn", "vt"), usecols=(1, 2, 3))
-        diagonal = float(np.linalg.norm(from_path.max(axis=0) - from_path.min(axis=0)))
+        cage = np.asarray(read_cage(cage_path)[0], dtype=float)
+        diagonal = float(np.linalg.norm(cage.max(axis=0) - cage.min(axis=0)))
         ours, cells = deformed(ROOT, cage_path, args.cells, False, args.ours, args.smooth)
         theirs, _ = deformed(args.baseline, cage_path, args.cells, False, args.tight, args.smooth)
         theirs_b, _ = deformed(args.baseline, cage_path, args.cells, True, args.tight, args.smooth)
