@@ -136,5 +136,5 @@ class DouglasRachford:
     def final_weights(self, state):
         """The weights (S,) of a state, projected onto the constraints to round-off: the solve's output."""
         values = self.split(state)[1].astype(np.float64) / self.ops.slot_mass
-        weights, self.duals, _ = self.ops.project(values, self.duals, RESIDUAL_TOLERANCE, NEWTON_STEPS)
-        return weights
+        weights, self.duals, feasible = self.ops.project(values, self.duals, RESIDUAL_TOLERANCE, NEWTON_STEPS)
+        return weights if feasible.all() else self.ops.restore_rows(weights, np.flatnonzero(~feasible))

@@ -19,6 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import fem
+from .constraints import constraint_residuals, nearest_feasible, restore_constraints
 from .factor import Factor
 from .parallel import thread_map, worker_count
 from .projection import PADDING_VALUE, STEP_TOLERANCE, corner_products, project_rows
@@ -31,6 +32,8 @@ FACTOR_GROUP_SLOTS = 20000
 # The harmonic coordinates' largest entries a vertex's first working set takes, then twice as many until the vertex's
 # position lies in their control points' hull (bench/RESULTS.md, "The locality solver").
 FIRST_SET_SIZE = 12
+# The largest violation of partition of unity or reproduction the solve's output keeps (unit-frame coordinates).
+EXACT = 1e-12
 
 
 @dataclass
@@ -448,6 +451,24 @@ class PairOperators:
         weights = np.concatenate([part[0] for part in parts])
         return (padded.scatter(weights), np.concatenate([part[1] for part in parts]),
                 np.concatenate([part[2] for part in parts]))
+
+    def restore_rows(self, weights, rows):
+        """(S,) weights with the given vertices' rows, whose projection missed round-off (a badly conditioned hull,
+        as in a very thin cage), restored on their slots: the least-norm correction, else the nearest feasible
+        weights (a linear program; the slots' hull holds the vertex, so one exists)."""
+        weights = np.array(weights, dtype=float)
+        padded_rows = np.maximum(self.padded.gather(weights)[rows], 0.0)  # padding slots → 0
+        residual = np.abs(np.einsum("nk,nkm->nm", padded_rows, self.padded.corners[rows]) - self.padded.targets[rows])
+        for vertex in rows[residual.max(axis=1) > EXACT]:
+            slots = slice(self.sets.indptr[vertex], self.sets.indptr[vertex + 1])
+            controls = self.padded.corners[vertex, :slots.stop - slots.start, 1:]
+            position = self.padded.targets[vertex, 1:][None]
+            row = restore_constraints(np.maximum(weights[slots], 0.0)[None], controls, position)
+            unity, reproduction = constraint_residuals(row, controls, position)
+            if unity[0] > EXACT or reproduction[0] > EXACT or (row < 0).any():
+                row = nearest_feasible(np.maximum(weights[slots], 0.0)[None], controls, position)
+            weights[slots] = row[0]
+        return weights
 
     def pair_positions(self, other):
         """Where each of this layout's pairs sits in ``other``, -1 where ``other`` has no such pair."""
