@@ -43,7 +43,7 @@ from .anderson import Anderson
 from .constraints import project_onto_constraints
 from .factor import Factor
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
-from .frame import principal_aspect
+from .frame import UnitFrame, principal_aspect
 from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
 from .solver import SolveSettings, balancing_factor, check_problem  # the same options, checks and balancing
 from .stretch import Stretch
@@ -265,11 +265,10 @@ def solve_on_mesh(
                          np.float32 if single_precision else np.float64)
     tv_weights = np.asarray(tv_weights, dtype=float)
 
-    # Work on the cage scaled to unit diagonal, so that penalty and tolerances are scale-free.
-    centre = vertices.mean(axis=0)
-    scale = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
-    unit_vertices = (vertices - centre) / scale
-    unit_controls = (control_points - centre) / scale
+    # Work on the mesh scaled to unit diagonal, so that penalty and tolerances are scale-free.
+    frame = UnitFrame.exact(vertices)
+    scale = frame.scale
+    unit_vertices, unit_controls = frame.to_unit(vertices), frame.to_unit(control_points)
 
     # A very thin 3D cage is meshed stretched (lbc_core.frame.MeshingFrame), so its cells are flat, and a splitting
     # that treats their steep and flat directions alike takes thousands of iterations. Past STRETCHED_SOLVE_FROM the

@@ -30,7 +30,8 @@ class UnitFrame:
     centre : (d,) float array
         The centre of the cage's bounding box, in the cage's units.
     scale : float
-        A power of two, within a factor √2 of the cage's bounding-box diagonal.
+        A power of two within a factor √2 of the cage's bounding-box diagonal (:meth:`of`), or the diagonal itself
+        (:meth:`exact`).
     """
 
     centre: np.ndarray
@@ -41,6 +42,15 @@ class UnitFrame:
         """The frame of a :class:`~lbc_core.cage.Cage`: its bounding box's centre, its diagonal rounded to 2^k."""
         low, high = cage.vertices.min(axis=0), cage.vertices.max(axis=0)
         return cls(centre=(low + high) / 2, scale=float(2.0 ** np.round(np.log2(cage.bbox_diagonal))))
+
+    @classmethod
+    def exact(cls, points):
+        """The frame of (m, d) points with their bounding box's diagonal exactly 1, not rounded to 2^k.
+
+        The solver works in it: its penalty and tolerances are calibrated on a unit diagonal.
+        """
+        low, high = points.min(axis=0), points.max(axis=0)
+        return cls(centre=(low + high) / 2, scale=float(np.linalg.norm(high - low)))
 
     def to_unit(self, positions):
         """(m, d) positions in the cage's units → (m, d) in the frame."""

@@ -27,7 +27,7 @@ from .anderson import Anderson
 from .errors import CageError
 from .factor import Factor
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
-from .frame import principal_aspect
+from .frame import UnitFrame, principal_aspect
 from .objective import tv_objective
 from .progress import Laps, Progress
 from .splitting import DouglasRachford
@@ -181,10 +181,10 @@ def solve_on_mesh(
                          anderson_memory, anderson_period or ANDERSON_PERIOD[d],
                          np.float32 if single_precision else np.float64)
 
-    # Work on the cage scaled to unit diagonal, so that penalty and tolerances are scale-free.
-    centre = vertices.mean(axis=0)
-    scale = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
-    unit_vertices, unit_controls = (vertices - centre) / scale, (control_points - centre) / scale
+    # Work on the mesh scaled to unit diagonal, so that penalty and tolerances are scale-free.
+    frame = UnitFrame.exact(vertices)
+    scale = frame.scale
+    unit_vertices, unit_controls = frame.to_unit(vertices), frame.to_unit(control_points)
     _check_affine(unit_controls)
     stretch = Stretch.of(unit_controls, epsilon)
     solve_vertices = unit_vertices if stretch is None else stretch.apply(unit_vertices)
