@@ -28,6 +28,7 @@ POSED_APART = _api.POSED_APART
 __version__ = _api.__version__
 bind = _api.bind
 flatten = _api.flatten
+format_size = _api.format_size
 make_cage = _api.make_cage
 rebind = _api.rebind
 rebind_report = _api.rebind_report

@@ -6,6 +6,7 @@ import bpy
 import numpy as np
 
 from . import deformer, geometry, jobs, storage
+from .core import format_size
 from .properties import bound_to, is_bound
 
 # Above this mean the panel suggests Max Influences: where each vertex feels most of a small cage's vertices (a 50k
@@ -14,12 +15,6 @@ from .properties import bound_to, is_bound
 MANY_INFLUENCES = 32
 SUGGESTED_INFLUENCES = 24
 
-
-def _format_bytes(count):
-    for unit in ("B", "KB", "MB", "GB"):
-        if count < 1024 or unit == "GB":
-            return f"{count:.0f} {unit}" if unit == "B" else f"{count:.1f} {unit}"
-        count /= 1024
 
 
 def draw_binding(layout, obj):
@@ -55,7 +50,7 @@ def draw_binding(layout, obj):
                       f"with Max Influences (e.g. {SUGGESTED_INFLUENCES}) for faster frames, if the deformation it "
                       "gives suits (it follows fewer cage vertices, and a bent smooth mesh may crease)", icon="INFO")
     memory = storage.memory_bytes(len(obj.data.vertices), settings.slots)
-    column.label(text=f"Cache in the .blend: {_format_bytes(memory)}")
+    column.label(text=f"Cache in the .blend: {format_size(memory)}")
     column.label(text=f"Bind time: {settings.bind_seconds:.1f} s")
     if settings.bind_report:  # warm (what was solved again) or from scratch (why)
         column.label(text=settings.bind_report[:1].upper() + settings.bind_report[1:])
@@ -145,7 +140,7 @@ def draw(layout, context):
         return
     leftovers = geometry.leftover_weights(obj)
     if leftovers:
-        size = _format_bytes(storage.memory_bytes(len(obj.data.vertices), storage.slot_count(obj.data)))
+        size = format_size(storage.memory_bytes(len(obj.data.vertices), storage.slot_count(obj.data)))
         box = layout.box()
         box.label(text=f"Carries LBC weights for no binding ({size}), from a bound mesh joined into it", icon="INFO")
         box.operator("object.lbc_unbind", icon="TRASH", text="Remove the LBC Weights")

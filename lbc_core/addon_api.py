@@ -9,6 +9,7 @@ to ``lbc_addon.core``.
 from . import forecast, options
 from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
+from .forecast import format_size
 from .options import BindOptions
 from .pipeline import bind
 from .planar import flatten, reframed
@@ -18,7 +19,8 @@ from .version import __version__
 
 __all__ = [
     "BindOptions", "CageError", "CageVertexError", "Cancelled", "DEFAULT_CELLS", "DEFAULT_FLOOR", "DEFAULT_TOLERANCE",
-    "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten", "make_cage", "rebind",
+    "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten", "format_size", "make_cage",
+    "rebind",
     "rebind_report", "reframed", "solved_again", "some_indices", "thin_changed_rows", "thin_weights",
 ]
 

@@ -16,6 +16,7 @@ import scipy.sparse as sp
 
 from .cage import POKE_SIDES, Cage, make_cage, some_indices
 from .errors import CageError
+from .forecast import format_size
 from .io import writing
 from .meshing import DomainMesh
 from .parallel import thread_map, worker_count
@@ -404,15 +405,9 @@ def _check_headers(headers, file_size, damaged):
     _check_shapes({key: shape for key, (shape, _) in headers.items()}, damaged)
     declared = sum(math.prod(shape) * dtype.itemsize for shape, dtype in headers.values())
     if declared > max(EXPANSION_ALLOWANCE, MAX_EXPANSION * file_size):
-        damaged(f"its arrays would take {_size(declared)}, {declared / file_size:,.0f} times the file's "
-                f"{_size(file_size)}, where a binding's take about twice its file")
+        damaged(f"its arrays would take {format_size(declared)}, {declared / file_size:,.0f} times the file's "
+                f"{format_size(file_size)}, where a binding's take about twice its file")
 
-
-def _size(count):
-    """'16 KB', '629 MB', '3.1 GB': a byte count for messages."""
-    if count < 2**20:
-        return f"{count / 2**10:.0f} KB"
-    return f"{count / 2**20:.0f} MB" if count < 2**30 else f"{count / 2**30:.1f} GB"
 
 
 def _check_shapes(shapes, damaged):

@@ -147,7 +147,17 @@ def solves_stretched(control_points, epsilon=0.0):
 
 
 def format_size(count):
-    """'12 MB', '3.1 GB' (of 2^20 and 2^30 bytes, as the add-on's panel counts): a byte count for messages."""
+    """'512 B', '16 KB', '12 MB', '3.1 GB' (of 2^10, 2^20 and 2^30 bytes): a byte count for messages and panels.
+
+    Examples
+    --------
+    >>> format_size(512), format_size(16 * 2**10), format_size(12 * 2**20), format_size(3.1 * 2**30)
+    ('512 B', '16 KB', '12 MB', '3.1 GB')
+    """
+    if count < 2**10:
+        return f"{count:.0f} B"
+    if count < 2**20:
+        return f"{count / 2**10:.0f} KB"
     return f"{count / 2**20:.0f} MB" if count < 2**30 else f"{count / 2**30:.1f} GB"
 
 
