@@ -180,6 +180,7 @@ def locate(clock, domain, unit_points, refuse_outside=True):
 def geodesic_weights(clock, domain, weighting):
     """The geodesics stage: ω (F, n) of ``domain``, from the heat-method distances to its control vertices."""
     distances = geodesic_distances(domain.vertices, domain.cells, domain.control_vertices, clock.part("geodesics"))
+    clock.progress.check()
     omega = tv_weights(domain.cells, distances, weighting)
     clock.done("geodesics")
     return omega

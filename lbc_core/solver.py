@@ -192,6 +192,7 @@ def solve_on_mesh(
     weights = np.zeros((n_vertices, n))
     weights[boundary_vertices] = boundary_weights
     iterations, converged, history, state = 0, True, [], None
+    progress.check()
     mesh = MeshData.of(solve_vertices, cells, boundary_vertices, boundary_weights, BETA[d], unit_controls,
                        unit_vertices)
     if len(mesh.interior):
@@ -333,6 +334,7 @@ class _Run:
             if verdict == "reshaped":
                 step, positions = self._reshape(step)
                 value = _moved(value, positions, step.size_x + step.ops.sets.n_slots)
+                check()
                 residual = None if residual is None else _moved(residual, positions, len(value))
                 check()
                 if anderson:
@@ -408,10 +410,13 @@ class _Run:
         sets = self.pending_growth
         ops = PairOperators(self.mesh, sets, self.settings.dtype, self.progress.check)
         new_step = self._step_map(ops, step.duals)
+        self.progress.check()
         pair_positions = step.ops.pair_positions(ops)
+        self.progress.check()
         x_positions = np.arange(ops.d)[:, None] * ops.n_pairs + pair_positions[None, :]
         x_positions[:, pair_positions < 0] = -1
         slot_positions = step.ops.sets.slot_positions(sets)
+        self.progress.check()
         positions = np.concatenate([x_positions.ravel(),
                                     np.where(slot_positions >= 0, new_step.size_x + slot_positions, -1)])
         self.history.append(dict(iteration=self.iteration, slots=sets.n_slots, pairs=ops.n_pairs))

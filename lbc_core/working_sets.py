@@ -32,6 +32,8 @@ FACTOR_GROUP_SLOTS = 20000
 # The harmonic coordinates' largest entries a vertex's first working set takes, then twice as many until the vertex's
 # position lies in their control points' hull (bench/RESULTS.md, "The locality solver").
 FIRST_SET_SIZE = 12
+# Pairs per chunk of the gradient matrix's assembly, cancel checked between chunks (bench/RESULTS.md, "The step").
+GRADIENT_CHUNK_PAIRS = 100_000
 # The largest violation of partition of unity or reproduction the solve's output keeps (unit-frame coordinates).
 EXACT = 1e-12
 
@@ -262,28 +264,29 @@ def _interior_system(scaled_gradients, cells, interior_position, mass):
     return (system + sp.diags(mass)).tocsr()
 
 
-def _block_system(system, sets, rank):
-    """The least-squares step's matrix on the slots, the lower triangle in the order ``rank`` (a permutation of the
-    slots) as COO: each control point's block is ``system``'s principal submatrix on the vertices holding it."""
-    n = sets.n_controls
-    vertex = sets.vertex_of_slot
-    table = np.full((len(sets.indptr) - 1, n), -1, dtype=np.int64)
-    table[vertex, sets.controls] = np.arange(sets.n_slots)
+def _block_system(system, sets, table, rank, slots, start):
+    """The lower triangle (COO) of the least-squares matrix on ``slots``, whole control points' blocks whose ranks in
+    control-major order are ``start`` on: each control point's block is ``system``'s principal submatrix on the
+    vertices holding it. ``table`` (N_in, n) gives the slot of each (vertex, control point), -1 where none."""
+    vertex = sets.vertex_of_slot[slots]
     counts = np.diff(system.indptr)[vertex]
-    slot = np.repeat(np.arange(sets.n_slots), counts)
+    local = np.repeat(np.arange(len(slots)), counts)
     entry = np.repeat(system.indptr[vertex] - np.r_[0, np.cumsum(counts)[:-1]], counts) + np.arange(counts.sum())
-    other = table[system.indices[entry], sets.controls[slot]]
-    del table
-    rows, columns = rank[slot], np.where(other >= 0, rank[np.maximum(other, 0)], -1)
+    other = table[system.indices[entry], sets.controls[slots][local]]
+    rows, columns = rank[slots][local] - start, np.where(other >= 0, rank[np.maximum(other, 0)] - start, -1)
     lower = (other >= 0) & (rows >= columns)
-    return sp.coo_matrix((system.data[entry[lower]], (rows[lower], columns[lower])),
-                         shape=(sets.n_slots, sets.n_slots))
+    size = len(slots)
+    return sp.coo_matrix((system.data[entry[lower]], (rows[lower], columns[lower])), shape=(size, size)).tocsr().tocoo()
 
 
-def _group_factors(lower, sets, dtype, check):
-    """Factorisations of a block-diagonal matrix given by its lower triangle in control-major order (COO), in
-    groups of whole control points of about FACTOR_GROUP_SLOTS slots: [(start, stop, Factor)]."""
-    rows = lower.tocsr()
+def _group_factors(system, sets, order, dtype, check):
+    """Factorisations of the least-squares matrix, block-diagonal over the control points, in control-major
+    ``order``, in groups of whole control points of about FACTOR_GROUP_SLOTS slots, each group's block built just
+    before its factorisation: [(start, stop, Factor)]."""
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    table = np.full((len(sets.indptr) - 1, sets.n_controls), -1, dtype=np.int64)
+    table[sets.vertex_of_slot, sets.controls] = np.arange(sets.n_slots)
     ends = np.cumsum(np.bincount(sets.controls, minlength=sets.n_controls))
     bounds = [0]
     for end in ends:
@@ -293,10 +296,9 @@ def _group_factors(lower, sets, dtype, check):
         bounds.append(sets.n_slots)
     factors = []
     for start, stop in zip(bounds[:-1], bounds[1:]):
-        block = rows[start:stop].tocoo()
-        factors.append((start, stop, Factor(sp.coo_matrix((block.data, (block.row, block.col - start)),
-                                                           shape=(stop - start, stop - start)), dtype)))
         check()
+        lower = _block_system(system, sets, table, rank, order[start:stop], start)
+        factors.append((start, stop, Factor(lower, dtype)))
     return factors
 
 
@@ -363,30 +365,30 @@ class PairOperators:
         corner_slot = table[corner_vertex, control]
         del table
         check()
-        boundary_row = mesh.boundary_position[corner_vertex]
-        corner_fixed = np.where(boundary_row >= 0, mesh.boundary_weights[np.maximum(boundary_row, 0), control], 0.0)
-        scaled = mesh.scaled_gradients[self.pair_cell].astype(dtype)  # (P, d+1, d)
-        touching = np.flatnonzero(corner_fixed.any(axis=1))  # pairs of cells on the cage: a few of them
+        # Only pairs of cells with a corner on the cage carry boundary values: a few of them.
+        touching = np.flatnonzero((mesh.boundary_position[mesh.cells] >= 0).any(axis=1)[self.pair_cell])
+        boundary_row = mesh.boundary_position[corner_vertex[touching]]
+        corner_fixed = np.where(boundary_row >= 0,
+                                mesh.boundary_weights[np.maximum(boundary_row, 0), control[touching]], 0.0)
         self.boundary_part = np.zeros((d, len(self.pair_cell)), dtype=dtype)
-        self.boundary_part[:, touching] = np.einsum("pc,pck->kp", corner_fixed[touching], scaled[touching])
+        self.boundary_part[:, touching] = np.einsum("pc,pck->kp", corner_fixed,
+                                                    mesh.scaled_gradients[self.pair_cell[touching]])
         del corner_vertex, boundary_row, corner_fixed
         check()
-        self.gradient = _gradient_matrix(scaled, corner_slot, sets.n_slots, dtype)
-        del scaled, corner_slot
+        self.gradient = _gradient_matrix(mesh.scaled_gradients, self.pair_cell, corner_slot, sets.n_slots, dtype,
+                                         check)
+        del corner_slot
         check()
         self.slot_mass = mesh.sqrt_mass[sets.vertex_of_slot].astype(dtype)
         # Control-major order: the matrix is block-diagonal over the control points, which the factorisation's
         # analysis then sees at once (a quarter faster on the gargoyle's cages).
         self.order = np.lexsort((sets.vertex_of_slot, sets.controls))
-        rank = np.empty_like(self.order)
-        rank[self.order] = np.arange(len(self.order))
-        system = _block_system(mesh.system, sets, rank)
+        self.factors = _group_factors(mesh.system, sets, self.order, dtype, check)
         check()
-        self.factors = _group_factors(system, sets, dtype, check)
-        del system
         self.row_blocks = _row_blocks(self.gradient, worker_count())
         self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell].astype(dtype)
         self.dtype = dtype
+        check()
         self.padded = PaddedRows(sets, mesh)
         bounds = np.linspace(0, len(self.padded.targets), worker_count() + 1).astype(int)
         self.vertex_blocks = [slice(start, stop) for start, stop in zip(bounds[:-1], bounds[1:])]
@@ -487,15 +489,23 @@ def _row_blocks(matrix, count):
     return blocks
 
 
-def _gradient_matrix(scaled, corner_slot, n_slots, dtype):
-    """The (d P, S) CSR matrix of slot values → √|c| ∇w on the pairs, rows component-major, from each pair's corner
-    gradients (P, d+1, d) and corner slots (P, d+1), -1 where a corner holds no slot."""
-    n_pairs, _, d = scaled.shape
-    pair, corner = np.nonzero(corner_slot >= 0)  # row-major: each pair's corners in order
-    counts = np.bincount(pair, minlength=n_pairs)
-    row_starts = np.r_[0, np.cumsum(counts)]
-    index_type = np.int32 if d * len(pair) < 2**31 else np.int64
-    indptr = np.concatenate([row_starts[:-1] + k * len(pair) for k in range(d)] + [[d * len(pair)]]).astype(index_type)
-    indices = np.tile(corner_slot[pair, corner], d).astype(index_type)
-    data = np.concatenate([scaled[pair, corner, k] for k in range(d)]).astype(dtype)
+def _gradient_matrix(scaled, pair_cell, corner_slot, n_slots, dtype, check):
+    """The (d P, S) CSR matrix of slot values → √|c| ∇w on the pairs, rows component-major, from each cell's corner
+    gradients (F, d+1, d), each pair's cell (P,) and corner slots (P, d+1), -1 where a corner holds no slot. Filled
+    GRADIENT_CHUNK_PAIRS pairs at a time, ``check`` called between them."""
+    n_pairs, d = len(pair_cell), scaled.shape[2]
+    row_starts = np.r_[0, np.cumsum(np.count_nonzero(corner_slot >= 0, axis=1))]
+    entries = int(row_starts[-1])
+    index_type = np.int32 if d * entries < 2**31 else np.int64
+    indptr = np.concatenate([row_starts[:-1] + k * entries for k in range(d)] + [[d * entries]]).astype(index_type)
+    indices, data = np.empty(d * entries, dtype=index_type), np.empty(d * entries, dtype=dtype)
+    for first in range(0, n_pairs, GRADIENT_CHUNK_PAIRS):
+        check()
+        chunk = corner_slot[first:first + GRADIENT_CHUNK_PAIRS]
+        pair, corner = np.nonzero(chunk >= 0)  # row-major: each pair's corners in order
+        cell, slot = pair_cell[first + pair], chunk[pair, corner]
+        start, stop = row_starts[first], row_starts[first] + len(pair)
+        for k in range(d):
+            indices[k * entries + start:k * entries + stop] = slot
+            data[k * entries + start:k * entries + stop] = scaled[cell, corner, k]
     return sp.csr_matrix((data, indices, indptr), shape=(d * n_pairs, n_slots))

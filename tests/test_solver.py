@@ -410,3 +410,25 @@ def test_first_working_sets_end_where_a_row_cannot_grow_further():
     sets, weights, _ = _until_feasible(mesh, sp.csr_matrix(values.shape), order, values, None, check,
                                        first_size=np.array([4, 4]))
     assert len(rounds) <= 3 and np.diff(sets.indptr).tolist() == [4, 6]
+
+
+@pytest.mark.parametrize("function_name", ["_gradient_matrix", "_group_factors"])
+def test_cancel_is_heard_inside_a_layouts_long_parts(function_name, monkeypatch):
+    """The gradient matrix is assembled and the least-squares matrix factorised in chunks, cancel polled between
+    them: a cancel turning true there stops the solve from inside that function, not after it."""
+    import sys
+
+    import lbc_core.working_sets as working_sets
+
+    monkeypatch.setattr(working_sets, "GRADIENT_CHUNK_PAIRS", 500)
+    monkeypatch.setattr(working_sets, "FACTOR_GROUP_SLOTS", 500)
+    polled_from = []
+
+    def cancel():
+        polled_from.append(sys._getframe(2).f_code.co_name)
+        return polled_from.count(function_name) >= 2  # its second poll: between two chunks
+
+    problem = _corpus_problem("cube", cells=2000)
+    with pytest.raises(lbc_core.Cancelled):
+        solve_on_mesh(*problem, cancel=cancel)
+    assert polled_from[-1] == function_name
