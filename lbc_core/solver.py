@@ -280,26 +280,28 @@ class _Run:
             weights = _moved(weights, sets.slot_positions(grown), grown.n_slots)
             sets = grown
         check()
-        ops = PairOperators(self.mesh, sets, self.settings.dtype, check)
-        step = self._step_map(ops, duals)
-        state = step.state_of(weights) if carried is None else carried.state_for(step, sets)
+        step = self._step_map(PairOperators(self.mesh, sets, self.settings.dtype, check), duals)
+        start = [step, step.state_of(weights) if carried is None else carried.state_for(step, sets)]
         if carried is not None:  # a warm start's sets fit already: its first reshape comes later
             self.next_growth_check = GROWTH_SPACING ** 2 * GROWTH_FIRST_CHECK
         self.started = time.perf_counter()
         self.checks, self.fraction, self.first_distance = [], 0.0, None
-        state, out, step = self._iterate(step, state)
+        del step, weights, sets  # _iterate empties ``start``: no frame here keeps the first layout once reshaped
+        state, out, step = self._iterate(start)
         final = SolverState.of(step, state, self.mesh)
         self.outer_progress(_ADMM_END, "projecting onto the constraints")
         return _Solution(step.ops.sets, step.final_weights(state), final)
 
-    def _iterate(self, step, state):
-        """Steps from ``state`` until convergence, the iteration limit, or growth of the working sets (which
-        returns the state carried onto the grown layout)."""
+    def _iterate(self, start):
+        """Steps from ``start`` ([step map, state], emptied here) until convergence or the iteration limit, through
+        growths of the working sets: the final state, the last step's record and the step map it ended on."""
+        step, value = start
+        start.clear()
         settings, check = self.settings, self.progress.check
-        anderson = Anderson(len(state), settings.anderson_memory, np.float32, check) \
+        anderson = Anderson(len(value), settings.anderson_memory, np.float32, check) \
             if settings.anderson_memory else None
         alpha, period = settings.relaxation, settings.anderson_period
-        value, residual, norm, out, previous = state, None, np.inf, None, None
+        residual, norm, out, previous = None, np.inf, None, None
         next_check = self.iteration + settings.check_every
         primal_scale = None
         while self.iteration < settings.max_iterations:
