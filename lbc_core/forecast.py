@@ -16,8 +16,9 @@ SMALL_CAGE, SMALL_CAGE_TOLERANCE = 12, 2e-4
 # (cell, control point) pairs per cell at a solve's widest: PAIRS_SCALE[d] · n^PAIRS_POWER for n control points
 # (bench/RESULTS.md, "Memory and the cost model").
 PAIRS_SCALE, PAIRS_POWER = {2: 2.2, 3: 2.5}, 0.5
-# Peak bytes per pair (same section), and per entry of the (cells, n) TV weights the caller holds.
-BYTES_PER_PAIR = 1000
+# Peak bytes per pair (bench/RESULTS.md, "The locality solver, third round"), and per entry of the (cells, n) TV
+# weights the caller holds.
+BYTES_PER_PAIR = 620
 BYTES_PER_WEIGHT = 8
 
 

@@ -334,6 +334,9 @@ class _Run:
                 self.converged = True
                 return value, out, step
             if verdict == "reshaped":
+                # The old layout's records and candidates are not kept through the reshape (its memory peak).
+                out = previous = None
+                del candidate, start_value, new_value, new_out, new_previous, new_residual
                 step, positions = self._reshape(step)
                 value = _moved(value, positions, step.size_x + step.ops.sets.n_slots)
                 check()
@@ -341,7 +344,6 @@ class _Run:
                 check()
                 if anderson:
                     anderson.embed(positions, len(value), residual)
-                out = previous = None
                 next_check = self.iteration + settings.check_every
             if verdict == "rescaled":
                 if anderson:
@@ -410,6 +412,7 @@ class _Run:
         """The step map on the reshaped working sets, and where each entry of the flat state goes there (-1:
         dropped)."""
         sets = self.pending_growth
+        step.ops.release()  # only its pairs and sets are read from here on: its matrices go before the new ones come
         ops = PairOperators(self.mesh, sets, self.settings.dtype, self.progress.check)
         new_step = self._step_map(ops, step.duals)
         self.progress.check()

@@ -454,6 +454,10 @@ class PairOperators:
         return (padded.scatter(weights), np.concatenate([part[1] for part in parts]),
                 np.concatenate([part[2] for part in parts]))
 
+    def release(self):
+        """Drop the matrices, factors and padded rows (a layout being replaced keeps only its pairs and sets)."""
+        self.gradient = self.row_blocks = self.factors = self.padded = None
+
     def restore_rows(self, weights, rows):
         """(S,) weights with the given vertices' rows, whose projection missed round-off (a badly conditioned hull,
         as in a very thin cage), restored on their slots: the least-norm correction, else the nearest feasible
