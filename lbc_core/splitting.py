@@ -59,6 +59,7 @@ class DouglasRachford:
         self.duals = np.zeros((len(ops.padded.targets), ops.d + 1)) if duals is None else duals
         self.secular_roots = None if axis_scale is None else np.zeros(ops.n_pairs)
         self.dtype = ops.dtype
+        self.buffers = None
 
     def split(self, state):
         """Views of a flat state as v_X (d, P) and v_W (S,)."""
@@ -94,20 +95,33 @@ class DouglasRachford:
         v_x, v_w = self.split(state)
         shrink = self.shrink_factors(v_x, self.thresholds, remember=True)
         W = self.projected(v_w)
-        reflected_x = v_x * (2.0 * shrink - 1.0) - ops.boundary_part
+        # Temporaries of the pairs' size go to buffers kept from step to step: fresh ones cost page faults.
+        pair_factor, pair_work = self._buffers(shrink.shape, v_x.shape)
+        np.multiply(shrink, 2.0, out=pair_factor)
+        pair_factor -= 1.0
+        reflected_x = np.multiply(v_x, pair_factor, out=pair_work)
+        reflected_x -= ops.boundary_part
         rhs = ops.transposed(reflected_x.ravel())
         rhs += ops.slot_mass * (2.0 * W - v_w)
         z = ops.solve(rhs)
         gradient = ops.gradients(z)
         new_state = np.empty_like(state)
         new_x, new_w = self.split(new_state)
-        np.multiply(v_x, 1.0 - alpha * shrink, out=new_x)
-        new_x += alpha * gradient
+        np.multiply(shrink, -alpha, out=pair_factor)
+        pair_factor += 1.0
+        np.multiply(v_x, pair_factor, out=new_x)
+        new_x += np.multiply(gradient, alpha, out=pair_work)
         np.multiply(ops.slot_mass, z, out=new_w)
         new_w -= W
         new_w *= alpha
         new_w += v_w
         return new_state, Step(v_x, v_w, shrink, W, z, gradient)
+
+    def _buffers(self, factor_shape, work_shape):
+        """Two work arrays of the step's dtype, (P,) or (d, P) for the factor and (d, P), kept across steps."""
+        if self.buffers is None or self.buffers[0].shape != factor_shape:
+            self.buffers = np.empty(factor_shape, self.dtype), np.empty(work_shape, self.dtype)
+        return self.buffers
 
     def rescale_penalty(self, state, factor):
         """Change the penalty to ``factor`` times itself, in place on ``state``: the split variables stay, the scaled
