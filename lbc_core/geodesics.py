@@ -201,6 +201,7 @@ def tv_weights(cells, distances, weighting="quadratic"):
     else:
         raise ValueError(f"unknown weighting {weighting!r}: use one of {sorted(WEIGHTINGS)} or a callable")
     weights = np.asarray(rho(cell_distance), dtype=float)
-    if weights.shape != cell_distance.shape or not np.all(np.isfinite(weights)) or np.any(weights < 0):
+    # min ≥ 0 fails on NaN and -inf, a finite max on +inf: two reductions, no (F, n) temporaries.
+    if weights.shape != cell_distance.shape or not (weights.min() >= 0 and np.isfinite(weights.max())):
         raise ValueError("the weighting function must return finite, non-negative values of the same shape")
     return weights
