@@ -32,7 +32,8 @@ FACTOR_GROUP_SLOTS = 20000
 # The harmonic coordinates' largest entries a vertex's first working set takes, then twice as many until the vertex's
 # position lies in their control points' hull (bench/RESULTS.md, "The locality solver").
 FIRST_SET_SIZE = 12
-# Pairs per chunk of the gradient matrix's assembly, cancel checked between chunks (bench/RESULTS.md, "The step").
+# Pairs per chunk of the gradient matrix's assembly, cancel checked between chunks (bench/RESULTS.md, "The locality
+# solver, third round").
 GRADIENT_CHUNK_PAIRS = 100_000
 # The largest violation of partition of unity or reproduction the solve's output keeps (unit-frame coordinates).
 EXACT = 1e-12
