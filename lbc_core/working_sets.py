@@ -4,7 +4,9 @@ A vertex's *working set* is the control points whose coordinates may be non-zero
 of it is a *slot*. The coordinates outside the working sets are held at 0, so the problem on the working sets is the
 LBC problem with more zeros imposed: the same problem wherever the working sets cover the solution's support. The
 solver keeps one ring of mesh vertices of margin around the support, growing the sets (:meth:`WorkingSets.grown`)
-where a coordinate turns positive next to a vertex that cannot hold it.
+where a coordinate turns positive next to a vertex that cannot hold it. Sets that hold most of all the slots anyway
+(cages whose coordinates spread wide, as Blender's Cylinder with its n-gon caps) are made whole, so that every control
+point's block of the step's matrix is the same and one factorisation serves them all.
 
 A coordinate's gradient is non-zero only on the cells that touch a vertex holding it (a slot or a fixed non-zero
 boundary value): the (cell, control point) *pairs*. :class:`PairOperators` holds, on the pairs, the gradient operator,
@@ -35,6 +37,10 @@ FIRST_SET_SIZE = 12
 # Pairs per chunk of the gradient matrix's assembly, cancel checked between chunks (bench/RESULTS.md, "The locality
 # solver, third round").
 GRADIENT_CHUNK_PAIRS = 100_000
+# Working sets holding more than this share of all (vertex, control point) slots are made whole: every control
+# point's block of the step's matrix is then the same, one factor for all (bench/RESULTS.md, "The locality solver,
+# third round").
+WHOLE_FROM = 0.6
 # The largest violation of partition of unity or reproduction the solve's output keeps (unit-frame coordinates).
 EXACT = 1e-12
 
@@ -78,15 +84,29 @@ class WorkingSets:
         matrix.sort_indices()
         return cls(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.shape[1])
 
+    @property
+    def whole(self):
+        """Whether every interior vertex holds every control point."""
+        return self.n_slots == (len(self.indptr) - 1) * self.n_controls
+
+    def widened(self):
+        """These sets, or every control point at every vertex where they hold more than WHOLE_FROM of them all."""
+        if self.whole or self.n_slots <= WHOLE_FROM * (len(self.indptr) - 1) * self.n_controls:
+            return self
+        n_rows, n = len(self.indptr) - 1, self.n_controls
+        return WorkingSets(np.arange(n_rows + 1, dtype=np.int64) * n, np.tile(np.arange(n, dtype=np.int64), n_rows), n)
+
     def reshaped(self, required, kept):
         """These working sets with the pattern of ``required`` added and the slots outside ``kept`` dropped (both
-        (N_in, n) sparse patterns, ``kept`` covering ``required``); None when nothing changes."""
+        (N_in, n) sparse patterns, ``kept`` covering ``required``), :meth:`widened`; None when nothing changes."""
+        if self.whole:
+            return None
         current = self.matrix()
         union = (current.multiply(kept) + sp.csr_matrix(required, dtype=float)).astype(bool).astype(float)
         union.eliminate_zeros()
         if union.nnz == self.n_slots and current.multiply(union).nnz == self.n_slots:
             return None
-        return WorkingSets.from_matrix(union)
+        return WorkingSets.from_matrix(union).widened()
 
     def grown(self, required):
         """These working sets with the pattern of ``required`` added; None when it adds nothing."""
@@ -155,7 +175,12 @@ def _until_feasible(mesh, base, order, values, duals, check, first_size=None):
         # Rows that hold every control point already can grow no further (a cage so thin that the projection's
         # tolerance is out of reach there): doubling the others' would loop for ever.
         if feasible.all() or (size[~feasible] >= n).all():
-            return sets, padded.scatter(weights), duals_out
+            weights, whole = padded.scatter(weights), sets.widened()
+            if whole is not sets:  # the weights are feasible on the wider sets too, zero in the new slots
+                widened = np.zeros(whole.n_slots)
+                widened[sets.slot_positions(whole)] = weights
+                sets, weights = whole, widened
+            return sets, weights, duals_out
         size[~feasible] = np.minimum(np.maximum(2 * size[~feasible], size[~feasible] + 4), n)
 
 
@@ -265,16 +290,19 @@ def _interior_system(scaled_gradients, cells, interior_position, mass):
     return (system + sp.diags(mass)).tocsr()
 
 
-def _block_system(system, sets, table, rank, slots, start):
-    """The lower triangle (COO) of the least-squares matrix on ``slots``, whole control points' blocks whose ranks in
-    control-major order are ``start`` on: each control point's block is ``system``'s principal submatrix on the
-    vertices holding it. ``table`` (N_in, n) gives the slot of each (vertex, control point), -1 where none."""
+def _block_system(system, sets, table, slots, position):
+    """The lower triangle (COO) of the least-squares matrix on ``slots``, whole control points' blocks, numbered in
+    the order given: each control point's block is ``system``'s principal submatrix on the vertices holding it.
+    ``table`` (N_in, n) gives the slot of each (vertex, control point), -1 where none; ``position`` (S,) is a work
+    array of -1, left so."""
     vertex = sets.vertex_of_slot[slots]
     counts = np.diff(system.indptr)[vertex]
-    local = np.repeat(np.arange(len(slots)), counts)
+    rows = np.repeat(np.arange(len(slots)), counts)
     entry = np.repeat(system.indptr[vertex] - np.r_[0, np.cumsum(counts)[:-1]], counts) + np.arange(counts.sum())
-    other = table[system.indices[entry], sets.controls[slots][local]]
-    rows, columns = rank[slots][local] - start, np.where(other >= 0, rank[np.maximum(other, 0)] - start, -1)
+    other = table[system.indices[entry], sets.controls[slots][rows]]
+    position[slots] = np.arange(len(slots))
+    columns = np.where(other >= 0, position[np.maximum(other, 0)], -1)
+    position[slots] = -1
     lower = (other >= 0) & (rows >= columns)
     size = len(slots)
     return sp.coo_matrix((system.data[entry[lower]], (rows[lower], columns[lower])), shape=(size, size)).tocsr().tocoo()
@@ -282,24 +310,39 @@ def _block_system(system, sets, table, rank, slots, start):
 
 def _group_factors(system, sets, order, dtype, check):
     """Factorisations of the least-squares matrix, block-diagonal over the control points, in control-major
-    ``order``, in groups of whole control points of about FACTOR_GROUP_SLOTS slots, each group's block built just
-    before its factorisation: [(start, stop, Factor)]."""
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
+    ``order``: [(positions (k, m), Factor)], each factor solving the blocks at ``positions`` of that order.
+
+    Control points held by the same vertices have the same block: one factor solves all k of them as k right-hand
+    sides (where the supports are wide, as in Blender's Cylinder, most are alike). The others are factorised in
+    groups of about FACTOR_GROUP_SLOTS slots (k = 1), each group's block built just before its factorisation."""
     table = np.full((len(sets.indptr) - 1, sets.n_controls), -1, dtype=np.int64)
     table[sets.vertex_of_slot, sets.controls] = np.arange(sets.n_slots)
-    ends = np.cumsum(np.bincount(sets.controls, minlength=sets.n_controls))
-    bounds = [0]
-    for end in ends:
-        if end - bounds[-1] >= FACTOR_GROUP_SLOTS:
-            bounds.append(int(end))
-    if bounds[-1] < sets.n_slots:
-        bounds.append(sets.n_slots)
-    factors = []
-    for start, stop in zip(bounds[:-1], bounds[1:]):
+    position = np.full(sets.n_slots, -1, dtype=np.int64)
+    counts = np.bincount(sets.controls, minlength=sets.n_controls)
+    starts = np.r_[0, np.cumsum(counts)[:-1]]
+    ordered_vertices = sets.vertex_of_slot[order]
+    alike = {}
+    for control in np.flatnonzero(counts):
+        key = ordered_vertices[starts[control]:starts[control] + counts[control]].tobytes()
+        alike.setdefault(key, []).append(control)
+    factors, group = [], []
+    for controls in sorted(alike.values()):
+        if len(controls) == 1:
+            group.append(controls[0])
+            if counts[group].sum() < FACTOR_GROUP_SLOTS:
+                continue
         check()
-        lower = _block_system(system, sets, table, rank, order[start:stop], start)
-        factors.append((start, stop, Factor(lower, dtype)))
+        blocks = [starts[c] + np.arange(counts[c]) for c in (controls[:1] if len(controls) > 1 else group)]
+        slots = np.concatenate(blocks)
+        positions = (starts[controls][:, None] + np.arange(counts[controls[0]]) if len(controls) > 1
+                     else slots[None, :])
+        factors.append((positions, Factor(_block_system(system, sets, table, order[slots], position), dtype)))
+        if len(controls) == 1:
+            group = []
+    if group:
+        check()
+        slots = np.concatenate([starts[c] + np.arange(counts[c]) for c in group])
+        factors.append((slots[None, :], Factor(_block_system(system, sets, table, order[slots], position), dtype)))
     return factors
 
 
@@ -433,8 +476,8 @@ class PairOperators:
     def solve(self, rhs):
         """The least-squares step's solve, in slot order."""
         ordered = rhs[self.order]
-        for start, stop, factor in self.factors:
-            ordered[start:stop] = factor.solve(ordered[start:stop])
+        for positions, factor in self.factors:
+            ordered[positions.T] = factor.solve(ordered[positions.T])
         out = np.empty_like(rhs)
         out[self.order] = ordered
         return out

@@ -386,14 +386,17 @@ def test_a_state_follows_its_cells_restricted_updated_and_replaced():
     np.testing.assert_array_equal(moved.slot_state, state.slot_state)
 
 
-def test_first_working_sets_end_where_a_row_cannot_grow_further():
+def test_first_working_sets_end_where_a_row_cannot_grow_further(monkeypatch):
     """A cage squashed to aspect 1e-3 looped for ever: a vertex whose projection misses its tolerance even with every
     control point held kept the others' sets doubling, unchanged, round after round."""
     from types import SimpleNamespace
 
     import scipy.sparse as sp
 
+    import lbc_core.working_sets as working_sets
     from lbc_core.working_sets import _until_feasible
+
+    monkeypatch.setattr(working_sets, "WHOLE_FROM", 1.0)  # the sets as grown, not made whole
 
     controls = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [2, 2, 2]])
     interior = np.array([[0.2, 0.2, 0.2], [3.0, 3.0, 3.0]])  # the second outside every hull
@@ -428,7 +431,27 @@ def test_cancel_is_heard_inside_a_layouts_long_parts(function_name, monkeypatch)
         polled_from.append(sys._getframe(2).f_code.co_name)
         return polled_from.count(function_name) >= 2  # its second poll: between two chunks
 
-    problem = _corpus_problem("cube", cells=2000)
+    problem = _corpus_problem("torus", cells=2000)
     with pytest.raises(lbc_core.Cancelled):
         solve_on_mesh(*problem, cancel=cancel)
     assert polled_from[-1] == function_name
+
+
+def test_wide_working_sets_are_made_whole_and_share_one_factor(monkeypatch):
+    """Blender's Cylinder (n-gon caps) spreads its coordinates over nearly every control point: its working sets are
+    made whole, and one factorisation then solves every control point's block."""
+    import lbc_core.working_sets as working_sets
+
+    shared = []
+    group_factors = working_sets._group_factors
+
+    def spy(*args):
+        factors = group_factors(*args)
+        shared.append(max(positions.shape[0] for positions, _ in factors))
+        return factors
+
+    monkeypatch.setattr(working_sets, "_group_factors", spy)
+    problem = _corpus_problem("cylinder-32-ngon", cells=2000)
+    result = solve_on_mesh(*problem)
+    assert result.converged and shared[-1] == len(problem[4]) == 64
+    assert_quality(problem[0], result.weights, problem[4], problem[2], problem[3])
