@@ -281,6 +281,7 @@ class _Run:
             sets = grown
         check()
         step = self._step_map(PairOperators(self.mesh, sets, self.settings.dtype, check), duals)
+        check()
         start = [step, step.state_of(weights) if carried is None else carried.state_for(step, sets)]
         if carried is not None:  # a warm start's sets fit already: its first reshape comes later
             self.next_growth_check = GROWTH_SPACING ** 2 * GROWTH_FIRST_CHECK
