@@ -125,7 +125,7 @@ def _heat_distances_triangles(vertices, cells, sources, progress):
     solver = potpourri3d.MeshHeatMethodDistanceSolver(np.c_[vertices, np.zeros(len(vertices))], np.asarray(cells))
     columns = []
     for count, source in enumerate(sources):
-        progress(count / len(sources), "geodesic distances: solving")
+        progress(count / len(sources), f"geodesic distances: solving, {count} of {len(sources)} cage vertices done")
         columns.append(solver.compute_distance(int(source)))
     return np.maximum(np.stack(columns, axis=1), 0.0)
 
@@ -153,7 +153,8 @@ def _heat_distances_tetrahedra(vertices, cells, sources, progress):
     sources = np.asarray(sources)
     distances = np.zeros((n_vertices, len(sources)))
     for start in range(0, len(sources), SOURCES_PER_CHUNK):
-        progress(0.1 + 0.9 * start / len(sources), "geodesic distances: solving")
+        progress(0.1 + 0.9 * start / len(sources),
+                 f"geodesic distances: solving, {start} of {len(sources)} cage vertices done")
         chunk = sources[start:start + SOURCES_PER_CHUNK]
         impulses = np.zeros((n_vertices, len(chunk)))
         impulses[chunk, np.arange(len(chunk))] = 1.0

@@ -266,6 +266,7 @@ class _Run:
         self.outer_progress, self.progress = progress, progress.part(_SETUP_END, _ADMM_END)
         self.iteration, self.converged, self.history = 0, False, []
         self.next_growth_check = GROWTH_FIRST_CHECK
+        self.reshapes = self.reshapes_told = 0
 
     def _step_map(self, ops, duals):
         axis_scale = None if self.stretch is None else self.stretch.axis_scale
@@ -426,6 +427,7 @@ class _Run:
         positions = np.concatenate([x_positions.ravel(),
                                     np.where(slot_positions >= 0, new_step.size_x + slot_positions, -1)])
         self.history.append(dict(iteration=self.iteration, slots=sets.n_slots, pairs=ops.n_pairs))
+        self.reshapes += 1
         return new_step, positions
 
     def _report(self, distance):
@@ -439,7 +441,11 @@ class _Run:
         if self.expected is not None and self.iteration < self.expected:
             left = min(left, (self.expected - self.iteration) * elapsed / self.iteration)
         told = f", {format_remaining(left)}" if by_residual > 0 else ""
-        self.progress(self.fraction, f"ADMM iteration {self.iteration}, residual {distance:.1f}× the tolerance{told}")
+        # A reshape adds unknowns the step has not settled yet: the residual rises, and the message says why.
+        grew = " after the working sets grew" if self.reshapes > self.reshapes_told else ""
+        self.reshapes_told = self.reshapes
+        self.progress(self.fraction,
+                      f"ADMM iteration {self.iteration}, residual {distance:.1f}× the tolerance{grew}{told}")
 
 
 def _moved(values, positions, size):

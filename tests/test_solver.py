@@ -455,3 +455,14 @@ def test_wide_working_sets_are_made_whole_and_share_one_factor(monkeypatch):
     result = solve_on_mesh(*problem)
     assert result.converged and shared[-1] == len(problem[4]) == 64
     assert_quality(problem[0], result.weights, problem[4], problem[2], problem[3])
+
+
+def test_progress_says_when_the_working_sets_grew():
+    """After a reshape the residual rises (new unknowns); the next progress message says why, and only that one."""
+    messages = []
+    problem = _corpus_problem("torus", cells=2000)
+    result = solve_on_mesh(*problem, progress=lambda fraction, message: messages.append(message))
+    reshapes = [record for record in result.history if "slots" in record]
+    told = [message for message in messages if "after the working sets grew" in message]
+    assert reshapes and 0 < len(told) <= len(reshapes)
+    assert all(message.startswith("ADMM iteration") for message in told)
