@@ -325,25 +325,37 @@ def _group_factors(system, sets, order, dtype, check):
     for control in np.flatnonzero(counts):
         key = ordered_vertices[starts[control]:starts[control] + counts[control]].tobytes()
         alike.setdefault(key, []).append(control)
-    factors, group = [], []
+
+    def factor(slots):  # ``slots``: positions in control-major order
+        return Factor(_block_system(system, sets, table, order[slots], position), dtype)
+
+    factors, singles = [], []
     for controls in sorted(alike.values()):
         if len(controls) == 1:
-            group.append(controls[0])
-            if counts[group].sum() < FACTOR_GROUP_SLOTS:
-                continue
+            singles.append(controls[0])
+            continue
+        block = np.arange(counts[controls[0]])
         check()
-        blocks = [starts[c] + np.arange(counts[c]) for c in (controls[:1] if len(controls) > 1 else group)]
-        slots = np.concatenate(blocks)
-        positions = (starts[controls][:, None] + np.arange(counts[controls[0]]) if len(controls) > 1
-                     else slots[None, :])
-        factors.append((positions, Factor(_block_system(system, sets, table, order[slots], position), dtype)))
-        if len(controls) == 1:
-            group = []
-    if group:
+        factors.append((starts[controls][:, None] + block, factor(starts[controls[0]] + block)))
+    for group in _groups(singles, counts, FACTOR_GROUP_SLOTS):
+        slots = np.concatenate([starts[control] + np.arange(counts[control]) for control in group])
         check()
-        slots = np.concatenate([starts[c] + np.arange(counts[c]) for c in group])
-        factors.append((slots[None, :], Factor(_block_system(system, sets, table, order[slots], position), dtype)))
+        factors.append((slots[None, :], factor(slots)))
     return factors
+
+
+def _groups(controls, counts, size):
+    """``controls`` in consecutive groups of at least ``size`` slots (``counts`` per control point), the last one
+    smaller."""
+    group, slots = [], 0
+    for control in controls:
+        group.append(control)
+        slots += counts[control]
+        if slots >= size:
+            yield group
+            group, slots = [], 0
+    if group:
+        yield group
 
 
 class PaddedRows:
