@@ -202,6 +202,8 @@ class MeshData:
         The boundary values as given, row k for the vertex ``boundary_position`` names k.
     boundary_position : (N,) int array
         Each vertex's row in ``boundary_weights``, -1 inside.
+    cell_on_cage : (F,) bool array
+        Cells with a corner on the cage: only their pairs carry boundary values.
     scaled_gradients : (F, d+1, d) float array
         √|c| ∇φ of each cell's corners.
     sqrt_cell : (F,) float array
@@ -225,6 +227,7 @@ class MeshData:
     fixed: sp.csr_matrix
     boundary_weights: np.ndarray
     boundary_position: np.ndarray
+    cell_on_cage: np.ndarray
     scaled_gradients: np.ndarray
     sqrt_cell: np.ndarray
     sqrt_mass: np.ndarray
@@ -254,9 +257,9 @@ class MeshData:
         boundary_position = np.full(n_vertices, -1)
         boundary_position[boundary_vertices] = np.arange(len(boundary_vertices))
         scaled = gradients * sqrt_cell[:, None, None]
-        return cls(vertices, cells, interior, position, fixed, boundary_weights, boundary_position, scaled, sqrt_cell,
-                   np.sqrt(beta * mass), adjacency, unit_controls, unit_vertices[interior],
-                   _interior_system(scaled, cells, position, beta * mass))
+        return cls(vertices, cells, interior, position, fixed, boundary_weights, boundary_position,
+                   (boundary_position[cells] >= 0).any(axis=1), scaled, sqrt_cell, np.sqrt(beta * mass), adjacency,
+                   unit_controls, unit_vertices[interior], _interior_system(scaled, cells, position, beta * mass))
 
     def margins(self, sets, weights):
         """The slots within one ring and within two rings of mesh vertices around the positive ``weights`` (S,)
@@ -421,8 +424,7 @@ class PairOperators:
         corner_slot = table[corner_vertex, control]
         del table
         check()
-        # Only pairs of cells with a corner on the cage carry boundary values: a few of them.
-        touching = np.flatnonzero((mesh.boundary_position[mesh.cells] >= 0).any(axis=1)[self.pair_cell])
+        touching = np.flatnonzero(mesh.cell_on_cage[self.pair_cell])  # pairs carrying boundary values: a few
         boundary_row = mesh.boundary_position[corner_vertex[touching]]
         corner_fixed = np.where(boundary_row >= 0,
                                 mesh.boundary_weights[np.maximum(boundary_row, 0), control[touching]], 0.0)
