@@ -118,8 +118,9 @@ class DouglasRachford:
         return new_state, Step(v_x, v_w, shrink, W, z, gradient)
 
     def _buffers(self, factor_shape, work_shape):
-        """Two work arrays of the step's dtype, (P,) or (d, P) for the factor and (d, P), kept across steps."""
-        if self.buffers is None or self.buffers[0].shape != factor_shape:
+        """Two work arrays of the step's dtype, (P,) or (d, P) for the factor and (d, P), kept across steps; made at
+        the first step, not while a reshape builds this map beside the old layout."""
+        if self.buffers is None:
             self.buffers = np.empty(factor_shape, self.dtype), np.empty(work_shape, self.dtype)
         return self.buffers
 
