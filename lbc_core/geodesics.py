@@ -16,13 +16,20 @@ from . import fem
 from .progress import Progress
 from .factor import Factor
 
+
+def _constant(d):
+    """ρ = 1, written over ``d``."""
+    d[...] = 1.0
+    return d
+
+
 # ρ of each weighting, by name; the paper's first (lbc_core.options.WEIGHTINGS lists these names for the options).
 # They work in place on the (F, n) array tv_weights made for them: a fresh one costs as much as the arithmetic.
 WEIGHTINGS = {
     "quadratic": lambda d: np.multiply(d, d, out=d),
     "linear": lambda d: d,
     "sqrt": lambda d: np.sqrt(d, out=d),
-    "constant": lambda d: np.copyto(d, 1.0) or d,
+    "constant": _constant,
 }
 # The heat method's check, in shares: of the pairs farther apart than FAR_SHARE of the largest straight-line distance,
 # at most MOST_BELOW under BELOW_STRAIGHT times their straight line, on at most CHECKED_VERTICES vertices, evenly
