@@ -67,8 +67,7 @@ class BindOptionProperties:
         name="Tolerance",
         description="Stopping tolerance of the solver (relative ADMM residual); 0 uses lbc's default "
         f"({DEFAULT_TOLERANCE[2]:g} in 2D, {DEFAULT_TOLERANCE[3]:g} in 3D, tighter for cages of a few vertices). "
-        "Smaller: more accurate weights, "
-        "slower bind",
+        "Smaller: more accurate weights, slower bind",
         default=0.0,
         min=0.0,
         soft_max=0.01,

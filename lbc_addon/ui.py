@@ -16,7 +16,6 @@ MANY_INFLUENCES = 32
 SUGGESTED_INFLUENCES = 24
 
 
-
 def draw_binding(layout, obj):
     """State, figures and actions of a bound mesh."""
     settings = obj.lbc

@@ -409,7 +409,6 @@ def _check_headers(headers, file_size, damaged):
                 f"{format_size(file_size)}, where a binding's take about twice its file")
 
 
-
 def _check_shapes(shapes, damaged):
     """Every array's shape against the sizes the others imply, the weights' count against what the points can hold."""
     n, d = shapes["cage_vertices"]

@@ -45,7 +45,7 @@ _COUNT_TOLERANCE = 0.15  # beyond this relative miss of the target cell count, m
 _SURFACE_SPACING = 1.0  # surface sample spacing, × the lattice cube side
 _BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage surface
 # Lattice corners of tetrahedra below this radius ratio are moved to raise the least ratio around them, in
-# _POLISH_ROUNDS rounds of _POLISH_TRIES tries up to _POLISH_STEP cube sides away (RESULTS.md, "Constants' notes").
+# _POLISH_ROUNDS rounds of _POLISH_TRIES tries up to _POLISH_STEP cube sides away (bench/RESULTS.md, "Constants' notes").
 _POLISH_RATIO = 0.2
 _FLAT = 1e-9  # a tetrahedron of at most this share of the median volume is flat (see _flip_flat)
 _POLISH_ROUNDS = 3
