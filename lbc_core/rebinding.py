@@ -37,7 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .binding import COLD, SOLVED_AGAIN, WARM, BindOutcome  # noqa: F401 (COLD, WARM: the marks of BindOutcome.start)
+from .binding import SOLVED_AGAIN, WARM, BindOutcome
 from .boundary import boundary_weights
 from .cage import ZERO_LENGTH, edge_pairing, make_cage
 from .constraints import padded_rows
@@ -101,7 +101,7 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     -------
     Binding
         Its ``outcome`` (:class:`~lbc_core.binding.BindOutcome`): ``start`` is "previous solution" (:data:`WARM`)
-        for a warm re-bind, "harmonic" (:data:`COLD`) for a cold one; ``report`` says, for the user, how many cells
+        for a warm re-bind, "harmonic" (:data:`lbc_core.binding.COLD`) for a cold one; ``report`` says, for the user, how many cells
         were solved again, or why the bind started from scratch; a warm one's ``solved_again`` holds those counts as
         numbers (see :func:`solved_again_text`), its ``travel`` how far the cage moved since its last bind from
         scratch.

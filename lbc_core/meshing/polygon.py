@@ -49,11 +49,6 @@ def _reference_sizes_2d(cage, cells):
     return max_area, _SPACING_FACTOR * np.sqrt(2.0 / np.sqrt(3.0) * max_area)
 
 
-def split_counts(lengths, spacing):
-    """Number of equal pieces for each cage edge so that no piece is longer than ``spacing``."""
-    return np.maximum(1, np.ceil(lengths / spacing - 1e-9)).astype(np.int64)
-
-
 class _PolygonBoundary:
     """Samples along the cage polygon, each at a parameter t in [0, 1) on one cage edge.
 
