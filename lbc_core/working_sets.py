@@ -375,15 +375,20 @@ class PaddedRows:
         self.corners[self.vertex, self.column, 1:] = mesh.unit_controls[sets.controls]
         self.products = corner_products(self.corners)
         self.targets = np.c_[np.ones(len(counts)), mesh.unit_interior]
+        self.full = sets.n_slots == len(counts) * self.width  # no padding (whole sets): rows are a reshape
 
     def gather(self, slot_values):
         """(S,) → (N_in, width), padding slots PADDING_VALUE."""
+        if self.full:
+            return slot_values.reshape(self.corners.shape[:2]).copy()
         rows = np.full(self.corners.shape[:2], PADDING_VALUE)
         rows[self.vertex, self.column] = slot_values
         return rows
 
     def scatter(self, rows):
         """(N_in, width) → (S,)."""
+        if self.full:
+            return rows.ravel()
         return rows[self.vertex, self.column]
 
 
@@ -396,7 +401,10 @@ class PairOperators:
     pair_cell, pair_control : (P,) int arrays
         The (cell, control point) pairs where a coordinate's gradient may be non-zero, sorted.
     gradient : (d P, S) CSR matrix
-        Slot values → √|c| ∇w on the pairs, component-major rows (row k P + p).
+        Slot values → √|c| ∇w on the pairs, component-major rows (row k P + p); None on whole sets.
+    cells_gradient, cells_gradient_t : (d F, N_in) CSR matrix and its transpose
+        On whole sets (None otherwise): the same products on the (N_in, n) block of the slots, 3–4 times faster
+        than the pairs' matrix (bench/RESULTS.md, "Whole working sets' products on blocks").
     boundary_part : (d, P) float array
         The boundary values' part of √|c| ∇w on the pairs.
     slot_mass : (S,) float array
@@ -415,15 +423,8 @@ class PairOperators:
         self.pair_cell, self.pair_control = self._pairs(mesh, sets, slot_vertex)
         check()
         d = mesh.vertices.shape[1]
-        # Each pair's corners: a slot (its index), or a boundary value, or nothing; looked up in dense (N, n)
-        # tables, built for this and dropped (a sorted search of the keys takes ten times as long).
         corner_vertex = mesh.cells[self.pair_cell].astype(np.int32)  # (P, d+1)
         control = self.pair_control[:, None]
-        table = np.full((len(mesh.vertices), n), -1, dtype=np.int32)
-        table[slot_vertex, sets.controls] = np.arange(sets.n_slots, dtype=np.int32)
-        corner_slot = table[corner_vertex, control]
-        del table
-        check()
         touching = np.flatnonzero(mesh.cell_on_cage[self.pair_cell])  # pairs carrying boundary values: a few
         boundary_row = mesh.boundary_position[corner_vertex[touching]]
         corner_fixed = np.where(boundary_row >= 0,
@@ -431,11 +432,26 @@ class PairOperators:
         self.boundary_part = np.zeros((d, len(self.pair_cell)), dtype=dtype)
         self.boundary_part[:, touching] = np.einsum("pc,pck->kp", corner_fixed,
                                                     mesh.scaled_gradients[self.pair_cell[touching]])
-        del corner_vertex, boundary_row, corner_fixed
+        del boundary_row, corner_fixed
         check()
-        self.gradient = _gradient_matrix(mesh.scaled_gradients, self.pair_cell, corner_slot, sets.n_slots, dtype,
-                                         check)
-        del corner_slot
+        if sets.whole:  # every pair of every cell: the products act on (N_in, n) blocks through the cells' operator
+            del corner_vertex
+            self.cells_gradient = _cells_gradient(mesh, dtype)
+            self.cells_gradient_t = self.cells_gradient.T.tocsr()
+            self.gradient = self.row_blocks = None
+        else:
+            self.cells_gradient = self.cells_gradient_t = None
+            # Each pair's corners: a slot (its index), or a boundary value, or nothing; looked up in a dense (N, n)
+            # table, built for this and dropped (a sorted search of the keys takes ten times as long).
+            table = np.full((len(mesh.vertices), n), -1, dtype=np.int32)
+            table[slot_vertex, sets.controls] = np.arange(sets.n_slots, dtype=np.int32)
+            corner_slot = table[corner_vertex, control]
+            del table, corner_vertex
+            check()
+            self.gradient = _gradient_matrix(mesh.scaled_gradients, self.pair_cell, corner_slot, sets.n_slots, dtype,
+                                             check)
+            del corner_slot
+            self.row_blocks = _row_blocks(self.gradient, worker_count())
         check()
         self.slot_mass = mesh.sqrt_mass[sets.vertex_of_slot].astype(dtype)
         # Control-major order: the matrix is block-diagonal over the control points, which the factorisation's
@@ -443,7 +459,6 @@ class PairOperators:
         self.order = np.lexsort((sets.vertex_of_slot, sets.controls))
         self.factors = _group_factors(mesh.system, sets, self.order, dtype, check)
         check()
-        self.row_blocks = _row_blocks(self.gradient, worker_count())
         self.pair_sqrt_cell = mesh.sqrt_cell[self.pair_cell].astype(dtype)
         self.dtype = dtype
         check()
@@ -454,11 +469,15 @@ class PairOperators:
 
     @staticmethod
     def _pairs(mesh, sets, slot_vertex):
-        """The (cell, control point) pairs touching a slot or a non-zero boundary value, sorted by cell."""
+        """The (cell, control point) pairs touching a slot or a non-zero boundary value, sorted by cell; on whole
+        sets every pair (the few more on cells wholly on the cage stay zero)."""
+        n_cells, k = mesh.cells.shape
+        if sets.whole:
+            return (np.repeat(np.arange(n_cells, dtype=np.int64), sets.n_controls),
+                    np.tile(np.arange(sets.n_controls, dtype=np.int64), n_cells))
         holds = sp.csr_matrix((np.ones(sets.n_slots), (slot_vertex, sets.controls)),
                               shape=(len(mesh.vertices), sets.n_controls))
         holds = (holds + mesh.fixed).astype(bool).astype(float)
-        n_cells, k = mesh.cells.shape
         incidence = sp.csr_matrix((np.ones(n_cells * k), mesh.cells.ravel(), np.arange(0, n_cells * k + 1, k)),
                                   shape=(n_cells, len(mesh.vertices)))
         pairs = (incidence @ holds).tocoo()
@@ -471,6 +490,10 @@ class PairOperators:
 
     def gradients(self, slot_values):
         """√|c| ∇w (d, P) on the pairs, boundary values included, row blocks one per thread."""
+        if self.cells_gradient is not None:
+            out = (self.cells_gradient @ slot_values.reshape(-1, self.sets.n_controls)).reshape(self.d, -1)
+            out += self.boundary_part
+            return out
         out = np.empty((self.d * self.n_pairs,), dtype=np.result_type(self.dtype, slot_values.dtype))
 
         def rows(block):
@@ -484,6 +507,8 @@ class PairOperators:
 
     def transposed(self, values):
         """Gᵀ ``values`` (d P,) → (S,), a partial sum per row block and thread."""
+        if self.cells_gradient_t is not None:
+            return (self.cells_gradient_t @ values.reshape(-1, self.sets.n_controls)).ravel()
         return sum(thread_map(lambda block: block[1].T @ values[block[0]:block[0] + block[1].shape[0]],
                               self.row_blocks))
 
@@ -515,6 +540,7 @@ class PairOperators:
     def release(self):
         """Drop the matrices, factors and padded rows (a layout being replaced keeps only its pairs and sets)."""
         self.gradient = self.row_blocks = self.factors = self.padded = None
+        self.cells_gradient = self.cells_gradient_t = None
 
     def restore_rows(self, weights, rows):
         """(S,) weights with the given vertices' rows, whose projection missed round-off (a badly conditioned hull,
@@ -538,6 +564,18 @@ class PairOperators:
         """Where each of this layout's pairs sits in ``other``, -1 where ``other`` has no such pair."""
         n = self.sets.n_controls
         return _positions(self.pair_cell * n + self.pair_control, other.pair_cell * n + other.pair_control)
+
+
+def _cells_gradient(mesh, dtype):
+    """The (d F, N_in) CSR matrix of interior vertex values → √|c| ∇ on every cell, rows component-major (row
+    k F + f): on whole working sets, applied to the (N_in, n) block of the slots at once."""
+    n_cells, d = len(mesh.cells), mesh.vertices.shape[1]
+    position = mesh.interior_position[mesh.cells]
+    cell, corner = np.nonzero(position >= 0)
+    rows = (np.arange(d)[:, None] * n_cells + cell[None, :]).ravel()
+    columns = np.tile(position[cell, corner], d)
+    values = mesh.scaled_gradients[cell, corner, :].T.ravel().astype(dtype)
+    return sp.csr_matrix((values, (rows, columns)), shape=(d * n_cells, len(mesh.interior)))
 
 
 def _row_blocks(matrix, count):

@@ -480,3 +480,32 @@ def test_whole_working_sets_reach_the_dense_optimum():
     assert result.converged and reference.converged
     assert result.objective <= 1.001 * reference.objective
     assert_quality(problem[0], result.weights, problem[4], problem[2], problem[3])
+
+
+def test_whole_sets_take_the_products_on_blocks(monkeypatch):
+    """On whole working sets the gradient products act on the (vertices, control points) block through the cells'
+    operator, and give what the pairs' matrix gives; the projection's rows are the slots reshaped."""
+    from lbc_core.working_sets import MeshData, PairOperators, WorkingSets
+
+    vertices, cells, boundary, fixed, controls, _ = _corpus_problem("cylinder-8-ngon", cells=500)
+    mesh = MeshData.of(vertices, cells, boundary, fixed, 1280.0, controls, vertices)
+    rows, n = len(mesh.interior), len(controls)
+    whole = WorkingSets(np.arange(rows + 1, dtype=np.int64) * n, np.tile(np.arange(n, dtype=np.int64), rows), n)
+    blocks = PairOperators(mesh, whole)
+    assert blocks.cells_gradient is not None and blocks.gradient is None and blocks.padded.full
+    monkeypatch.setattr(WorkingSets, "whole", property(lambda sets: False))
+    pairs = PairOperators(mesh, whole)
+    assert pairs.cells_gradient is None
+    shared = pairs.pair_positions(blocks)
+    assert (shared >= 0).all()
+    values = np.random.default_rng(0).random(whole.n_slots)
+    np.testing.assert_allclose(blocks.gradients(values)[:, shared], pairs.gradients(values), atol=1e-12)
+    on_pairs = np.random.default_rng(1).random((mesh.vertices.shape[1], pairs.n_pairs))
+    on_blocks = np.zeros((mesh.vertices.shape[1], blocks.n_pairs))
+    on_blocks[:, shared] = on_pairs
+    np.testing.assert_allclose(blocks.transposed(on_blocks.ravel()), pairs.transposed(on_pairs.ravel()), atol=1e-12)
+    padded = blocks.padded
+    rows_of_slots = np.zeros(padded.corners.shape[:2])
+    rows_of_slots[padded.vertex, padded.column] = values
+    np.testing.assert_array_equal(padded.gather(values), rows_of_slots)
+    np.testing.assert_array_equal(padded.scatter(rows_of_slots), values)
