@@ -18,9 +18,9 @@ Per pose: kinks (the change of each mesh edge's dihedral angle, bench/capsule.py
 folded by more than 30°, triangles turned over against their neighbours. LBC "defaults" is what the add-on binds:
 ``lbc_core.bind`` at its defaults, then ``thin_weights`` at the add-on's default floor.
 
-The default run prints, per scene, LBC's defaults, the same with the rows of the points outside the cage
-extrapolated (lbc_core.smoothing's ``points`` and ``outside``, which the pipeline does not pass yet) and Mesh Deform
-(precision 5, through bpy) in the same process, with their bind seconds (``--baseline REV``: also LBC's defaults with
+The default run prints, per scene, LBC's defaults (the rows of the points outside the cage extrapolated to them:
+lbc_core.smoothing's ``points`` and ``outside``), the same with those points following their closest point inside
+(as before the pipeline passed them) and Mesh Deform (precision 5, through bpy) in the same process, with their bind seconds (``--baseline REV``: also LBC's defaults with
 the evaluation, reduction and thinning of git revision REV). ``--levers`` prints, per scene, one bind per ``--binds`` setting (cells, 0 for the default,
 and the relaxation ε) and, on each, the evaluation per ``--evaluations`` setting: the fit's radius and fade (median
 edges), the thinning's floor (0: every weight) and the
@@ -126,9 +126,10 @@ def thinned(binding, weights, floor=DEFAULT_FLOOR):
 
 
 def bench_defaults(names, baseline=None):
-    """LBC's defaults (and ``baseline``'s, and with the outside rows extrapolated) against Mesh Deform, per pose."""
+    """LBC's defaults (and ``baseline``'s, and with the outside points following their closest point) against Mesh
+    Deform, per pose."""
     columns = ([f"LBC defaults at {baseline}"] if baseline else []) + [
-        "LBC defaults", "LBC, outside points extrapolated", "Mesh Deform precision 5"]
+        "LBC defaults", "LBC, outside points following their closest point", "Mesh Deform precision 5"]
     print(f"Kinks p99 / max (degrees), edges folded > 30°, triangles turned over; {load()}")
     print("| scene | pose | " + " | ".join(columns) + " |")
     print("| --- | --- | " + " | ".join("---" for _ in columns) + " |")
@@ -144,7 +145,7 @@ def bench_defaults(names, baseline=None):
         found.append(weights)
         seconds.append(spent)
         start = time.perf_counter()
-        found.append(thinned(binding, Evaluation(binding).weights(outside="tilt")))
+        found.append(thinned(binding, Evaluation(binding).weights(outside="near")))
         seconds.append(spent - binding.timings["reduction"] + time.perf_counter() - start)
         influences = [np.diff(weights.indptr) for weights in found]
         rows = []

@@ -140,7 +140,8 @@ def bind(
     omega = geodesic_weights(clock, domain, request.weighting)
     result = solve(clock, domain.vertices, domain.cells, domain.boundary_vertices, fixed, unit_cage.vertices, omega,
                    request)
-    weights = evaluate(clock, domain, located, result.weights, unit_cage, request.threshold_for(cage.n_control_points))
+    weights = evaluate(clock, domain, located, result.weights, unit_cage, request.threshold_for(cage.n_control_points),
+                       points=frame.to_unit(points), outside=outside)
     clock.progress(1.0, "bound")
     return lbc_binding(frame, cage, domain, result, weights, outside, points, request, clock)
 
@@ -197,15 +198,17 @@ def solve(clock, vertices, cells, fixed, values, control_points, omega, request,
     return result
 
 
-def evaluate(clock, domain, located, domain_weights, unit_cage, threshold, reach=1.0):
+def evaluate(clock, domain, located, domain_weights, unit_cage, threshold, reach=1.0, points=None, outside=None):
     """The reduction stage: the smooth evaluation at the located points, reduced (weights below ``threshold``
     dropped, the constraints restored); ``reach`` scales the fit's radius and fade near the cage, in median edges.
+    With the (unit frame) ``points`` and their ``outside`` flags, the rows of points outside the cage extrapolate
+    to them (:class:`~lbc_core.smoothing.SmoothInterpolation`).
 
     Returns the (m, n) sparse weights.
     """
     part = clock.part("reduction")
     smooth = SmoothInterpolation(domain.vertices, domain.cells, located, radius_edges=RADIUS_EDGES * reach,
-                                 fade_edges=FADE_EDGES * reach, progress=part)
+                                 fade_edges=FADE_EDGES * reach, progress=part, points=points, outside=outside)
     weights = interpolate_and_reduce(smooth, domain_weights, unit_cage.vertices, domain.vertices, threshold,
                                      tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=part)
     clock.done("reduction")
@@ -344,8 +347,9 @@ def check_cage_and_points(cage_vertices, cage_faces, points, options=None):
 
 
 def check_inside(outside):
-    """Refuse points that all lie outside the cage (``outside``: (m,) bool): each would follow the closest point of
-    the cage's interior, which is meant for a few stray points, and a cage around none is most likely the wrong one."""
+    """Refuse points that all lie outside the cage (``outside``: (m,) bool): each would extrapolate from the closest
+    point of the cage's interior, which is meant for a few stray points, and a cage around none is most likely the
+    wrong one."""
     if len(outside) and outside.all():
         subject = "the point lies" if len(outside) == 1 else f"all {len(outside)} points lie"
         raise PointsOutside(f"{subject} outside the cage: the cage must enclose the points it deforms. Is it the right "

@@ -17,6 +17,9 @@ from .progress import Progress
 # Rows reduced by one thread at a time: the padded (rows, K, d+1) work arrays of a million points would take
 # gigabytes, so at most this many rows per thread are in flight (the smooth evaluation's own chunk).
 ROWS_PER_CHUNK = 16_384
+# How far from 1 an extrapolated row's sum may end, else the point follows its closest point inside instead
+# (bench/RESULTS.md, "Points outside the cage extrapolate in every bind").
+UNITY_TOLERANCE = 1e-12
 
 
 def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance, progress=None,
@@ -66,7 +69,15 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         if len(inner) == block.shape[0]:
             return reduced
         outer = np.flatnonzero(extrapolated)
-        signed = _reduce_signed(block[outer] @ sp.csr_matrix(domain_weights), controls, positions[outer], threshold)
+        signed, met = _reduce_signed(block[outer] @ sp.csr_matrix(domain_weights), controls, positions[outer],
+                                     threshold, tolerance)
+        if not met.all():
+            # An extrapolation from too few or one-sided vertices (far outside a thin cage): the point follows its
+            # closest point inside, reduced as a point inside.
+            failed = outer[~met]
+            closest = linear[rows][failed]
+            signed = scatter_rows(sp.diags(met.astype(float)) @ signed, np.flatnonzero(~met),
+                                  _reduce_inside(closest, closest, closest @ domain_vertices))
         return scatter_rows(scatter_rows(sp.csr_matrix((block.shape[0], controls.shape[0])), inner, reduced), outer,
                             signed)
 
@@ -87,10 +98,11 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     return _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
 
 
-def _reduce_signed(full, controls, positions, threshold):
+def _reduce_signed(full, controls, positions, threshold, tolerance):
     """Rows of points outside the cage, whose weights extrapolate (some negative): weights of magnitude below
     ``threshold`` dropped, then the least-norm change on the rest that makes them sum to 1 and reproduce the point
-    (where those left span too few directions, the row is kept whole). Returns the (m, n) CSR rows."""
+    (where those left span too few directions, the row is kept whole). Returns the (m, n) CSR rows and which of them
+    meet the constraints to ``tolerance`` ((m,) bool array)."""
     n, d = controls.shape
     kept = full.copy()
     kept.data[np.abs(kept.data) < threshold] = 0.0
@@ -109,12 +121,14 @@ def _reduce_signed(full, controls, positions, threshold):
     solved = np.linalg.solve(np.where(usable[:, None, None], gram, np.eye(d + 1)), residual[:, :, None])
     corrected = values + (np.swapaxes(matrix, 1, 2) @ solved)[:, :, 0] * present
     reduced = csr_from_padded(np.where(present, corrected, 0.0), columns, n)
-    if usable.all():
-        return reduced
-    whole = np.flatnonzero(~usable)
-    kept_rows = sp.diags(usable.astype(float)) @ reduced
-    kept_rows.eliminate_zeros()
-    return scatter_rows(kept_rows, whole, sp.csr_matrix(full)[whole])
+    if not usable.all():
+        whole = np.flatnonzero(~usable)
+        kept_rows = sp.diags(usable.astype(float)) @ reduced
+        kept_rows.eliminate_zeros()
+        reduced = scatter_rows(kept_rows, whole, sp.csr_matrix(full)[whole])
+    unity = np.abs(np.asarray(reduced.sum(axis=1)).ravel() - 1.0)
+    reproduction = np.abs(reduced @ controls - positions).max(axis=1, initial=0.0)
+    return reduced, (unity <= UNITY_TOLERANCE) & (reproduction <= tolerance)
 
 
 def _by_chunks(m, n, reduce_chunk, progress):

@@ -28,6 +28,9 @@ RADIUS_EDGES = 2.0
 FADE_EDGES = 0.25
 # A fit whose moment matrix is this ill-conditioned (too few or coplanar vertices in reach) is not used.
 MAX_CONDITION = 1e8
+# An outside point's extrapolated row that misses the point by more than this (unit frame) is not used: it follows
+# its closest point (bench/RESULTS.md, "Points outside the cage extrapolate in every bind").
+EXTRAPOLATION_MISS = 1e-6
 _CHUNK = 1 << 14  # points fitted at a time: bounds the (point, vertex) pairs held
 
 
@@ -38,10 +41,11 @@ class SmoothInterpolation:
     rises smoothly from 0 on the cage to 1 at ``fade`` from it. Every row sums to 1 and reproduces the point. A point
     outside the cage, bound to its closest domain point q, reproduces q, unless ``points`` and ``outside`` are given:
     then its row is q's P1 row plus the offset p - q times the gradient of the fit at q (:func:`fit_gradients`), so it
-    reproduces p itself, and the part outside turns with the cage around it instead of only following q (a tip
-    poking out of a curled tentacle's cage stays a tip; bench/RESULTS.md). Such a row may hold negative weights: no
-    non-negative weights reproduce a point outside the hull of their control points. Used like a CSR matrix by
-    :func:`lbc_core.reduction.interpolate_and_reduce`: ``shape``, row slices, ``linear`` and ``outside``.
+    reproduces p itself (where the fit at q can: else q's row), and the part outside turns with the cage around it
+    instead of only following q (a tip poking out of a curled tentacle's cage stays a tip; bench/RESULTS.md). Such a
+    row may hold negative weights: no non-negative weights reproduce a point outside the hull of their control
+    points. Used like a CSR matrix by :func:`lbc_core.reduction.interpolate_and_reduce`: ``shape``, row slices,
+    ``linear`` and ``outside``.
 
     Parameters
     ----------
@@ -119,6 +123,12 @@ class SmoothInterpolation:
         extrapolated = linear[outside]
         for axis, gradient in enumerate(fit_gradients(self.vertices, self.tree, points[outside], self.radius)):
             extrapolated = extrapolated + sp.diags(offset[:, axis]) @ gradient
+        # Where the fit there is missing or too poorly conditioned to reproduce the point, it follows q alone.
+        missed = np.abs(extrapolated @ self.vertices - self.points[first + outside]).max(axis=1) > EXTRAPOLATION_MISS
+        if missed.any():
+            extrapolated = (sp.diags((~missed).astype(float)) @ extrapolated
+                            + sp.diags(missed.astype(float)) @ linear[outside]).tocsr()
+            extrapolated.eliminate_zeros()
         inside = sp.diags(np.isin(np.arange(len(points)), outside, invert=True).astype(float)) @ rows
         inside.eliminate_zeros()
         placement = sp.csr_matrix((np.ones(len(outside)), (outside, np.arange(len(outside)))),

@@ -312,8 +312,8 @@ def _refusal_and_peak_memory(path):
 def test_a_file_declaring_far_more_weights_than_it_has_indices_is_refused_unread(square_file, tmp_path):
     path = _declaring(square_file[0], tmp_path / "bomb.npz", {"weights_data": ((200_000_000,), np.float64)})
     message, peak = _refusal_and_peak_memory(path)
-    assert "its weights declare 200000000 numbers and 18 indices, where 5 points of 4 control points hold at most 20" \
-        in message
+    assert re.search(r"its weights declare 200000000 numbers and \d+ indices, where 5 points of 4 control points hold at "
+                     r"most 20", message)
     assert peak < 20 * 2**20  # reading the declared weights would allocate 1.6 GB
 
 
