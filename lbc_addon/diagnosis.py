@@ -172,9 +172,8 @@ def rest_moved(mesh):
     """Whether a bound mesh's vertices were moved as a whole since binding: a sample of them (:data:`REST_SAMPLES`)
     is an affine image, other than the identity, of the rest positions the weights reproduce. Apply Transforms does
     this to the mesh data, and the deformer would add the cage's displacement to a rest it no longer has: a jump.
-    Edits of part of the mesh (sculpting) are no affine image. Vertices outside the cage rest at their closest point
-    inside, which can be an affine image of them (a box outside a box): a mesh whose sampled vertices all lie outside
-    could be flagged, which is why a mesh wholly outside is refused at bind time."""
+    Edits of part of the mesh (sculpting) are no affine image. The weights of vertices outside the cage reproduce them
+    too (they extrapolate from the closest points inside), so their rest is their own position."""
     rest_attribute = mesh.attributes.get(storage.REST_NAME)
     count = len(mesh.vertices)
     if rest_attribute is None or count < 4 or len(rest_attribute.data) != count:

@@ -205,14 +205,16 @@ def printed_progress(interval=1.0):
 
 def _outside_warning(outside):
     """A warning about the mesh's points outside the cage (``outside``: (m,) bool; lbc_core refuses them all), since
-    they follow the closest points inside rather than the cage itself."""
+    they follow the cage by extrapolation from the closest points inside, not exactly as the points inside do."""
     count = int(np.count_nonzero(outside))
     too_small = too_small_warning(count, len(outside))
     if too_small:
         return [too_small]
     if count == 1:
-        return ["1 vertex lies outside the cage; it follows the closest point inside it"]
-    return [f"{count} vertices lie outside the cage; they follow the closest points inside it"] if count else []
+        return ["1 vertex lies outside the cage; it follows the cage around the closest point inside it"]
+    if not count:
+        return []
+    return [f"{count} vertices lie outside the cage; they follow the cage around the closest points inside it"]
 
 
 def too_small_warning(count, total):
@@ -221,8 +223,8 @@ def too_small_warning(count, total):
     if not total or count <= OUTSIDE_SHARE_WARNED * total:
         return ""
     return (f"{count} of {total} vertices ({count / total:.0%}) lie outside the cage, which is too small for the mesh: "
-            "they follow the closest points inside it, not the cage. Scale the cage up so it encloses the mesh, then "
-            "Rebind")
+            "they follow the cage only by extrapolation from the closest points inside it. Scale the cage up so it "
+            "encloses the mesh, then Rebind")
 
 
 def _cap_warning(weights, cap):

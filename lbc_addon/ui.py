@@ -24,7 +24,7 @@ def draw_binding(layout, obj):
     too_small = jobs.too_small_warning(settings.outside, total) if ok else ""
     box = layout.box()
     box.label(text=settings.status or "Bound", icon="CHECKMARK" if ok and not too_small else "ERROR")
-    if too_small:  # following, but much of the mesh follows the closest points inside the cage instead
+    if too_small:  # following, but much of the mesh only by extrapolation from the closest points inside
         wrapped_label(box, too_small)
     if settings.cage is None:  # deleted: bind to another cage (Bind's poll says what to select)
         box.operator("object.lbc_bind", icon="MOD_MESHDEFORM")

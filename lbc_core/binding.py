@@ -77,7 +77,8 @@ class Binding:
     domain_weights : (N, n) float array
         Coordinates at the domain's vertices.
     outside : (m,) bool array
-        Points outside the cage, bound to the closest point of the domain.
+        Points outside the cage, whose rows extrapolate from the closest point of the domain: they reproduce the
+        point, with signed weights.
     points : (m, d) float array
         The points at bind time; deformation is exact at the rest pose.
     scheme : str
@@ -138,8 +139,8 @@ class Binding:
     def deform(self, new_cage_vertices):
         """Positions of the points for a moved cage.
 
-        Displacement form, p + Σ w_i (c_i - c_i^rest), so the rest pose is exact and points outside the cage move
-        with the point they are bound to.
+        Displacement form, p + Σ w_i (c_i - c_i^rest), so the rest pose is exact; points outside the cage follow it
+        by extrapolation (exactly under any affine move of the cage).
 
         Parameters
         ----------

@@ -160,7 +160,7 @@ def _run_bind(args):
         print(
             f"bound {figures['points']} points to {figures['control_points']} control points with {binding.scheme}: "
             f"{nonzeros:.2f} stored weights per point, {outside} points outside the cage"
-            f"{' (bound to the closest point inside)' if outside else ''}, {total:.2f} s; wrote {args.output}"
+            f"{' (extrapolated from the closest points inside)' if outside else ''}, {total:.2f} s; wrote {args.output}"
         )
         if not binding.converged:
             print(f"not converged: the solve stopped after {binding.iterations} iterations above its tolerance; the "

@@ -62,7 +62,8 @@ def test_api_bind_refuses_a_mesh_wholly_outside_before_the_solve_and_warns_about
     mesh.data.vertices[1].co.z = 3.0
     summary = api.bind(mesh, cage, cells=1000)
     assert summary["outside"] == 2
-    assert summary["warnings"] == ["2 vertices lie outside the cage; they follow the closest points inside it"]
+    assert summary["warnings"] == [
+        "2 vertices lie outside the cage; they follow the cage around the closest points inside it"]
     empty = bpy.data.objects.new("Empty mesh", bpy.data.meshes.new("Empty mesh"))
     bpy.context.scene.collection.objects.link(empty)
     with pytest.raises(lbc_core.CageError, match="'Empty mesh' has no vertices: there is nothing to bind"):
@@ -365,7 +366,7 @@ def test_api_prints_and_logs_the_warnings_of_bind_and_rebind_all(capsys, caplog)
         api.rebind_all(cage)
     logged = [record.getMessage() for record in caplog.records if record.name == api.__name__]
     out = capsys.readouterr().out
-    for warning in ("Sphere: 1 vertex lies outside the cage; it follows the closest point inside it",
+    for warning in ("Sphere: 1 vertex lies outside the cage; it follows the cage around the closest point inside it",
                     "Sphere: the cage is bound with its shape key 'Pose' at 1: that shape is the rest"):
         assert sum(message.startswith(warning) for message in logged) == 2, logged
         assert out.count(f"LBC bind: warning: {warning}") == 2, out

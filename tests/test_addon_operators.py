@@ -259,7 +259,8 @@ def test_vertices_outside_the_cage_are_counted_and_reported(capfd):
     mesh.data.vertices[0].co = (0.0, 0.0, 3.0)  # pulled out through the top of the box
     assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     assert mesh.lbc.outside == 1
-    assert "Sphere: 1 vertex lies outside the cage; it follows the closest point inside it" in capfd.readouterr().out
+    expected = "Sphere: 1 vertex lies outside the cage; it follows the cage around the closest point inside it"
+    assert expected in capfd.readouterr().out
 
 
 def test_rebind_after_a_topology_change_deforms_again():
@@ -403,8 +404,8 @@ def test_a_cage_far_too_small_is_reported_as_a_warning_with_the_share_outside_an
     level, message = harness.reports[-1]
     assert level == {"WARNING"}, harness.reports
     assert message == (f"Sphere: {mesh.lbc.outside} of 42 vertices ({mesh.lbc.outside / 42:.0%}) lie outside the cage, "
-                       "which is too small for the mesh: they follow the closest points inside it, not the cage. Scale "
-                       "the cage up so it encloses the mesh, then Rebind")
+                       "which is too small for the mesh: they follow the cage only by extrapolation from the closest "
+                       "points inside it. Scale the cage up so it encloses the mesh, then Rebind")
 
 
 def test_esc_during_a_modal_bind_cancels_it_and_changes_nothing():

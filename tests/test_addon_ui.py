@@ -127,8 +127,8 @@ def test_a_cage_far_too_small_warns_in_the_state_with_the_share_outside_and_the_
     outside = summary["outside"]
     assert outside > 0.05 * 42
     warning = (f"{outside} of 42 vertices ({outside / 42:.0%}) lie outside the cage, which is too small for the mesh: "
-               "they follow the closest points inside it, not the cage. Scale the cage up so it encloses the mesh, "
-               "then Rebind")
+               "they follow the cage only by extrapolation from the closest points inside it. Scale the cage up so "
+               "it encloses the mesh, then Rebind")
     assert warning in summary["warnings"]
     layout = _draw(mesh, [mesh])
     assert layout.icons["Following 'Box'"] == "ERROR"

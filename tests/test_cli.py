@@ -218,7 +218,7 @@ def test_non_convergence_and_outside_points_are_in_the_plain_output(tmp_path, ca
     code, out, err = run(capsys, "bind", LOGO, points, "-o", tmp_path / "b.npz", "--cells", 400,
                          "--max-iterations", 5, "--quiet")
     assert code == 0, err
-    assert "1 points outside the cage (bound to the closest point inside)" in out
+    assert "1 points outside the cage (extrapolated from the closest points inside)" in out
     assert "not converged: the solve stopped after 5 iterations" in out
 
 
