@@ -77,8 +77,9 @@ class Binding:
     domain_weights : (N, n) float array
         Coordinates at the domain's vertices.
     outside : (m,) bool array
-        Points outside the cage, whose rows extrapolate from the closest point of the domain: they reproduce the
-        point, with signed weights.
+        Points outside the cage, whose rows extrapolate from the closest point of the domain, with signed weights:
+        they reproduce the point, unless far outside a thin part of the cage (the extrapolation shortened toward that
+        closest point) or where the fit there is too poor (the closest point itself).
     points : (m, d) float array
         The points at bind time; deformation is exact at the rest pose.
     scheme : str
@@ -140,7 +141,7 @@ class Binding:
         """Positions of the points for a moved cage.
 
         Displacement form, p + Σ w_i (c_i - c_i^rest), so the rest pose is exact; points outside the cage follow it
-        by extrapolation (exactly under any affine move of the cage).
+        by extrapolation (exactly under any affine move of the cage where their rows reproduce them).
 
         Parameters
         ----------

@@ -17,9 +17,10 @@ from .progress import Progress
 # Rows reduced by one thread at a time: the padded (rows, K, d+1) work arrays of a million points would take
 # gigabytes, so at most this many rows per thread are in flight (the smooth evaluation's own chunk).
 ROWS_PER_CHUNK = 16_384
-# How far from 1 an extrapolated row's sum may end, else the point follows its closest point inside instead
-# (bench/RESULTS.md, "Points outside the cage extrapolate in every bind").
-UNITY_TOLERANCE = 1e-12
+# How far from 1 an extrapolated row's sum may end, else the point follows its closest point inside instead; and
+# the most its extrapolation's weights may sum to in magnitude, so that no cage vertex moves an outside point much
+# more than itself (bench/RESULTS.md, "Points outside the cage extrapolate in every bind").
+UNITY_TOLERANCE, EXTRAPOLATION_GAIN = 1e-12, 2.0
 
 
 def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance, progress=None,
@@ -69,8 +70,9 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         if len(inner) == block.shape[0]:
             return reduced
         outer = np.flatnonzero(extrapolated)
-        signed, met = _reduce_signed(block[outer] @ sp.csr_matrix(domain_weights), controls, positions[outer],
-                                     threshold, tolerance)
+        full, targets = _bounded_lever(block[outer], linear[rows][outer], sp.csr_matrix(domain_weights),
+                                       domain_vertices)
+        signed, met = _reduce_signed(full, controls, targets, threshold, tolerance)
         if not met.all():
             # An extrapolation from too few or one-sided vertices (far outside a thin cage): the point follows its
             # closest point inside, reduced as a point inside.
@@ -96,6 +98,19 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         return scatter_rows(kept, failed, again)
 
     return _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
+
+
+def _bounded_lever(extrapolating, closest, domain_weights, domain_vertices):
+    """Outside points' coordinates (control space) and the points they reproduce: the closest point's row plus the
+    extrapolation, whose weights sum in magnitude to at most EXTRAPOLATION_GAIN, shortened toward the closest point
+    where they would not (far outside a thin cage the extrapolation is a long lever on a short base)."""
+    base = closest @ domain_weights
+    lever = extrapolating @ domain_weights - base
+    gain = np.asarray(abs(lever).sum(axis=1)).ravel()
+    share = np.minimum(1.0, EXTRAPOLATION_GAIN / np.maximum(gain, 1e-300))
+    at = closest @ domain_vertices
+    targets = at + share[:, None] * (extrapolating @ domain_vertices - at)
+    return sp.csr_matrix(base + sp.diags(share) @ lever), targets
 
 
 def _reduce_signed(full, controls, positions, threshold, tolerance):

@@ -487,10 +487,12 @@ def test_mesh_partly_outside_is_bound_and_counted(star_binding):
     inside, clear = inside_polygon(STAR, GRID, 1e-6)
     assert 0 < star_binding.outside_count < len(GRID)
     np.testing.assert_array_equal(star_binding.outside[clear], ~inside[clear])
-    # Bound: every point, outside ones included, follows an affine map of the cage exactly.
+    # Bound: the points inside follow an affine map of the cage exactly, and so do most outside ones (those far out
+    # beside the star's thin points have their extrapolation shortened).
     affine = np.array([[1.2, 0.3], [-0.2, 0.9]])
     moved = star_binding.deform(STAR @ affine.T + [0.5, -1.0])
-    np.testing.assert_allclose(moved, GRID @ affine.T + [0.5, -1.0], atol=1e-9)
+    exact = np.abs(moved - (GRID @ affine.T + [0.5, -1.0])).max(axis=1) <= 1e-9
+    assert exact[inside & clear].all() and exact[star_binding.outside].mean() > 0.9  # 0.94
     np.testing.assert_array_equal(star_binding.deform(STAR), GRID)  # the rest pose is exact, outside too
 
 
@@ -576,3 +578,18 @@ def test_points_far_outside_a_thin_cage_follow_their_closest_points_where_no_ext
     located, _, _ = interpolation_matrix(binding.domain.vertices, binding.domain.cells, points[followers])
     np.testing.assert_allclose(reproduced[followers], located @ binding.domain.vertices,
                                atol=REPRODUCTION * binding.cage.bbox_diagonal)
+
+
+def test_points_far_outside_a_thin_cage_are_no_long_levers():
+    """Above and below a slab 1/100 as thick as wide, the extrapolation from the closest point is a long lever on a
+    short base (weights up to ±21, so a cage vertex moved by 1 % of the cage moved a point 15 times as far): its
+    weights are bounded to sum in magnitude to at most 1 + EXTRAPOLATION_GAIN (3), shortened toward the closest
+    point."""
+    slab = CUBE * [1.0, 1.0, 0.01]
+    rng = np.random.default_rng(0)
+    points = np.c_[rng.uniform(0.1, 0.9, (400, 2)), rng.uniform(-0.3, 0.31, 400)]
+    binding = lbc_core.bind(slab, CUBE_FACES, points, cells=1000)
+    magnitude = np.asarray(abs(binding.weights).sum(axis=1)).ravel()
+    assert binding.outside.sum() > 300 and magnitude[~binding.outside].max() <= 1 + 1e-9
+    assert magnitude.max() <= 3.0 + 1e-6
+    np.testing.assert_allclose(binding.weights.sum(axis=1), 1.0, atol=UNITY)
