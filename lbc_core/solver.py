@@ -270,6 +270,7 @@ class _Run:
         self.iteration, self.converged, self.history = 0, False, []
         self.next_growth_check = GROWTH_FIRST_CHECK
         self.reshapes = self.reshapes_told = 0
+        self.wide = self.wide_told = False
 
     def _step_map(self, ops, duals):
         axis_scale = None if self.stretch is None else self.stretch.axis_scale
@@ -370,8 +371,11 @@ class _Run:
     def _check(self, step, value, out, previous, primal, primal_scale):
         """A scheduled check: progress, convergence, growth of the working sets, penalty balancing."""
         settings = self.settings
-        wide = step.ops.sets.whole and step.ops.sets.n_controls > SMALL_CAGE
-        tolerance = settings.tolerance * (WHOLE_TOLERANCE_SHARE if wide else 1.0)
+        if step.ops.sets.whole and step.ops.sets.n_controls > SMALL_CAGE and not self.wide:
+            self.wide, self.expected = True, None  # the forecast's iterations know nothing of the tighter stop
+            if self.first_distance:  # the way left is measured against the tighter stop from here on
+                self.first_distance /= WHOLE_TOLERANCE_SHARE
+        tolerance = settings.tolerance * (WHOLE_TOLERANCE_SHARE if self.wide else 1.0)
         self.pending_growth = None
         if primal <= tolerance and previous is not None:
             record = dict(iteration=self.iteration, **_residuals(step, out, previous, primal_scale))
@@ -447,7 +451,9 @@ class _Run:
         told = f", {format_remaining(left)}" if by_residual > 0 else ""
         # A reshape adds unknowns the step has not settled yet: the residual rises, and the message says why.
         grew = " after the working sets grew" if self.reshapes > self.reshapes_told else ""
-        self.reshapes_told = self.reshapes
+        if self.wide and not self.wide_told:
+            grew = " (the working sets hold every coordinate now: a tighter stop)"
+        self.reshapes_told, self.wide_told = self.reshapes, self.wide
         self.progress(self.fraction,
                       f"ADMM iteration {self.iteration}, residual {distance:.1f}× the tolerance{grew}{told}")
 
