@@ -192,7 +192,8 @@ def save_shape_key(mesh_obj, name=""):
 
 def status(mesh_obj):
     """(ok, message): whether the deformer of a bound mesh works, and if not, why (for an unbound object: that it
-    is not bound)."""
+    is not bound); a mesh that follows though much of it lies outside a cage too small gets the panel's warning
+    after its message."""
     _require_enabled()
     if not isinstance(mesh_obj, bpy.types.Object):
         return False, f"{mesh_obj!r} is not an object: pass it as e.g. bpy.data.objects['Name']"
@@ -202,7 +203,11 @@ def status(mesh_obj):
         leftover = ("; it carries LBC weights for no binding (from a bound mesh joined into it), which api.unbind "
                     "removes" if geometry.leftover_weights(mesh_obj) else "")
         return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}"
-    return diagnosis.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
+    ok, message = diagnosis.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
+    settings = mesh_obj.lbc
+    too_small = jobs.too_small_warning(settings.outside, settings.mesh_vertex_count or len(mesh_obj.data.vertices),
+                                       "Rebind") if ok else ""
+    return ok, f"{message}; {too_small}" if too_small else message  # following, but as the panel warns
 
 
 def _require_enabled():

@@ -37,3 +37,4 @@ solved_again = _api.solved_again
 some_indices = _api.some_indices
 thin_changed_rows = _api.thin_changed_rows
 thin_weights = _api.thin_weights
+too_small_warning = _api.too_small_warning

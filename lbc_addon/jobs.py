@@ -29,12 +29,9 @@ import numpy as np
 
 from . import storage
 from .core import (DEFAULT_FLOOR, BindOptions, CageError, CageVertexError, PointsOutside, bind, make_cage, rebind,
-                   rebind_report, reframed, solved_again, thin_changed_rows, thin_weights)
+                   rebind_report, reframed, solved_again, thin_changed_rows, thin_weights,
+                   too_small_warning)
 
-
-# Beyond this share of a mesh's vertices outside its cage, the cage is too small rather than grazed by a few stray
-# vertices (a tail's tip): the bind warns with the share and the fix, and the panel's state shows it.
-OUTSIDE_SHARE_WARNED = 0.05
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
 KEPT_BINDINGS = 4
@@ -207,7 +204,7 @@ def _outside_warning(outside):
     """A warning about the mesh's points outside the cage (``outside``: (m,) bool; lbc_core refuses them all), since
     they follow the cage by extrapolation from the closest points inside, not exactly as the points inside do."""
     count = int(np.count_nonzero(outside))
-    too_small = too_small_warning(count, len(outside))
+    too_small = too_small_warning(count, len(outside), "Rebind")
     if too_small:
         return [too_small]
     if count == 1:
@@ -215,16 +212,6 @@ def _outside_warning(outside):
     if not count:
         return []
     return [f"{count} vertices lie outside the cage; they follow the cage around the closest points inside it"]
-
-
-def too_small_warning(count, total):
-    """What to say when ``count`` of a mesh's ``total`` vertices lie outside its cage, more than
-    :data:`OUTSIDE_SHARE_WARNED` of them: the share and the fix; "" for fewer."""
-    if not total or count <= OUTSIDE_SHARE_WARNED * total:
-        return ""
-    return (f"{count} of {total} vertices ({count / total:.0%}) lie outside the cage, which is too small for the mesh: "
-            "they follow the cage only by extrapolation from the closest points inside it. Scale the cage up so it "
-            "encloses the mesh, then Rebind")
 
 
 def _cap_warning(weights, cap):

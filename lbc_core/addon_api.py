@@ -11,7 +11,7 @@ from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
 from .forecast import format_size
 from .options import BindOptions
-from .pipeline import bind
+from .pipeline import bind, too_small_warning
 from .planar import flatten, reframed
 from .rebinding import WARM, rebind, solved_again_text
 from .thinning import DEFAULT_FLOOR, thin_changed_rows, thin_weights
@@ -22,6 +22,7 @@ __all__ = [
     "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten", "format_size", "make_cage",
     "rebind",
     "rebind_report", "reframed", "solved_again", "some_indices", "thin_changed_rows", "thin_weights",
+    "too_small_warning",
 ]
 
 DEFAULT_CELLS = options.DEFAULT_CELLS

@@ -124,6 +124,7 @@ def _scheme_list(text):
 def _run_bind(args):
     from .cage import make_cage
     from .io import check_output
+    from .pipeline import too_small_warning
 
     check_output(args.output, inputs=(args.cage, args.mesh))
     cage_vertices, cage_faces, points = _read_inputs(args.cage, args.mesh)
@@ -152,6 +153,10 @@ def _run_bind(args):
         "converged": binding.converged,
         "warnings": list(binding.cage.warnings),
     }
+    too_small = too_small_warning(figures["outside"], figures["points"])
+    if too_small:
+        figures["warnings"].append(too_small)
+        _warn([too_small], args.quiet)
     if args.json:
         _print_json(figures)
     else:

@@ -42,6 +42,9 @@ STAGES = {"checks": 0.0, "meshing": 0.08, "carry": 0.05, "interpolation": 0.05, 
 # points after the solve, which tells it which points to evaluate again.
 BIND_STAGES = ("checks", "meshing", "interpolation", "geodesics", "solve", "reduction")
 REBIND_STAGES = ("checks", "carry", "geodesics", "solve", "interpolation", "reduction")
+# Beyond this share of a mesh's points outside its cage, the cage is too small rather than grazed by a few stray
+# points (a tail's tip): a bind warns with the share and the fix.
+OUTSIDE_SHARE_WARNED = 0.05
 
 
 class StageClock:
@@ -344,6 +347,24 @@ def check_cage_and_points(cage_vertices, cage_faces, points, options=None):
     if cage_faces is None and np.shape(cage_vertices)[1:] == (3,):
         plane_z = float(np.asarray(cage_vertices, dtype=float)[0, 2])
     return cage, check_points(cage, points, plane_z)
+
+
+def too_small_warning(count, total, then="bind again"):
+    """What to say when ``count`` of a mesh's ``total`` points lie outside its cage, more than
+    :data:`OUTSIDE_SHARE_WARNED` of them: the share and the fix (``then`` is its last step); "" for fewer.
+
+    Examples
+    --------
+    >>> too_small_warning(1, 100)
+    ''
+    >>> too_small_warning(7, 42)[:57]
+    '7 of 42 vertices (17%) lie outside the cage, which is too'
+    """
+    if not total or count <= OUTSIDE_SHARE_WARNED * total:
+        return ""
+    return (f"{count} of {total} vertices ({count / total:.0%}) lie outside the cage, which is too small for the mesh: "
+            "they follow the cage only by extrapolation from the closest points inside it. Scale the cage up so it "
+            f"encloses the mesh, then {then}")
 
 
 def check_inside(outside):

@@ -134,6 +134,7 @@ def test_a_cage_far_too_small_warns_in_the_state_with_the_share_outside_and_the_
     assert layout.icons["Following 'Box'"] == "ERROR"
     text = " ".join(layout.labels().split("\n"))
     assert warning in text and text.count("lie outside the cage") == 1  # in the state's box, not again below
+    assert api.status(mesh) == (True, f"Following 'Box'; {warning}")  # what a pipeline reads says it too
 
 
 def test_deleted_cage_shows_why_and_offers_bind(bound_gargoyle):

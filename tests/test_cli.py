@@ -222,6 +222,21 @@ def test_non_convergence_and_outside_points_are_in_the_plain_output(tmp_path, ca
     assert "not converged: the solve stopped after 5 iterations" in out
 
 
+def test_a_cage_far_too_small_is_warned_on_stderr_and_in_the_json(tmp_path, capsys):
+    """Half the points outside: the cage is too small, as the add-on says; the command line says it too."""
+    points = tmp_path / "points.obj"
+    cage, _ = read_cage(LOGO)
+    write_mesh(points, np.r_[cage.mean(axis=0, keepdims=True), cage.max(axis=0, keepdims=True) + 10.0])
+    code, out, err = run(capsys, "bind", LOGO, points, "-o", tmp_path / "b.npz", "--cells", 400)
+    assert code == 0, err
+    warning = ("1 of 2 vertices (50%) lie outside the cage, which is too small for the mesh: they follow the cage "
+               "only by extrapolation from the closest points inside it. Scale the cage up so it encloses the mesh, "
+               "then bind again")
+    assert f"lbc: warning: {warning}" in err
+    code, out, err = run(capsys, "bind", LOGO, points, "-o", tmp_path / "c.npz", "--cells", 400, "--json", "--quiet")
+    assert code == 0 and json.loads(out)["warnings"] == [warning] and "warning" not in err
+
+
 def test_warnings_and_the_forecast_come_before_the_long_work(tmp_path, logo_mesh):
     cage, _ = read_cage(LOGO)
     doubled = tmp_path / "doubled.obj"
