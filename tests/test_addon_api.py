@@ -77,7 +77,8 @@ def test_a_mirrored_cage_binds_without_a_warning_about_its_faces():
     summary = api.bind(mesh, cage, cells=1000)
     # No "reversed all cage faces: they pointed inward" (the mirrored box leaves a few vertices outside, said apart).
     assert [warning for warning in summary["warnings"] if "outside the cage" not in warning] == []
-    assert api.status(mesh) == (True, "Following 'Box'")
+    ok, message = api.status(mesh)  # followed, perhaps by the note that much of the sphere lies outside the box
+    assert ok and message.split(";")[0] == "Following 'Box'"
 
 
 def test_an_error_naming_vertices_of_a_cage_with_modifiers_says_they_are_the_evaluated_ones():
