@@ -204,9 +204,7 @@ def status(mesh_obj):
                     "removes" if geometry.leftover_weights(mesh_obj) else "")
         return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}"
     ok, message = diagnosis.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
-    settings = mesh_obj.lbc
-    too_small = jobs.too_small_warning(settings.outside, settings.mesh_vertex_count or len(mesh_obj.data.vertices),
-                                       "Rebind") if ok else ""
+    too_small = jobs.cage_too_small(mesh_obj.lbc, len(mesh_obj.data.vertices)) if ok else ""
     return ok, f"{message}; {too_small}" if too_small else message  # following, but as the panel warns
 
 

@@ -214,6 +214,13 @@ def _outside_warning(outside):
     return [f"{count} vertices lie outside the cage; they follow the cage around the closest points inside it"]
 
 
+def cage_too_small(settings, vertex_count):
+    """The too-small warning of a bound mesh (its ``obj.lbc`` settings and its vertex count now), as the panel and
+    ``api.status`` show it for a mesh that follows; "" when little of it lies outside."""
+    total = settings.mesh_vertex_count or vertex_count  # 0: bound before the count was recorded
+    return too_small_warning(settings.outside, total, "Rebind")
+
+
 def _cap_warning(weights, cap):
     """A warning when Max Influences ``cap`` could not be kept everywhere: a vertex its ``cap`` largest weights cannot
     hold in place keeps the fewest that can (lbc_core.thinning), and the panel would show more than the cap."""

@@ -20,8 +20,7 @@ def draw_binding(layout, obj):
     """State, figures and actions of a bound mesh."""
     settings = obj.lbc
     ok = settings.state == "FOLLOWING"
-    total = settings.mesh_vertex_count or len(obj.data.vertices)  # 0: bound before the count was recorded
-    too_small = jobs.too_small_warning(settings.outside, total, "Rebind") if ok else ""
+    too_small = jobs.cage_too_small(settings, len(obj.data.vertices)) if ok else ""
     box = layout.box()
     box.label(text=settings.status or "Bound", icon="CHECKMARK" if ok and not too_small else "ERROR")
     if too_small:  # following, but much of the mesh only by extrapolation from the closest points inside

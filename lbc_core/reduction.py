@@ -57,27 +57,28 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     # A weight below threshold / 10 at every corner of a cell cannot reach the threshold inside it; drop those
     # entries (the solver's faint tails) before the product, keeping what a support may need to grow into.
     sparse_domain = sp.csr_matrix(np.where(domain_weights >= threshold / 10, domain_weights, 0.0))
+    full_domain = sp.csr_matrix(domain_weights)
     linear = getattr(located, "linear", located)
     outside = getattr(located, "outside", None)
     progress = Progress.of(progress, cancel)
 
     def reduce_chunk(rows):
         block = located[rows]  # once: a smooth interpolation computes its rows on demand
+        barycentric = linear[rows]
         positions = block @ domain_vertices
         extrapolated = np.zeros(block.shape[0], dtype=bool) if outside is None else outside[rows]
         inner = np.flatnonzero(~extrapolated)
-        reduced = _reduce_inside(block[inner], linear[rows][inner], positions[inner])
+        reduced = _reduce_inside(block[inner], barycentric[inner], positions[inner])
         if len(inner) == block.shape[0]:
             return reduced
         outer = np.flatnonzero(extrapolated)
-        full, targets = _bounded_lever(block[outer], linear[rows][outer], sp.csr_matrix(domain_weights),
+        full, targets = _bounded_lever(block[outer], barycentric[outer], positions[outer], full_domain,
                                        domain_vertices)
         signed, met = _reduce_signed(full, controls, targets, threshold, tolerance)
         if not met.all():
             # An extrapolation from too few or one-sided vertices (far outside a thin cage): the point follows its
             # closest point inside, reduced as a point inside.
-            failed = outer[~met]
-            closest = linear[rows][failed]
+            closest = barycentric[outer[~met]]
             signed = scatter_rows(sp.diags(met.astype(float)) @ signed, np.flatnonzero(~met),
                                   _reduce_inside(closest, closest, closest @ domain_vertices))
         return scatter_rows(scatter_rows(sp.csr_matrix((block.shape[0], controls.shape[0])), inner, reduced), outer,
@@ -91,7 +92,7 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         # non-negative weights on its support meet the constraints; the barycentric row, a convex combination of the
         # vertices' coordinates, always does.
         failed = np.flatnonzero(~met)
-        again, _ = _reduce_rows(fallback[failed] @ sp.csr_matrix(domain_weights), controls, positions[failed],
+        again, _ = _reduce_rows(fallback[failed] @ full_domain, controls, positions[failed],
                                 threshold, tolerance, progress.check)
         kept = sp.diags(met.astype(float)) @ reduced
         kept.eliminate_zeros()
@@ -100,16 +101,17 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     return _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
 
 
-def _bounded_lever(extrapolating, closest, domain_weights, domain_vertices):
+def _bounded_lever(extrapolating, closest, positions, domain_weights, domain_vertices):
     """Outside points' coordinates (control space) and the points they reproduce: the closest point's row plus the
-    extrapolation, whose weights sum in magnitude to at most EXTRAPOLATION_GAIN, shortened toward the closest point
-    where they would not (far outside a thin cage the extrapolation is a long lever on a short base)."""
+    extrapolation (to ``positions``, ``extrapolating``'s own), whose weights sum in magnitude to at most
+    EXTRAPOLATION_GAIN, shortened toward the closest point where they would not (far outside a thin cage the
+    extrapolation is a long lever on a short base)."""
     base = closest @ domain_weights
     lever = extrapolating @ domain_weights - base
     gain = np.asarray(abs(lever).sum(axis=1)).ravel()
     share = np.minimum(1.0, EXTRAPOLATION_GAIN / np.maximum(gain, 1e-300))
     at = closest @ domain_vertices
-    targets = at + share[:, None] * (extrapolating @ domain_vertices - at)
+    targets = at + share[:, None] * (positions - at)
     return sp.csr_matrix(base + sp.diags(share) @ lever), targets
 
 

@@ -378,9 +378,9 @@ class PaddedRows:
         self.full = sets.n_slots == len(counts) * self.width  # no padding (whole sets): rows are a reshape
 
     def gather(self, slot_values):
-        """(S,) → (N_in, width), padding slots PADDING_VALUE."""
+        """(S,) → (N_in, width) float64, a fresh array, padding slots PADDING_VALUE."""
         if self.full:
-            return slot_values.reshape(self.corners.shape[:2]).copy()
+            return np.array(slot_values, dtype=float).reshape(self.corners.shape[:2])
         rows = np.full(self.corners.shape[:2], PADDING_VALUE)
         rows[self.vertex, self.column] = slot_values
         return rows
@@ -524,7 +524,7 @@ class PairOperators:
     def project(self, slot_values, duals, tolerance=STEP_TOLERANCE, steps=STEP_NEWTON_STEPS):
         """Each vertex's slot values projected onto its constraints: (S,) weights, (N_in, d+1) duals, feasible.
         Within the iterations a few Newton steps each time suffice: the next projection starts where they ended."""
-        values = self.padded.gather(slot_values.astype(np.float64))
+        values = self.padded.gather(slot_values)  # float64 rows, a fresh array
         padded = self.padded
         duals = np.zeros(padded.targets.shape) if duals is None else duals
 
