@@ -234,7 +234,8 @@ def _fit_rows(vertices, tree, points, radius, terms):
         factor = np.repeat(solved[:, 0, term] * fits, counts)
         for axis in range(d):
             factor += offsets[axis] * np.repeat(solved[:, 1 + axis, term] * fits, counts)
-        rows = sp.csr_matrix((weight.data * factor, weight.indices, weight.indptr), shape=weight.shape)
+        # Its own index arrays: eliminate_zeros prunes them in place, and the next term needs the kernel's.
+        rows = sp.csr_matrix((weight.data * factor, weight.indices.copy(), weight.indptr.copy()), shape=weight.shape)
         rows.eliminate_zeros()
         result.append(rows)
     return result, fits

@@ -10,7 +10,7 @@ from lbc_core.errors import Cancelled
 from lbc_core.interpolation import interpolation_matrix
 from lbc_core.progress import Progress
 from lbc_core.reduction import interpolate_and_reduce
-from lbc_core.smoothing import SmoothInterpolation, fade_in, kernel, median_edge, moving_least_squares
+from lbc_core.smoothing import SmoothInterpolation, fade_in, fit_gradients, kernel, median_edge, moving_least_squares
 
 
 @pytest.mark.parametrize("d", [2, 3])
@@ -38,6 +38,22 @@ def test_a_flat_neighbourhood_is_not_fitted():
     grid = np.stack(np.meshgrid(np.linspace(0, 1, 10), np.linspace(0, 1, 10), [0.0]), axis=-1).reshape(-1, 3)
     rows, fits = moving_least_squares(grid, cKDTree(grid), np.array([[0.5, 0.5, 0.0]]), radius=0.3)
     assert not fits.any() and rows.nnz == 0
+
+
+def test_fit_gradients_of_a_batch_are_each_points_own_where_some_points_have_no_fit():
+    """A point with no usable fit has empty rows; once, pruning them corrupted the other points' slopes along the
+    second and third axes, which shared the kernel's index arrays."""
+    rng = np.random.default_rng(3)
+    lonely = [[5.0, 5.0, 5.0], [5.1, 5.0, 5.0], [5.0, 5.1, 5.0]]  # three vertices in a plane: no fit there
+    vertices = np.vstack([rng.random((400, 3)), lonely])
+    points = np.vstack([rng.random((20, 3)), [[5.03, 5.03, 5.0]], rng.random((20, 3))])
+    tree = cKDTree(vertices)
+    batch = fit_gradients(vertices, tree, points, 0.35)
+    for k in range(len(points)):
+        alone = fit_gradients(vertices, tree, points[k:k + 1], 0.35)
+        for axis in range(3):
+            assert abs(batch[axis][k] - alone[axis]).max() < 1e-9
+    assert all(batch[axis][20].nnz == 0 for axis in range(3))
 
 
 def test_kernel_and_fade_ends():
