@@ -175,11 +175,11 @@ def baseline_code(revision):
     """The bind's evaluation, reduction and thinning from ``revision`` (bench/smoothness.py's baseline_modules)."""
     import lbc_core.pipeline as pipeline
 
-    from bench.smoothness import baseline_modules
+    from bench.smoothness import baseline_modules, pipeline_smoothing
 
     old = baseline_modules(revision)
     saved = pipeline.SmoothInterpolation, pipeline.interpolate_and_reduce, thinning.thin_weights
-    pipeline.SmoothInterpolation = old["smoothing"].SmoothInterpolation
+    pipeline.SmoothInterpolation = pipeline_smoothing(old["smoothing"])
     pipeline.interpolate_and_reduce = old["reduction"].interpolate_and_reduce
     thinning.thin_weights = old["thinning"].thin_weights
     try:

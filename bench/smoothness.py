@@ -35,6 +35,7 @@
 """
 
 import argparse
+import inspect
 import os
 import re
 import subprocess
@@ -244,7 +245,7 @@ def bench_speed(baseline):
         import lbc_core.pipeline as pipeline
 
         saved = pipeline.SmoothInterpolation, pipeline.interpolate_and_reduce, jobs.thin_weights, parallel.worker_count
-        pipeline.SmoothInterpolation = old["smoothing"].SmoothInterpolation
+        pipeline.SmoothInterpolation = pipeline_smoothing(old["smoothing"])
         pipeline.interpolate_and_reduce = old["reduction"].interpolate_and_reduce
         jobs.thin_weights, parallel.worker_count = old["thinning"].thin_weights, lambda: 1
         try:
@@ -324,6 +325,19 @@ def baseline_modules(revision, names=("constraints", "smoothing", "reduction", "
         exec(compile(source, f"{revision}:lbc_core/{name}.py", "exec"), module.__dict__)
         modules[name] = module
     return modules
+
+
+def pipeline_smoothing(module):
+    """``module``'s SmoothInterpolation as ``lbc_core.pipeline.evaluate`` calls it today (with ``reach``), for a
+    baseline whose class took the radius and fade in median edges instead."""
+    if "reach" in inspect.signature(module.SmoothInterpolation).parameters:
+        return module.SmoothInterpolation
+
+    def smoothing(*args, reach=1.0, **kwargs):
+        return module.SmoothInterpolation(*args, radius_edges=module.RADIUS_EDGES * reach,
+                                          fade_edges=module.FADE_EDGES * reach, **kwargs)
+
+    return smoothing
 
 
 def bench_evaluation(baseline, rounds=3):

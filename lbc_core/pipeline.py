@@ -28,7 +28,7 @@ from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
 from .parallel import busy_factor, counted_in_load
 from .progress import Laps, Progress
 from .reduction import interpolate_and_reduce
-from .smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation
+from .smoothing import SmoothInterpolation
 from .forecast import check_memory, solve_forecast, solves_stretched
 from .solver import solve_on_mesh
 
@@ -203,15 +203,15 @@ def solve(clock, vertices, cells, fixed, values, control_points, omega, request,
 
 def evaluate(clock, domain, located, domain_weights, unit_cage, threshold, reach=1.0, points=None, outside=None):
     """The reduction stage: the smooth evaluation at the located points, reduced (weights below ``threshold``
-    dropped, the constraints restored); ``reach`` scales the fit's radius and fade near the cage, in median edges.
+    dropped, the constraints restored); ``reach`` scales the fit's radii, depths and fade, in median edges.
     With the (unit frame) ``points`` and their ``outside`` flags, the rows of points outside the cage extrapolate
     to them (:class:`~lbc_core.smoothing.SmoothInterpolation`).
 
     Returns the (m, n) sparse weights.
     """
     part = clock.part("reduction")
-    smooth = SmoothInterpolation(domain.vertices, domain.cells, located, radius_edges=RADIUS_EDGES * reach,
-                                 fade_edges=FADE_EDGES * reach, progress=part, points=points, outside=outside)
+    smooth = SmoothInterpolation(domain.vertices, domain.cells, located, reach=reach, progress=part, points=points,
+                                 outside=outside)
     weights = interpolate_and_reduce(smooth, domain_weights, unit_cage.vertices, domain.vertices, threshold,
                                      tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=part)
     clock.done("reduction")

@@ -54,7 +54,7 @@ from .parallel import counted_in_load
 from .pipeline import (REBIND_STAGES, REPRODUCTION_TOLERANCE, StageClock, bind, check_points, evaluate,
                        geodesic_weights, lbc_binding, locate, request_of, solve)
 from .progress import Progress
-from .smoothing import RADIUS_EDGES, median_edge
+from .smoothing import DEEP_RADIUS_EDGES, RADIUS_EDGES, median_edge
 from .solver import SolveResult
 
 # Share of its radius ratio a carried cell with a corner off the cage must keep (bench/RESULTS.md, "The warm re-bind
@@ -333,7 +333,7 @@ def _staleness(previous, carried, old_vertices, domain_weights, edge):
 def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, moved):
     """Indices of the points to evaluate again: all of them if the points changed, else those outside the cage (their
     closest domain point may have moved), with weight on a moved control point, or within reach of a changed vertex
-    (the fit's radius, ``RADIUS_EDGES`` times the previous median edge ``old_edge``, or a cell's longest edge for the
+    (the fit's widest radius, in the previous median edges ``old_edge``, or a cell's longest edge for the
     piecewise-linear part and the fade near the cage, both read at the corners of the point's cell)."""
     if len(points) != len(previous.points) or not np.array_equal(points, previous.points):
         return np.arange(len(points))
@@ -345,7 +345,7 @@ def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, ol
     corners = old_vertices[carried.cells]
     longest = max(float(np.linalg.norm(corners[:, a] - corners[:, b], axis=1).max())
                   for a in range(corners.shape[1]) for b in range(a))
-    reach = max(RADIUS_EDGES * old_edge, longest)
+    reach = max(max(RADIUS_EDGES, DEEP_RADIUS_EDGES) * old_edge, longest)
     distance, _ = cKDTree(old_vertices[changed]).query(unit_points, distance_upper_bound=reach)
     return np.flatnonzero(on_moved | np.isfinite(distance))
 

@@ -23,6 +23,10 @@ from .progress import Progress
 
 # The fit's radius in median cell edges: wider is smoother and costs more influences per point (bench/RESULTS.md).
 RADIUS_EDGES = 2.0
+# The radius where the cage is thick, and the local depths (median cell edges) over which the radius grows to it:
+# smoother in wide parts, no wider across thin ones (bench/RESULTS.md, "A wider fit where the cage is thick").
+DEEP_RADIUS_EDGES = 3.0
+DEPTH_EDGES = (0.2, 0.8)
 # Distance from the cage (median cell edges, each point's own) over which the fit fades into the P1
 # interpolation (bench/RESULTS.md, "The smooth evaluation's fade into P1: over a quarter of a cell edge instead of one").
 FADE_EDGES = 0.25
@@ -38,7 +42,9 @@ class SmoothInterpolation:
     """The (m, N) interpolation matrix from a domain's vertices to points, rows computed on demand.
 
     Row i is (1 - β_i) times the point's P1 barycentric row plus β_i times its moving least-squares row, where β
-    rises smoothly from 0 on the cage to 1 at ``fade`` from it. Every row sums to 1 and reproduces the point. A point
+    rises smoothly from 0 on the cage to 1 at ``fade`` from it. The fit's radius is wider where the cage is thick
+    than across thin parts, where a wide fit would reach across the gaps between them (fingers, toes). Every row
+    sums to 1 and reproduces the point. A point
     outside the cage, bound to its closest domain point q, reproduces q, unless ``points`` and ``outside`` are given:
     then its row is q's P1 row plus the offset p - q times the gradient of the fit at q (:func:`fit_gradients`), so it
     reproduces p itself (where the fit at q can: else q's row), and the part outside turns with the cage around it
@@ -56,7 +62,14 @@ class SmoothInterpolation:
     located : (m, N) scipy.sparse.csr_matrix
         The points' P1 barycentric rows (:func:`lbc_core.interpolation.interpolation_matrix`).
     radius_edges, fade_edges : float
-        The fit's radius and the fade's width, in median cell edge lengths.
+        The fit's radius near the cage and the fade's width, in median cell edge lengths.
+    deep_radius_edges : float
+        The fit's radius where the cage is thick: it grows to it with the local depth across ``depth_edges``
+        (:meth:`radius_at`).
+    depth_edges : (float, float)
+        The local depths (median cell edge lengths) between which the radius grows.
+    reach : float
+        Scales every length above: the median edge of a mesh whose previous evaluation is kept in part.
     progress : Progress, optional
         Checked for cancellation before each chunk of rows (:class:`~lbc_core.errors.Cancelled`).
     points : (m, d) float array, optional
@@ -67,7 +80,7 @@ class SmoothInterpolation:
     """
 
     def __init__(self, vertices, cells, located, radius_edges=RADIUS_EDGES, fade_edges=FADE_EDGES, progress=None,
-                 points=None, outside=None):
+                 points=None, outside=None, deep_radius_edges=DEEP_RADIUS_EDGES, depth_edges=DEPTH_EDGES, reach=1.0):
         self.vertices = np.asarray(vertices, dtype=float)
         self.located = sp.csr_matrix(located)
         self.shape = self.located.shape
@@ -76,17 +89,16 @@ class SmoothInterpolation:
         self.outside = None if outside is None else np.asarray(outside, dtype=bool)
         self.points = None if points is None else np.asarray(points, dtype=float)
         self.progress = Progress.of(progress)
-        edge = median_edge(self.vertices, cells)
+        edge = reach * median_edge(self.vertices, cells)
         self.radius = radius_edges * edge
+        self.deep_radius = max(deep_radius_edges, radius_edges) * edge
+        self.depths = (depth_edges[0] * edge, depth_edges[1] * edge)
         self.fade = fade_edges * edge
         self.tree = cKDTree(self.vertices)
-        # The fade follows each point's own distance to the cage. The corners' distances (at most N searches) bound
-        # it from below (it is 1-Lipschitz), so only the points that bound leaves within the fade are searched.
-        corners = np.unique(self.located.indices)
+        # The fade follows each point's own distance to the cage. The vertices' distances bound it from below (it
+        # is 1-Lipschitz), so only the points that bound leaves within the fade are searched.
         self.boundary = FacetSearch(self.vertices, np.asarray(cells))
-        self.cage_distance = np.zeros(len(self.vertices))
-        self.cage_distance[corners] = np.sqrt(self.boundary.closest(self.vertices[corners],
-                                                                    self.progress.check).squared)
+        self.vertex_depth = np.sqrt(self.boundary.closest(self.vertices, self.progress.check).squared)
 
     @property
     def linear(self):
@@ -107,7 +119,8 @@ class SmoothInterpolation:
     def _rows(self, linear, first):
         points = linear @ self.vertices
         blend = fade_in(self.distance_to_cage(linear, points) / self.fade)
-        fitted, fits = moving_least_squares(self.vertices, self.tree, points, self.radius)
+        distances = neighbour_distances(self.tree, points, self.deep_radius)
+        (fitted,), fits = _fit_rows(self.vertices, distances, points, self.radius_at(distances), [0])
         blend = np.where(fits, blend, 0.0)
         rows = linear.copy()
         rows.data *= np.repeat(1.0 - blend, np.diff(rows.indptr))
@@ -135,6 +148,21 @@ class SmoothInterpolation:
                                   shape=(len(points), len(outside)))
         return (inside + placement @ extrapolated).tocsr()
 
+    def radius_at(self, distances):
+        """The fit's radius (length units) at points whose :func:`neighbour_distances` are ``distances``: the
+        radius near the cage, growing smoothly to the deep radius with the local depth, the kernel-weighted mean of
+        the domain vertices' distances to the cage within the near radius. Smooth in the point (a point's own
+        distance kinks on the medial axis), and small across a part one or two cells thick, where every vertex lies
+        on or near the cage."""
+        if self.deep_radius == self.radius:
+            return np.full(distances.shape[0], self.radius)
+        near = distances.copy()
+        near.data = kernel(near.data / self.radius)
+        mass = np.asarray(near.sum(axis=1)).ravel()
+        depth = (near @ self.vertex_depth) / np.maximum(mass, np.finfo(float).tiny)
+        low, high = self.depths
+        return self.radius + (self.deep_radius - self.radius) * fade_in((depth - low) / (high - low))
+
     def distance_to_cage(self, linear, points):
         """Each point's distance to the cage where it is below the fade, else a lower bound of it at least the fade.
 
@@ -151,7 +179,7 @@ class SmoothInterpolation:
         """
         counts = np.diff(linear.indptr)
         owner = np.repeat(np.arange(len(points)), counts)
-        below = self.cage_distance[linear.indices] - np.linalg.norm(points[owner] - self.vertices[linear.indices],
+        below = self.vertex_depth[linear.indices] - np.linalg.norm(points[owner] - self.vertices[linear.indices],
                                                                     axis=1)
         lower = np.full(len(points), -np.inf)
         np.maximum.at(lower, owner, below)
@@ -170,8 +198,8 @@ def moving_least_squares(vertices, tree, points, radius):
     vertices : (N, d) float array
     tree : scipy.spatial.cKDTree of ``vertices``
     points : (k, d) float array
-    radius : float
-        The kernel's support radius (length units).
+    radius : float or (k,) float array
+        The kernel's support radius (length units), one for all points or one per point.
 
     Returns
     -------
@@ -180,8 +208,17 @@ def moving_least_squares(vertices, tree, points, radius):
         point (``rows @ vertices == points`` up to rounding). Rows of points with no usable fit are empty.
     fits : (k,) bool array
         Points whose neighbourhood holds enough vertices, not all in a plane, for a well-conditioned fit.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.spatial import cKDTree
+    >>> grid = np.stack(np.meshgrid(*[np.linspace(0, 1, 5)] * 2), -1).reshape(-1, 2)
+    >>> rows, fits = moving_least_squares(grid, cKDTree(grid), np.array([[0.4, 0.55]]), 0.5)
+    >>> bool(fits[0]), np.allclose(rows @ grid, [[0.4, 0.55]])
+    (True, True)
     """
-    (rows,), fits = _fit_rows(vertices, tree, points, radius, [0])
+    (rows,), fits = _fit_rows(vertices, neighbour_distances(tree, points, np.max(radius)), points, radius, [0])
     return rows, fits
 
 
@@ -191,54 +228,77 @@ def fit_gradients(vertices, tree, points, radius):
     and applied to the vertices' coordinates gives the unit vector of its axis (rows of points with no usable fit:
     empty). Same parameters as :func:`moving_least_squares`."""
     d = points.shape[1]
-    rows, _ = _fit_rows(vertices, tree, points, radius, list(range(1, d + 1)))
+    rows, _ = _fit_rows(vertices, neighbour_distances(tree, points, np.max(radius)), points, radius,
+                        list(range(1, d + 1)))
+    scale = np.broadcast_to(np.asarray(radius, dtype=float), (len(points),))
     for gradient in rows:
-        gradient.data /= radius
+        gradient.data /= np.repeat(scale, np.diff(gradient.indptr))
     return rows
 
 
-def _fit_rows(vertices, tree, points, radius, terms):
+def _fit_rows(vertices, distances, points, radius, terms):
     """Rows giving the fit's coefficients ``terms`` (0: the value at the point; 1 + a: the slope along axis a, per
-    radius) at each point: ([(k, N) CSR per term], fits (k,) bool)."""
+    radius) at each point, from its :func:`neighbour_distances` within at least ``radius``: ([(k, N) CSR per term],
+    fits (k,) bool)."""
     k, d = points.shape
-    pairs = cKDTree(points).sparse_distance_matrix(tree, radius, output_type="coo_matrix").tocsr()
-    # sparse_distance_matrix leaves out pairs at distance 0: a point on a vertex gets that vertex back.
-    _, on_vertex = tree.query(points, distance_upper_bound=0.0)
-    hit = np.flatnonzero(on_vertex < len(vertices))
-    weight = sp.csr_matrix((kernel(pairs.data / radius), pairs.indices, pairs.indptr), shape=(k, len(vertices)))
-    if len(hit):
-        weight = (weight + sp.csr_matrix((np.ones(len(hit)), (hit, on_vertex[hit])), shape=weight.shape)).tocsr()
-    # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ.
-    local = vertices / radius
-    centre = points / radius
+    radius = np.broadcast_to(np.asarray(radius, dtype=float), (k,))
+    weight = distances.copy()
+    weight.data = kernel(weight.data / radius[_row_of_each(weight)])
+    weight.eliminate_zeros()
+    owner = _row_of_each(weight)
+    # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ, taken in
+    # the frame scaled by the largest radius and then rescaled per point.
+    scale = radius.max()
+    local, centre, ratio = vertices / scale, points / scale, scale / radius
     upper = [(a, b) for a in range(d) for b in range(a, d)]
     sums = weight @ np.c_[np.ones(len(vertices)), local, np.stack([local[:, a] * local[:, b] for a, b in upper], 1)]
-    mass, first = sums[:, 0], sums[:, 1:d + 1] - centre * sums[:, :1]  # Σ K, Σ K (v - p)
+    mass = sums[:, 0]
+    first = (sums[:, 1:d + 1] - centre * sums[:, :1]) * ratio[:, None]  # Σ K (v - p) / r
     second = np.empty((k, d, d))
     for column, (a, b) in enumerate(upper):
         # Σ K (v_a - p_a)(v_b - p_b) = Σ K v_a v_b - p_a Σ K v_b - p_b Σ K v_a + p_a p_b Σ K
         second[:, a, b] = second[:, b, a] = (sums[:, 1 + d + column] - centre[:, a] * sums[:, 1 + b]
-                                             - centre[:, b] * sums[:, 1 + a] + centre[:, a] * centre[:, b] * mass)
+                                             - centre[:, b] * sums[:, 1 + a]
+                                             + centre[:, a] * centre[:, b] * mass) * ratio ** 2
     moments = np.empty((k, d + 1, d + 1))
     moments[:, 0, 0], moments[:, 0, 1:], moments[:, 1:, 0], moments[:, 1:, 1:] = mass, first, first, second
     fits = well_conditioned(moments)
-    # Coefficient t of the fit = e_tᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e_t (M is symmetric).
+    # Coefficient t of the fit = e_tᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e_t (M is symmetric), an
+    # affine function of the vertex, c_t + g_t · local_j, whose c_t and g_t are the point's.
     solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
                              np.broadcast_to(np.eye(d + 1)[:, terms], (k, d + 1, len(terms))))
-    # Per (point, vertex) pair, coordinate by coordinate: np.repeat over each row's pairs is several times faster
-    # than gathering (pairs, d) blocks by row index.
-    counts = np.diff(weight.indptr)
-    offsets = [local[:, axis][weight.indices] - np.repeat(centre[:, axis], counts) for axis in range(d)]
+    slopes = solved[:, 1:] * (ratio * fits)[:, None, None]
+    constants = solved[:, 0] * fits[:, None] - np.einsum("ka,kat->kt", centre, slopes)
+    pair_local = [local[weight.indices, axis] for axis in range(d)]
     result = []
     for term in range(len(terms)):
-        factor = np.repeat(solved[:, 0, term] * fits, counts)
+        factor = np.ascontiguousarray(constants[:, term])[owner]
         for axis in range(d):
-            factor += offsets[axis] * np.repeat(solved[:, 1 + axis, term] * fits, counts)
+            factor += np.ascontiguousarray(slopes[:, axis, term])[owner] * pair_local[axis]
         # Its own index arrays: eliminate_zeros prunes them in place, and the next term needs the kernel's.
         rows = sp.csr_matrix((weight.data * factor, weight.indices.copy(), weight.indptr.copy()), shape=weight.shape)
         rows.eliminate_zeros()
         result.append(rows)
     return result, fits
+
+
+def _row_of_each(matrix):
+    """The row of each stored entry of a CSR matrix."""
+    return np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))
+
+
+def neighbour_distances(tree, points, reach):
+    """(k, N) CSR: the distance from each point to each vertex of ``tree`` within ``reach``; a point on a vertex
+    holds the smallest positive float there, so that the pair is stored (columns unsorted within rows)."""
+    pairs = cKDTree(points).sparse_distance_matrix(tree, reach, output_type="coo_matrix")
+    pairs.has_canonical_format = True  # each pair once: no sum or sort needed
+    distances = pairs.tocsr()
+    _, on_vertex = tree.query(points, distance_upper_bound=0.0)
+    hit = np.flatnonzero(on_vertex < tree.n)
+    if len(hit):
+        distances = distances + sp.csr_matrix((np.full(len(hit), np.finfo(float).tiny), (hit, on_vertex[hit])),
+                                              shape=distances.shape)
+    return sp.csr_matrix(distances)
 
 
 def well_conditioned(matrices):
