@@ -43,9 +43,9 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
 from .errors import CageError, CageVertexError
-from .geometry import (cross2, enclosed_measure, in_triangle_2d, intersecting_triangles, is_convex_polygon,
-                       newell_normal, overlapping_boxes, plane_axes, segments_touch, triangle_normals, unit,
-                       winding_numbers)
+from .geometry import (cross2, enclosed_measure, hull_share, in_triangle_2d, intersecting_triangles,
+                       is_convex_polygon, newell_normal, overlapping_boxes, plane_axes, segments_touch, triangle_normals,
+                       unit, winding_numbers)
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 # A vertex a million times farther from the cage's middle than the rest of the cage is wide is no part of it: it would
@@ -161,6 +161,12 @@ class Cage:
     def measure(self):
         """Signed area (2D) or volume (3D) enclosed; positive for the stored orientation."""
         return float(enclosed_measure(self.surface_vertices, self.facets))
+
+    @property
+    def convexity(self):
+        """The enclosed area or volume over its convex hull's: 1 for a convex cage (whose coordinates spread over
+        most control points, so that its solve costs more: :mod:`lbc_core.forecast`)."""
+        return hull_share(self.surface_vertices, self.measure)
 
     def fingerprint(self):
         """A hash of the topology (vertex count and facets); positions do not enter it.

@@ -16,6 +16,9 @@ SMALL_CAGE, SMALL_CAGE_TOLERANCE = 12, 2e-4
 # (cell, control point) pairs per cell at a solve's widest: PAIRS_SCALE[d] · n^PAIRS_POWER for n control points
 # (bench/RESULTS.md, "Memory and the cost model").
 PAIRS_SCALE, PAIRS_POWER = {2: 2.2, 3: 2.5}, 0.5
+# A convex 3D cage (enclosing CONVEX_SHARE of its hull) spreads its coordinates: this share of all pairs, times the
+# iterations, times the cost per pair (bench/RESULTS.md, "The forecast for convex cages").
+CONVEX_SHARE, WIDE_PAIRS_SHARE, WIDE_ITERATIONS, WIDE_STEP_COST = 0.95, 0.75, 2.6, 0.55
 # Peak bytes per pair (bench/RESULTS.md, "The locality solver, third round"), and per entry of the (cells, n) TV
 # weights the caller holds.
 BYTES_PER_PAIR = 620
@@ -39,7 +42,13 @@ def default_tolerance(dim, n_control_points):
     return DEFAULT_TOLERANCE[dim]
 
 
-def estimate_memory(n_control_points, n_cells, dim):
+def spreads_wide(n_control_points, dim, convexity):
+    """Whether a cage's coordinates are expected to spread over most of its control points: a convex 3D cage of more
+    than SMALL_CAGE of them (``convexity``: :attr:`Cage.convexity`; 0 when unknown)."""
+    return dim == 3 and n_control_points > SMALL_CAGE and convexity >= CONVEX_SHARE
+
+
+def estimate_memory(n_control_points, n_cells, dim, convexity=0.0):
     """Peak memory of a solve, estimated before it starts.
 
     Parameters
@@ -48,18 +57,23 @@ def estimate_memory(n_control_points, n_cells, dim):
     n_cells : int
         Triangles (dim 2) or tetrahedra (dim 3).
     dim : int
+    convexity : float
+        :attr:`Cage.convexity` (0 when unknown).
 
     Returns
     -------
     int, bytes
     """
-    pairs = estimate_pairs(n_control_points, n_cells, dim)
+    pairs = estimate_pairs(n_control_points, n_cells, dim, convexity)
     return int(BYTES_PER_PAIR * pairs + BYTES_PER_WEIGHT * n_control_points * n_cells)
 
 
-def estimate_pairs(n_control_points, n_cells, dim):
+def estimate_pairs(n_control_points, n_cells, dim, convexity=0.0):
     """The (cell, control point) pairs a solve holds at its widest, about."""
-    return PAIRS_SCALE[dim] * n_control_points ** PAIRS_POWER * n_cells
+    pairs = PAIRS_SCALE[dim] * n_control_points ** PAIRS_POWER * n_cells
+    if spreads_wide(n_control_points, dim, convexity):
+        pairs = max(pairs, WIDE_PAIRS_SHARE * n_control_points * n_cells)
+    return pairs
 
 
 # Seconds per pair and iteration on a 2-core x86_64, the reshapes included (bench/RESULTS.md, "Memory and the cost
@@ -71,9 +85,9 @@ ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 34}, 0.3, 0.25
 # whose fingers face each other across narrow gaps (bench/RESULTS.md, "Cages whose parts face each other across a
 # narrow gap").
 MESHING_SECONDS_PER_CELL = 5e-5
-# Seconds per point for the work after the solve: location, smooth fit, reduction, thinning (bench/RESULTS.md, "The
-# bind outside the solve").
-SECONDS_PER_POINT = 1e-5
+# Seconds per point for the work after the solve: location, smooth fit, reduction, thinning (bench/RESULTS.md, "A wider
+# fit where the cage is thick").
+SECONDS_PER_POINT = 2e-5
 # A stretched solve (a very thin cage): factor on the iterations and on each one's cost (bench/thin_cages.py).
 STRETCHED_ITERATIONS, STRETCHED_STEP_COST = 2, 5
 # Principal aspect from which a thin cage needs more iterations: 1 + log10(aspect / THIN_FROM_ASPECT) times as many
@@ -86,7 +100,7 @@ BUSY_TOLD_FROM = 1.5
 
 
 def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0,
-                   meshing=False):
+                   meshing=False, convexity=0.0):
     """What a solve will take, told before it starts: its memory and roughly its time.
 
     Parameters
@@ -103,21 +117,25 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
         The points the bind evaluates after the solve (0: the solve alone is told).
     meshing : bool
         Whether the bind meshes the cage first (its time is told before the solve's).
+    convexity : float
+        :attr:`Cage.convexity` (0 when unknown): a convex cage's coordinates spread wide (:func:`spreads_wide`).
 
     Returns
     -------
     str, e.g. "solving 106 control points on about 8000 cells: about 190 MB of memory for the solve and roughly 4 s"
     """
-    iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells)
-    seconds = SECONDS_PER_PAIR_STEP * estimate_pairs(n_control_points, n_cells, dim) * iterations * busy
+    iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells, convexity)
+    seconds = SECONDS_PER_PAIR_STEP * estimate_pairs(n_control_points, n_cells, dim, convexity) * iterations * busy
     if stretched:
         seconds *= STRETCHED_STEP_COST
+    if spreads_wide(n_control_points, dim, convexity):
+        seconds *= WIDE_STEP_COST
     text = ""
     if meshing:
         meshing_seconds = MESHING_SECONDS_PER_CELL * n_cells * busy
         text = f"meshing {'' if meshing_seconds < 1 else 'roughly '}{format_duration(meshing_seconds)}, then "
     text += (f"solving {n_control_points} control points on about {n_cells} cells: about "
-            f"{format_size(estimate_memory(n_control_points, n_cells, dim))} of memory for the solve and "
+            f"{format_size(estimate_memory(n_control_points, n_cells, dim, convexity))} of memory for the solve and "
             f"{'' if seconds < 1 else 'roughly '}{format_duration(seconds)}")
     if n_points:
         points_seconds = SECONDS_PER_POINT * n_points * busy
@@ -129,14 +147,17 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     return text
 
 
-def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0, n_cells=8000):
+def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0, n_cells=8000, convexity=0.0):
     """About how many iterations a solve takes at the default tolerance (see :data:`ITERATIONS_SCALE`,
-    :data:`STRETCHED_ITERATIONS`, :data:`THIN_FROM_ASPECT`); the arguments as for :func:`solve_forecast`."""
+    :data:`STRETCHED_ITERATIONS`, :data:`THIN_FROM_ASPECT`, :data:`WIDE_ITERATIONS`); the arguments as for
+    :func:`solve_forecast`."""
     iterations = ITERATIONS_SCALE[dim] * n_control_points ** ITERATIONS_POWER * (n_cells / 8000) ** CELLS_POWER
     if stretched:
         iterations *= STRETCHED_ITERATIONS
     elif dim == 3 and aspect > THIN_FROM_ASPECT:
         iterations *= 1 + np.log10(aspect / THIN_FROM_ASPECT)
+    if spreads_wide(n_control_points, dim, convexity):
+        iterations *= WIDE_ITERATIONS
     return float(iterations)
 
 
@@ -208,9 +229,10 @@ def format_remaining(seconds):
     return f"{duration} left" if duration.startswith("under") else f"about {duration} left"
 
 
-def check_memory(n_control_points, n_cells, dim):
-    """Raise CageError, with the estimate, if a solve would need more memory than the machine has available."""
-    needed = estimate_memory(n_control_points, n_cells, dim)
+def check_memory(n_control_points, n_cells, dim, convexity=0.0):
+    """Raise CageError, with the estimate, if a solve would need more memory than the machine has available
+    (``convexity`` as for :func:`estimate_memory`)."""
+    needed = estimate_memory(n_control_points, n_cells, dim, convexity)
     available = _available_memory()
     if available is not None and needed > MEMORY_SHARE * available:
         raise CageError(

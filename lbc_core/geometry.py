@@ -7,6 +7,7 @@ the leading axis; lengths are in the caller's units.
 """
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 
 def row_keys(rows, base):
@@ -268,6 +269,25 @@ def enclosed_measure(vertices, facets):
         return float(0.5 * np.sum(cross2(p, q)))
     p, q, r = (vertices[facets[:, k]] for k in range(3))
     return float(np.sum(np.einsum("ij,ij->i", p, np.cross(q, r))) / 6.0)
+
+
+def hull_share(points, measure):
+    """``measure`` (an area or volume the points bound) over that of the points' convex hull: 1 for a convex
+    shape; 0 where the hull is flat.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.5, 0.9]])
+    >>> round(hull_share(square, 0.95), 2)
+    0.95
+    """
+    points = np.asarray(points, dtype=float)
+    try:
+        hull = ConvexHull(points - points.mean(axis=0)).volume  # an area in 2D
+    except QhullError:
+        return 0.0
+    return float(abs(measure) / hull) if hull > 0 else 0.0
 
 
 def signed_measures(vertices, cells):

@@ -311,13 +311,14 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     """
     cage, points = check_cage_and_points(cage_vertices, cage_faces, points, options)
     n_cells = options.cells or DEFAULT_CELLS[cage.dim]
-    check_memory(cage.n_control_points, n_cells, cage.dim)
+    convexity = cage.convexity
+    check_memory(cage.n_control_points, n_cells, cage.dim, convexity)
     if progress is not None and cage.is_simplex:
         progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve")
     elif progress is not None:
         progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim,
                                      solves_stretched(cage.vertices, options.epsilon), principal_aspect(cage.vertices),
-                                     busy_factor(), len(points), meshing=True))
+                                     busy_factor(), len(points), meshing=True, convexity=convexity))
     return cage, points
 
 

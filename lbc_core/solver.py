@@ -28,6 +28,7 @@ from .errors import CageError
 from .factor import Factor
 from .forecast import SMALL_CAGE, default_tolerance, forecast_iterations, format_remaining, seconds_left
 from .frame import UnitFrame, principal_aspect
+from .geometry import hull_share, signed_measures
 from .objective import tv_objective
 from .progress import Laps, Progress
 from .splitting import DouglasRachford
@@ -202,7 +203,8 @@ def solve_on_mesh(
         progress(0.0, "finding where each coordinate may reach (factorising the solver's matrix)")
         sets, first, duals, carried = _starting_point(mesh, start, progress)
         clock.lap("factorisation")
-        expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls), len(cells))
+        expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls), len(cells),
+                                        _convexity(unit_vertices, cells))
                     if start is None and tolerance == default_tolerance(d, n) else None)
         run = _Run(mesh, tv_weights, settings, stretch, _starting_penalty(penalty, start, d, n), progress, expected)
         solution = run.solve(sets, first, duals, carried)
@@ -491,6 +493,11 @@ def balancing_factor(residuals, high):
     BALANCE_LOW times), else 1."""
     ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
     return 2.0 if ratio > high else 0.5 if ratio < BALANCE_LOW else 1.0
+
+
+def _convexity(vertices, cells):
+    """The domain's area or volume over its convex hull's: the cage's :attr:`~lbc_core.cage.Cage.convexity`."""
+    return hull_share(vertices, np.abs(signed_measures(vertices, cells)).sum())
 
 
 def _starting_penalty(penalty, start, d, n):

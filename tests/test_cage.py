@@ -17,6 +17,7 @@ import lbc_core.geometry as geometry
 from lbc_core.cage import MAX_CONTROL_POINTS, Cage, make_cage
 from lbc_core.errors import CageError, CageVertexError
 from lbc_core.geometry import intersecting_triangles, overlapping_boxes
+from lbc_core.io import read_cage
 from helpers.random_cages import draw_dented_sphere, lengths, sphere_directions, star_polygon, subdivided_cube
 
 DATA = Path(__file__).parent / "data"
@@ -81,6 +82,14 @@ def test_vertices_that_are_not_numbers(vertices):
 def test_faces_from_a_generator():
     cage = make_cage(CUBE, (face for face in CUBE_QUADS))
     assert cage.measure == pytest.approx(1.0)
+
+
+def test_convexity_is_the_share_of_the_convex_hull_the_cage_encloses():
+    assert make_cage(CUBE, CUBE_QUADS).convexity == pytest.approx(1.0)
+    hollow = make_cage(*hollow_cube())
+    assert hollow.convexity == pytest.approx((8.0 - 0.4**3) / 8.0)
+    gargoyle = make_cage(*read_cage(DATA / "cages-3d" / "gargoyle" / "cage_L10.obj"))
+    assert 0.5 < gargoyle.convexity < 0.8
 
 
 def test_too_few_polygon_vertices():
