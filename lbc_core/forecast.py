@@ -16,9 +16,9 @@ SMALL_CAGE, SMALL_CAGE_TOLERANCE = 12, 2e-4
 # (cell, control point) pairs per cell at a solve's widest: PAIRS_SCALE[d] · n^PAIRS_POWER for n control points
 # (bench/RESULTS.md, "Memory and the cost model").
 PAIRS_SCALE, PAIRS_POWER = {2: 2.2, 3: 2.5}, 0.5
-# A convex 3D cage (enclosing CONVEX_SHARE of its hull) spreads its coordinates: this share of all pairs, times the
-# iterations, times the cost per pair (bench/RESULTS.md, "The forecast for convex cages").
-CONVEX_SHARE, WIDE_PAIRS_SHARE, WIDE_ITERATIONS, WIDE_STEP_COST = 0.95, 0.75, 2.6, 0.55
+# A convex 3D cage (enclosing CONVEX_SHARE of its hull) spreads its coordinates wider: times the pairs, times the
+# iterations, times the cost per pair and step (bench/RESULTS.md, "The forecast for convex cages").
+CONVEX_SHARE, WIDE_PAIRS, WIDE_ITERATIONS, WIDE_STEP_COST = 0.95, 2.5, 2.6, 0.52
 # Peak bytes per pair (bench/RESULTS.md, "The locality solver, third round"), and per entry of the (cells, n) TV
 # weights the caller holds.
 BYTES_PER_PAIR = 620
@@ -72,7 +72,7 @@ def estimate_pairs(n_control_points, n_cells, dim, convexity=0.0):
     """The (cell, control point) pairs a solve holds at its widest, about."""
     pairs = PAIRS_SCALE[dim] * n_control_points ** PAIRS_POWER * n_cells
     if spreads_wide(n_control_points, dim, convexity):
-        pairs = max(pairs, WIDE_PAIRS_SHARE * n_control_points * n_cells)
+        pairs = min(WIDE_PAIRS * pairs, n_control_points * n_cells)
     return pairs
 
 
