@@ -164,8 +164,8 @@ class Cage:
 
     @property
     def convexity(self):
-        """The enclosed area or volume over its convex hull's: 1 for a convex cage (whose coordinates spread over
-        most control points, so that its solve costs more: :mod:`lbc_core.forecast`)."""
+        """The enclosed area or volume over its convex hull's: 1 for a convex cage (whose coordinates spread wider,
+        so that its solve costs more: :mod:`lbc_core.forecast`)."""
         return hull_share(self.surface_vertices, self.measure)
 
     def fingerprint(self):

@@ -43,8 +43,9 @@ def default_tolerance(dim, n_control_points):
 
 
 def spreads_wide(n_control_points, dim, convexity):
-    """Whether a cage's coordinates are expected to spread over most of its control points: a convex 3D cage of more
-    than SMALL_CAGE of them (``convexity``: :attr:`Cage.convexity`; 0 when unknown)."""
+    """Whether a cage's coordinates are expected to spread wider, over more iterations, than the gargoyle's cages the
+    model was fitted to: a convex 3D cage of more than SMALL_CAGE control points (``convexity``:
+    :attr:`Cage.convexity`; 0 when unknown)."""
     return dim == 3 and n_control_points > SMALL_CAGE and convexity >= CONVEX_SHARE
 
 
@@ -118,7 +119,7 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     meshing : bool
         Whether the bind meshes the cage first (its time is told before the solve's).
     convexity : float
-        :attr:`Cage.convexity` (0 when unknown): a convex cage's coordinates spread wide (:func:`spreads_wide`).
+        :attr:`Cage.convexity` (0 when unknown): a convex cage's coordinates spread wider (:func:`spreads_wide`).
 
     Returns
     -------
