@@ -86,9 +86,9 @@ ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 34}, 0.3, 0.25
 # whose fingers face each other across narrow gaps (bench/RESULTS.md, "Cages whose parts face each other across a
 # narrow gap").
 MESHING_SECONDS_PER_CELL = 5e-5
-# Seconds per point for the work after the solve: location, smooth fit, reduction, thinning (bench/RESULTS.md, "A wider
-# fit where the cage is thick").
-SECONDS_PER_POINT = 2e-5
+# Seconds per point for the work after the solve: location, smooth fit, reduction, thinning (bench/RESULTS.md, "The
+# bind outside the solve").
+SECONDS_PER_POINT = 1e-5
 # A stretched solve (a very thin cage): factor on the iterations and on each one's cost (bench/thin_cages.py).
 STRETCHED_ITERATIONS, STRETCHED_STEP_COST = 2, 5
 # Principal aspect from which a thin cage needs more iterations: 1 + log10(aspect / THIN_FROM_ASPECT) times as many

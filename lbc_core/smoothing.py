@@ -23,9 +23,10 @@ from .progress import Progress
 
 # The fit's radius in median cell edges: wider is smoother and costs more influences per point (bench/RESULTS.md).
 RADIUS_EDGES = 2.0
-# The radius where the cage is thick, and the local depths (median cell edges) over which the radius grows to it:
-# smoother in wide parts, no wider across thin ones (bench/RESULTS.md, "A wider fit where the cage is thick").
-DEEP_RADIUS_EDGES = 3.0
+# The radius where the cage is thick, and the local depths (median cell edges) over which the radius grows to it.
+# 3 creases bent limbs less but costs a fifth more influences and twice the warm re-bind, so it is not the default
+# (bench/RESULTS.md, "A wider fit where the cage is thick").
+DEEP_RADIUS_EDGES = RADIUS_EDGES
 DEPTH_EDGES = (0.2, 0.8)
 # Distance from the cage (median cell edges, each point's own) over which the fit fades into the P1
 # interpolation (bench/RESULTS.md, "The smooth evaluation's fade into P1: over a quarter of a cell edge instead of one").
@@ -42,9 +43,9 @@ class SmoothInterpolation:
     """The (m, N) interpolation matrix from a domain's vertices to points, rows computed on demand.
 
     Row i is (1 - β_i) times the point's P1 barycentric row plus β_i times its moving least-squares row, where β
-    rises smoothly from 0 on the cage to 1 at ``fade`` from it. The fit's radius is wider where the cage is thick
-    than across thin parts, where a wide fit would reach across the gaps between them (fingers, toes). Every row
-    sums to 1 and reproduces the point. A point
+    rises smoothly from 0 on the cage to 1 at ``fade`` from it. The fit's radius may be wider where the cage is
+    thick than across thin parts, where a wide fit would reach across the gaps between them (fingers, toes). Every
+    row sums to 1 and reproduces the point. A point
     outside the cage, bound to its closest domain point q, reproduces q, unless ``points`` and ``outside`` are given:
     then its row is q's P1 row plus the offset p - q times the gradient of the fit at q (:func:`fit_gradients`), so it
     reproduces p itself (where the fit at q can: else q's row), and the part outside turns with the cage around it
