@@ -1,7 +1,7 @@
 """Creases on posed characters and capsules: LBC at its defaults against Mesh Deform precision 5, and each lever.
 
     .venv/bin/python bench/creases.py [--scenes capsule,arm,figure,tentacle] [--levers] [--binds cells:epsilon,...]
-                                      [--evaluations radius:fade:floor:outside,...]
+                                      [--evaluations radius:fade:floor:outside[:deep],...]
 
 Scenes (each a mesh, its cage and posed cages):
 
@@ -26,7 +26,8 @@ and the relaxation ε) and, on each, the evaluation per ``--evaluations`` settin
 edges), the thinning's floor (0: every weight) and the
 treatment of the points outside the cage ("near": each follows its closest point; "tilt": the closest point's
 coordinates plus the offset times their gradient, which reproduces the point: lbc_core.smoothing's ``points`` and
-``outside``); with each the evaluation's and thinning's seconds.
+``outside``), and optionally the fit's radius where the cage is thick (``deep``, median edges: the lever of
+bench/RESULTS.md, "A wider fit where the cage is thick"); with each the evaluation's and thinning's seconds.
 """
 
 import argparse
@@ -107,12 +108,13 @@ class Evaluation:
         self.points = frame.to_unit(binding.points)
         self.located, _, _ = interpolation_matrix(self.vertices, self.cells, self.points)
 
-    def weights(self, radius=RADIUS_EDGES, fade=FADE_EDGES, outside="near"):
+    def weights(self, radius=RADIUS_EDGES, fade=FADE_EDGES, outside="near", deep=None):
         """The evaluation at the points; ``outside`` "tilt": the outside points' rows extrapolate to them
         (SmoothInterpolation's ``points`` and ``outside``), "near": they reproduce their closest domain point."""
         binding = self.binding
         extra = dict(points=self.points, outside=binding.outside) if outside == "tilt" else {}
         smooth = SmoothInterpolation(self.vertices, self.cells, self.located, radius_edges=radius, fade_edges=fade,
+                                     deep_radius_edges=radius if deep is None else deep,
                                      **extra)
         return interpolate_and_reduce(smooth, binding.domain_weights, self.unit_cage.vertices, self.vertices,
                                       binding.options["threshold"],
@@ -201,13 +203,14 @@ def bench_levers(names, binds, evaluations):
             binding = lbc_core.bind(cage, cage_faces, mesh, cells=cells or None, epsilon=epsilon)
             seconds = time.perf_counter() - start
             evaluation = Evaluation(binding)
-            for radius, fade, floor, outside in evaluations:
+            for radius, fade, floor, outside, deep in evaluations:
                 start = time.perf_counter()
-                weights = thinned(binding, evaluation.weights(radius, fade, outside), floor)
+                weights = thinned(binding, evaluation.weights(radius, fade, outside, deep), floor)
                 evaluated = time.perf_counter() - start
                 counts = np.diff(weights.indptr)
                 print(f"| {len(binding.domain.cells)} tets, ε {epsilon:g} | {seconds:.2f} | {radius:g}, {fade:g}, "
-                      f"{floor:g}, {outside} | {evaluated:.2f} | {counts.mean():.1f} / {counts.max()} | "
+                      f"{floor:g}, {outside}{'' if deep is None else f', deep {deep:g}'} | {evaluated:.2f} | "
+                      f"{counts.mean():.1f} / {counts.max()} | "
                       + " | ".join(figures_text(mesh, deformed(binding, weights, pose), faces)
                                    for pose in poses.values()) + " |", flush=True)
     print(f"({load()})")
@@ -227,7 +230,8 @@ def main(argv=None):
     names = args.scenes.split(",")
     if args.levers:
         binds = [(int(cells), float(epsilon)) for cells, epsilon in (value.split(":") for value in args.binds.split(","))]
-        evaluations = [(float(radius), float(fade), float(floor), outside) for radius, fade, floor, outside
+        evaluations = [(float(radius), float(fade), float(floor), outside, float(deep[0]) if deep else None)
+                       for radius, fade, floor, outside, *deep
                        in (value.split(":") for value in args.evaluations.split(","))]
         bench_levers(names, binds, evaluations)
     else:
