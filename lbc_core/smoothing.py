@@ -96,10 +96,14 @@ class SmoothInterpolation:
         self.depths = (depth_edges[0] * edge, depth_edges[1] * edge)
         self.fade = fade_edges * edge
         self.tree = cKDTree(self.vertices)
-        # The fade follows each point's own distance to the cage. The vertices' distances bound it from below (it
-        # is 1-Lipschitz), so only the points that bound leaves within the fade are searched.
+        # The fade follows each point's own distance to the cage. The corners' distances bound it from below (it is
+        # 1-Lipschitz), so only the points that bound leaves within the fade are searched. A widening fit needs every
+        # vertex's (radius_at); else the corners' suffice (at most N searches).
         self.boundary = FacetSearch(self.vertices, np.asarray(cells))
-        self.vertex_depth = np.sqrt(self.boundary.closest(self.vertices, self.progress.check).squared)
+        needed = (np.arange(len(self.vertices)) if self.deep_radius > self.radius
+                  else np.unique(self.located.indices))
+        self.vertex_depth = np.zeros(len(self.vertices))
+        self.vertex_depth[needed] = np.sqrt(self.boundary.closest(self.vertices[needed], self.progress.check).squared)
 
     @property
     def linear(self):

@@ -142,7 +142,7 @@ def test_the_fit_widens_with_the_local_depth_and_stays_narrow_across_a_thin_part
         radius = smooth.radius_at(neighbour_distances(smooth.tree, points, smooth.deep_radius))
         return radius / median_edge(vertices, cells)
 
-    centre, by_a_face = radii(*_block_of_cubes(6), np.array([[3.0, 3.0, 3.0], [3.0, 3.0, 0.1]]))
+    centre, by_a_face = radii(*_cubes(6, 6, 6), np.array([[3.0, 3.0, 3.0], [3.0, 3.0, 0.1]]))
     assert centre == pytest.approx(WIDER) and by_a_face < centre
     axis = np.array([[x, 0.5, 0.5] for x in np.linspace(2.0, 8.0, 7)])
     assert np.allclose(radii(*_bar_of_cubes(), axis), RADIUS_EDGES)
@@ -201,43 +201,28 @@ def test_a_mesh_near_the_cage_is_fitted_smoothly_and_creases_less_than_with_a_wi
     assert narrow["p99"] < 0.9 * widened["p99"] and narrow["creased"] < widened["creased"], (narrow, widened)
 
 
-def _block_of_cubes(size):
-    """A cube of ``size``³ unit cubes, each cut into 6 tetrahedra around its main diagonal."""
-    grid = np.stack(np.meshgrid(*[np.arange(size + 1)] * 3, indexing="ij"), axis=-1).reshape(-1, 3).astype(float)
-    index = lambda x, y, z: (x * (size + 1) + y) * (size + 1) + z  # noqa: E731
+def _cubes(nx, ny, nz):
+    """A box of nx × ny × nz unit cubes, each cut into 6 tetrahedra around its main diagonal, positively oriented."""
+    shape = (nx + 1, ny + 1, nz + 1)
+    grid = np.stack(np.meshgrid(*[np.arange(size) for size in shape], indexing="ij"), axis=-1).reshape(-1, 3)
     cells = []
-    for x, y, z in np.ndindex(size, size, size):
+    for x, y, z in np.ndindex(nx, ny, nz):
         for path in ((1, 2, 4), (1, 4, 2), (2, 1, 4), (2, 4, 1), (4, 1, 2), (4, 2, 1)):
-            bits, tet = 0, [index(x, y, z)]
+            bits, tet = 0, [np.ravel_multi_index((x, y, z), shape)]
             for bit in path:
-                bits |= bit
-                tet.append(index(x + (bits >> 2 & 1), y + (bits >> 1 & 1), z + (bits & 1)))
+                bits |= bit  # bits 4, 2, 1 step along x, y, z
+                tet.append(np.ravel_multi_index((x + (bits >> 2 & 1), y + (bits >> 1 & 1), z + (bits & 1)), shape))
             cells.append(tet)
-    return grid, _oriented(grid, np.array(cells))
-
-
-def _oriented(vertices, cells):
+    vertices, cells = grid.astype(float), np.array(cells)
     a, b, c, d = (vertices[cells[:, k]] for k in range(4))
     negative = np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) < 0
     cells[negative] = cells[negative][:, [0, 2, 1, 3]]
-    return cells
+    return vertices, cells
 
 
 def _bar_of_cubes(length=10):
-    """A bar of ``length`` unit cubes in a row, each cut into 6 tetrahedra: every vertex lies on its boundary."""
-    grid = np.stack(np.meshgrid(np.arange(length + 1), [0, 1], [0, 1], indexing="ij"), axis=-1).reshape(-1, 3)
-    index = {tuple(v): k for k, v in enumerate(grid)}
-    cells = []
-    for x in range(length):
-        corner = [index[(x + a, b, c)] for a, b, c in np.ndindex(2, 2, 2)]  # bit order a b c
-        for path in ((1, 2, 4), (1, 4, 2), (2, 1, 4), (2, 4, 1), (4, 1, 2), (4, 2, 1)):
-            bits, tet = 0, [corner[0]]
-            for bit in path:
-                bits |= bit
-                # a, b, c of the corner: bits 4, 2, 1 → x, y, z
-                tet.append(corner[bits])
-            cells.append(tet)
-    return grid.astype(float), _oriented(grid.astype(float), np.array(cells))
+    """A bar of ``length`` unit cubes in a row: every vertex lies on its boundary."""
+    return _cubes(length, 1, 1)
 
 
 def test_a_part_one_cell_across_is_fitted_too():
