@@ -1,5 +1,5 @@
 """One shared thread pool for the work that numpy and scipy run without the GIL (ufuncs, sparse products), and how
-busy the machine is for it (the load average, less what this process's own finished binds left in it)."""
+busy the machine is for it (the threads runnable now, else the load average)."""
 
 import functools
 import math
@@ -15,6 +15,8 @@ LOAD_TIME_CONSTANT = 60.0
 # This process's recent binds, which the load average still holds: (end, wall seconds, CPU seconds) of each.
 _OWN_WORK = deque(maxlen=16)
 _COUNTING = threading.local()
+# Readings of the runnable threads averaged for the busy factor, and the seconds between them.
+RUNNABLE_SAMPLES, RUNNABLE_SPACING = 10, 0.002
 
 
 def worker_count():
@@ -23,14 +25,33 @@ def worker_count():
 
 
 def busy_factor():
-    """How many times an idle machine's time work takes now, from the load average: the threads other jobs keep
-    runnable share the cores with ours (1 where the system has no load average). The part of the load this
-    process's own finished binds left (:func:`own_load`) is not counted: they no longer compete."""
+    """How many times an idle machine's time work takes now: the threads other jobs keep runnable share the cores
+    with ours. Counted now where the system says (:func:`runnable_others`), else from the one-minute load average
+    less the part this process's own finished binds left in it (:func:`own_load`); 1 where neither is known."""
+    others = runnable_others()
+    if others is None:
+        try:
+            others = max(0.0, os.getloadavg()[0] - own_load())
+        except (AttributeError, OSError):
+            return 1.0
+    return max(1.0, (others + worker_count()) / (os.cpu_count() or 1))
+
+
+def runnable_others(path="/proc/loadavg", samples=RUNNABLE_SAMPLES, spacing=RUNNABLE_SPACING):
+    """Threads other than the calling one runnable now, the mean of ``samples`` readings ``spacing`` seconds apart
+    of Linux's count (the fourth field of /proc/loadavg); None where ``path`` cannot be read. The load average
+    lags a minute behind: it still counts jobs that just ended and not yet those that just began
+    (bench/RESULTS.md, "The busy factor counted now")."""
+    total = 0
     try:
-        load = os.getloadavg()[0]
-    except (AttributeError, OSError):
-        return 1.0
-    return max(1.0, (max(0.0, load - own_load()) + worker_count()) / (os.cpu_count() or 1))
+        for sample in range(samples):
+            if sample:
+                time.sleep(spacing)
+            with open(path) as loadavg:
+                total += int(loadavg.read().split()[3].split("/")[0]) - 1
+    except (OSError, ValueError, IndexError):
+        return None
+    return max(0.0, total / samples)
 
 
 def own_load(now=None):

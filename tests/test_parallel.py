@@ -36,6 +36,7 @@ def test_row_chunks_run_on_several_threads():
 
 
 def test_the_busy_factor_counts_the_other_jobs_against_the_cores(monkeypatch):
+    monkeypatch.setattr(parallel, "runnable_others", lambda: None)  # a system without a count of runnable threads
     monkeypatch.setattr(parallel, "_OWN_WORK", parallel.deque())  # no bind of this process before
     monkeypatch.setattr(parallel.os, "cpu_count", lambda: 2)
     monkeypatch.setattr(parallel.os, "getloadavg", lambda: (0.3, 0.0, 0.0))
@@ -54,6 +55,7 @@ def test_the_busy_factor_counts_the_other_jobs_against_the_cores(monkeypatch):
 
 def test_the_busy_factor_leaves_out_the_load_this_process_s_own_finished_binds_left(monkeypatch):
     """A new user's finding: right after a long bind, the next one's forecast said the machine was busy."""
+    monkeypatch.setattr(parallel, "runnable_others", lambda: None)
     monkeypatch.setattr(parallel.os, "cpu_count", lambda: 2)
     monkeypatch.setattr(parallel.os, "getloadavg", lambda: (1.3, 0.0, 0.0))
     monkeypatch.setattr(parallel, "_OWN_WORK", parallel.deque())
@@ -82,3 +84,25 @@ def test_a_counted_function_records_its_work_once_however_nested(monkeypatch):
     inner()
     assert len(parallel._OWN_WORK) == 2
     assert all(cpu >= 0.05 for _, _, cpu in parallel._OWN_WORK)
+
+
+def test_the_busy_factor_counts_the_threads_runnable_now_where_the_system_says(monkeypatch, tmp_path):
+    """A new user's finding: binds run one after another from the command line were told the machine was 2.3-3.1
+    times busier than it was; the load average still counted the binds that had just ended."""
+    loadavg = tmp_path / "loadavg"
+    monkeypatch.setattr(parallel.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(parallel.os, "getloadavg", lambda: (3.0, 0.0, 0.0))  # a minute's busy past
+    read = parallel.runnable_others
+    monkeypatch.setattr(parallel, "runnable_others", lambda: read(str(loadavg), spacing=0.0))
+    loadavg.write_text("3.00 1.00 0.50 1/312 4242\n")  # only the reader runs now
+    assert parallel.busy_factor() == 1.0
+    loadavg.write_text("3.00 1.00 0.50 3/312 4242\n")  # two other threads runnable
+    assert parallel.busy_factor() == 2.0
+    assert read(str(tmp_path / "missing")) is None  # no such count here: the load average's turn
+
+
+def test_runnable_threads_are_averaged_over_a_few_readings(tmp_path, monkeypatch):
+    readings = iter(["0.1 0.1 0.1 %d/9 1\n" % count for count in (1, 3, 1, 3)])
+    monkeypatch.setattr(parallel.time, "sleep", lambda seconds: None)
+    monkeypatch.setattr("builtins.open", lambda path: __import__("io").StringIO(next(readings)))
+    assert parallel.runnable_others("/proc/loadavg", samples=4) == 1.0
