@@ -61,6 +61,9 @@ END_GROWTH_SHARE, END_GROWTH_FLOOR = 0.005, 1e-4
 WHOLE_TOLERANCE_SHARE = 0.2
 # Where each part of the solve ends on its progress range.
 _SETUP_END, _ADMM_END = 0.06, 0.98
+# The iterations' progress until the tolerance is first met stops at this share: where the forecast's iterations
+# are too few, the rest and the end game's growth still move it (bench/RESULTS.md, "The time left in the end game").
+BEFORE_END_GAME_SHARE = 0.9
 
 
 @dataclass
@@ -273,6 +276,9 @@ class _Run:
         self.next_growth_check = GROWTH_FIRST_CHECK
         self.reshapes = self.reshapes_told = 0
         self.wide = self.wide_told = False
+        # The end game's clock: seconds spent in reshapes, the last one's iteration, and how many iterations the
+        # residual took to meet the tolerance after it (None until it first did).
+        self.reshape_seconds, self.last_reshape, self.settle = 0.0, 0, None
 
     def _step_map(self, ops, duals):
         axis_scale = None if self.stretch is None else self.stretch.axis_scale
@@ -293,7 +299,7 @@ class _Run:
         if carried is not None:  # a warm start's sets fit already: its first reshape comes later
             self.next_growth_check = GROWTH_SPACING ** 2 * GROWTH_FIRST_CHECK
         self.started = time.perf_counter()
-        self.checks, self.fraction, self.first_distance = [], 0.0, None
+        self.checks, self.fraction, self.way, self.first_distance = [], 0.0, 0.0, None
         del step, weights, sets  # _iterate empties ``start``: no frame here keeps the first layout once reshaped
         state, out, step = self._iterate(start)
         final = SolverState.of(step, state, self.mesh)
@@ -345,6 +351,7 @@ class _Run:
                 # The old layout's records and candidates are not kept through the reshape (its memory peak).
                 out = previous = None
                 del candidate, start_value, new_value, new_out, new_previous, new_residual
+                began = time.perf_counter()
                 step, positions = self._reshape(step)
                 value = _moved(value, positions, step.size_x + step.ops.sets.n_slots)
                 check()
@@ -353,6 +360,8 @@ class _Run:
                 if anderson:
                     anderson.embed(positions, len(value), residual)
                 next_check = self.iteration + settings.check_every
+                self.reshape_seconds += time.perf_counter() - began
+                self.last_reshape = self.iteration
             if verdict == "rescaled":
                 if anderson:
                     anderson.reset()
@@ -384,6 +393,7 @@ class _Run:
             self.history.append(record)
             distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
             if distance <= 1:
+                self.settle = self.iteration - self.last_reshape
                 self.pending_growth = self._growth(step, out, GROWTH_FLOOR, prune=False)
                 if self.pending_growth is None or \
                         self.pending_growth.n_slots <= (1 + END_GROWTH_SHARE) * step.ops.sets.n_slots:
@@ -393,10 +403,10 @@ class _Run:
         else:
             self.history.append(dict(iteration=self.iteration, primal=float(primal)))
             distance = primal / tolerance
-        self._report(distance)
         if self.pending_growth is None and self.iteration >= self.next_growth_check:
             self.next_growth_check = GROWTH_SPACING * self.iteration
             self.pending_growth = self._growth(step, out, GROWTH_FLOOR)
+        self._report(distance)
         if self.pending_growth is not None:
             return "reshaped"
         if self.iteration <= BALANCE_UNTIL and previous is not None and \
@@ -441,23 +451,56 @@ class _Run:
         return new_step, positions
 
     def _report(self, distance):
-        """Progress: the share of the way in log scale to the tolerance, and the time left."""
+        """Progress: the time elapsed over the time elapsed and left, and the time left in words."""
         self.first_distance = self.first_distance or max(distance, 1.0 + 1e-9)
         by_residual = min(0.99, np.log(self.first_distance / max(distance, 1e-300)) / np.log(self.first_distance))
-        self.fraction = max(self.fraction, self.iteration / self.settings.max_iterations, by_residual)
+        self.way = max(self.way, self.iteration / self.settings.max_iterations, by_residual)
         elapsed = time.perf_counter() - self.started
         self.checks.append((self.iteration, distance))
-        left = seconds_left(elapsed, max(self.fraction, 1e-9), self.checks, self.settings.max_iterations)
+        left = self._seconds_left(elapsed)
+        most = BEFORE_END_GAME_SHARE if self.settle is None else 0.99
+        self.fraction = max(self.fraction, min(most, elapsed / (elapsed + left)))
+        told = f", {format_remaining(left)}" if by_residual > 0 or self.expected or self.settle is not None else ""
+        self.progress(self.fraction, f"ADMM iteration {self.iteration}, residual {distance:.1f}× the tolerance"
+                                     f"{self._why_on()}{told}")
+
+    def _seconds_left(self, elapsed):
+        """The time left: the forecast's iterations at this solve's pace while they last (the residual's way says
+        little across reshapes), then the residual's way; once the tolerance was met, at least the end game's
+        (bench/RESULTS.md, "The time left in the end game")."""
+        expected_left = None
         if self.expected is not None and self.iteration < self.expected:
-            left = min(left, (self.expected - self.iteration) * elapsed / self.iteration)
-        told = f", {format_remaining(left)}" if by_residual > 0 else ""
-        # A reshape adds unknowns the step has not settled yet: the residual rises, and the message says why.
-        grew = " after the working sets grew" if self.reshapes > self.reshapes_told else ""
+            expected_left = (self.expected - self.iteration) * elapsed / self.iteration
+        if self.settle is not None:
+            return max(self._end_game_left(elapsed), expected_left or 0.0)
+        if expected_left is not None:
+            return expected_left
+        return seconds_left(elapsed, max(self.way, 1e-9), self.checks, self.settings.max_iterations)
+
+    def _end_game_left(self, elapsed):
+        """Seconds left once the tolerance was met: the iterations it took to meet it after the last reshape, from
+        that reshape or the one pending, at this solve's seconds a step, and the reshape pending."""
+        steps_done = max(self.iteration, 1)
+        step_seconds = max(elapsed - self.reshape_seconds, 0.0) / steps_done
+        pending = self.pending_growth is not None
+        reshape_seconds = self.reshape_seconds / max(self.reshapes, 1) if pending else 0.0
+        since = self.iteration if pending else self.last_reshape
+        steps = max(since + self.settle - self.iteration, self.settings.check_every)
+        return steps * step_seconds + reshape_seconds
+
+    def _why_on(self):
+        """Why a solve goes on though its residual rose, or met the tolerance, for the progress message."""
         if self.wide and not self.wide_told:
-            grew = " (the working sets hold every coordinate now: a tighter stop)"
+            why = " (the working sets hold every coordinate now: a tighter stop)"
+        elif self.reshapes > self.reshapes_told:
+            # A reshape adds unknowns the step has not settled yet: the residual rises.
+            why = " after the working sets grew"
+        elif self.pending_growth is not None and self.checks[-1][1] <= 1:
+            why = ": met, and the working sets grow where weights reach their edge"
+        else:
+            why = ""
         self.reshapes_told, self.wide_told = self.reshapes, self.wide
-        self.progress(self.fraction,
-                      f"ADMM iteration {self.iteration}, residual {distance:.1f}× the tolerance{grew}{told}")
+        return why
 
 
 def _moved(values, positions, size):

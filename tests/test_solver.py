@@ -152,9 +152,33 @@ def test_progress_says_the_time_left_once_the_residual_has_fallen():
     messages = []
     solve_pack(load_pack("woody"), progress=lambda fraction, message: messages.append(message))
     admm = [message for message in messages if message.startswith("ADMM iteration")]
-    # The first check has nothing to extrapolate from (it used to say minutes for a solve of a second).
-    assert "left" not in admm[0]
     assert all("left" in message for message in admm[1:]) and len(admm) > 2
+    # The first check has no residual to extrapolate from (it used to say minutes for a solve of a second); it says
+    # what the forecast's iterations take at the solve's pace.
+    assert not any("min left" in message for message in admm)
+    with_tolerance = []
+    solve_pack(load_pack("woody"), tolerance=2e-4, progress=lambda fraction, message: with_tolerance.append(message))
+    assert "left" not in [message for message in with_tolerance if message.startswith("ADMM iteration")][0]
+
+
+def test_the_time_left_counts_the_end_game_where_the_working_sets_grow_after_the_tolerance_is_met():
+    """Gargoyle L08 at 32,000 cells met its tolerance at iteration 120 of 240 and said "under 1 s left" for the
+    remaining 10 s while its working sets grew; the progress bar stood at 97 % for half the solve."""
+    from lbc_core import solver
+
+    problem = _corpus_problem("limbs", cells=3000)
+    times, reports = [], []
+    result = solve_on_mesh(*problem, progress=lambda fraction, message: (
+        times.append(solver.time.perf_counter()), reports.append((fraction, message))))
+    end = solver.time.perf_counter()
+    grew = [k for k, (_, message) in enumerate(reports) if "met, and the working sets grow" in message]
+    assert result.converged and grew, [message for _, message in reports]
+    for k in grew:  # what is left is told, not "under 1 s"
+        fraction, message = reports[k]
+        assert "under 1 s left" not in message or end - times[k] < 1.5, message
+        assert fraction < 0.95
+    fractions = [fraction for fraction, message in reports if message.startswith("ADMM iteration")]
+    assert fractions == sorted(fractions)
 
 
 def test_the_time_left_early_on_is_bounded_by_the_iterations_the_forecast_expects(monkeypatch):
