@@ -123,10 +123,15 @@ def _scheme_list(text):
 
 def _run_bind(args):
     from .cage import make_cage
-    from .io import check_output
+    from .io import FORMATS, check_output
     from .pipeline import too_small_warning
 
     check_output(args.output, inputs=(args.cage, args.mesh))
+    output = Path(args.output)
+    if output.suffix.lower() in FORMATS:  # any other name is the user's choice; a mesh's suffix is a mistake
+        raise CageError(f"{output}: bind writes a binding (an .npz archive), not a mesh; name it "
+                        f"{output.with_suffix('.npz')}, then `lbc deform {output.with_suffix('.npz').name} NEW_CAGE "
+                        f"-o deformed{output.suffix}` writes the deformed mesh")
     cage_vertices, cage_faces, points = _read_inputs(args.cage, args.mesh)
     try:
         cage = make_cage(cage_vertices, cage_faces)

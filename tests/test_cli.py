@@ -196,6 +196,9 @@ def test_the_path_written_is_the_path_printed(tmp_path, capsys, logo_mesh):
         (["--epsilon", -1, "--max-iterations", -5], "epsilon must be 0 or more, got -1"),
         (["--threshold", 0.5], "threshold 0.5 would drop every weight"),
         (["-o", "{d}/nodir/b.npz"], "the folder {d}/nodir does not exist"),
+        # A new user's `-o z.obj` was written as an .npz archive named z.obj, silently.
+        (["-o", "{d}/z.OBJ"], "{d}/z.OBJ: bind writes a binding (an .npz archive), not a mesh; name it {d}/z.npz, "
+                              "then `lbc deform z.npz NEW_CAGE -o deformed.OBJ` writes the deformed mesh"),
     ],
 )
 def test_bad_options_and_outputs_are_refused_before_the_bind(tmp_path, logo_mesh, argv, message):
@@ -410,7 +413,9 @@ def test_an_output_that_is_one_of_the_inputs_is_refused(tmp_path, logo_mesh, log
     code, _, err = lbc("deform", logo_binding, posed, "-o", tmp_path / "." / "posed.obj")
     assert_one_line_error(code, err, "is also an input of this command")
     # A missing input beside an existing output is the reader's to report (the check once raised a traceback).
-    code, _, err = lbc("bind", LOGO, tmp_path / "missing.obj", "-o", mesh)
+    existing = tmp_path / "existing.npz"
+    existing.write_bytes(b"")
+    code, _, err = lbc("bind", LOGO, tmp_path / "missing.obj", "-o", existing)
     assert code == 2 and "missing.obj" in err and "Traceback" not in err
 
 
