@@ -17,6 +17,9 @@ _OWN_WORK = deque(maxlen=16)
 _COUNTING = threading.local()
 # Readings of the runnable threads averaged for the busy factor, and the seconds between them.
 RUNNABLE_SAMPLES, RUNNABLE_SPACING = 10, 0.002
+# The cores a bind keeps busy on average, its threads' parallel parts and serial parts together (121-142 % CPU on
+# 2 cores: bench/RESULTS.md, "The busy factor counted now").
+BIND_CORES = 1.3
 
 
 def worker_count():
@@ -34,24 +37,39 @@ def busy_factor():
             others = max(0.0, os.getloadavg()[0] - own_load())
         except (AttributeError, OSError):
             return 1.0
-    return max(1.0, (others + worker_count()) / (os.cpu_count() or 1))
+    return max(1.0, (others + min(BIND_CORES, worker_count())) / (os.cpu_count() or 1))
 
 
-def runnable_others(path="/proc/loadavg", samples=RUNNABLE_SAMPLES, spacing=RUNNABLE_SPACING):
-    """Threads other than the calling one runnable now, the mean of ``samples`` readings ``spacing`` seconds apart
-    of Linux's count (the fourth field of /proc/loadavg); None where ``path`` cannot be read. The load average
-    lags a minute behind: it still counts jobs that just ended and not yet those that just began
-    (bench/RESULTS.md, "The busy factor counted now")."""
+def runnable_others(path="/proc/loadavg", tasks="/proc/self/task", samples=RUNNABLE_SAMPLES,
+                    spacing=RUNNABLE_SPACING):
+    """Threads of other processes runnable now: the mean of ``samples`` readings ``spacing`` seconds apart of Linux's
+    count (the fourth field of /proc/loadavg) less this process's own runnable threads (``tasks``: its threads'
+    folders, whose ``stat`` gives their state; a BLAS pool spinning after a product is no other job); None where
+    ``path`` cannot be read. The load average lags a minute behind: it still counts jobs that just ended and not yet
+    those that just began (bench/RESULTS.md, "The busy factor counted now")."""
     total = 0
     try:
         for sample in range(samples):
             if sample:
                 time.sleep(spacing)
             with open(path) as loadavg:
-                total += int(loadavg.read().split()[3].split("/")[0]) - 1
+                total += int(loadavg.read().split()[3].split("/")[0])
+            total -= _running_threads(tasks)
     except (OSError, ValueError, IndexError):
         return None
     return max(0.0, total / samples)
+
+
+def _running_threads(tasks):
+    """How many of the threads under ``tasks`` (a /proc/PID/task folder) are running or runnable (state R)."""
+    running = 0
+    for thread in os.listdir(tasks):
+        try:
+            with open(os.path.join(tasks, thread, "stat")) as stat:
+                running += stat.read().rpartition(")")[2].split()[0] == "R"
+        except OSError:  # a thread that ended meanwhile
+            continue
+    return running
 
 
 def own_load(now=None):
