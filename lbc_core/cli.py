@@ -14,6 +14,7 @@ cancelled run (Ctrl-C) exits with 130.
 
 import argparse
 import json
+import os
 import shutil
 import sys
 import textwrap
@@ -46,6 +47,9 @@ def main(argv=None):
     except (Cancelled, KeyboardInterrupt):
         print("lbc: cancelled", file=sys.stderr)
         return EXIT_CANCELLED
+    except BrokenPipeError:  # stdout's reader stopped reading (`lbc stats b.npz --json | head`): nothing to add
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so that the exit's flush cannot fail again
+        return 1
 
 
 def _parser():
@@ -131,7 +135,7 @@ def _run_bind(args):
     if output.suffix.lower() in FORMATS:  # any other name is the user's choice; a mesh's suffix is a mistake
         raise CageError(f"{output}: bind writes a binding (an .npz archive), not a mesh; name it "
                         f"{output.with_suffix('.npz')}, then `lbc deform {output.with_suffix('.npz').name} NEW_CAGE "
-                        f"-o deformed{output.suffix}` writes the deformed mesh")
+                        f"--mesh {args.mesh} -o deformed{output.suffix}` writes the deformed mesh")
     cage_vertices, cage_faces, points = _read_inputs(args.cage, args.mesh)
     try:
         cage = make_cage(cage_vertices, cage_faces)
@@ -221,6 +225,9 @@ def _run_deform(args):
         write_posed_obj(args.mesh, args.output, deformed)  # its UVs, groups and materials kept
     else:
         write_mesh(args.output, deformed, faces)
+    if not args.mesh:  # a new user took the points-only file for a broken mesh
+        _warn([f"{args.output} holds the deformed points only, no faces: give the bound mesh with --mesh MESH to "
+               "keep its faces"], args.quiet)
     if args.plot:
         _plots().plot_deformation(binding, new_vertices, args.plot)
     figures = {"output": str(args.output), "points": int(len(deformed)), "deform_seconds": seconds}

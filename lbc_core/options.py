@@ -186,14 +186,15 @@ def _method(value):
 _CHECKS = {
     "cells": _bounded(None, True, lambda value: value >= MIN_CELLS,
                       f"must be at least {MIN_CELLS}, got {{value}}: e.g. {DEFAULT_CELLS[2]} in 2D or {DEFAULT_CELLS[3]} "
-                      "in 3D (None: these defaults)"),
+                      "in 3D (left out, or None: these defaults)"),
     "weighting": _weighting,
     "epsilon": _bounded(DEFAULT_EPSILON, False, lambda value: value >= 0,
                         "must be 0 or more, got {value:g}: 0 is the paper's plain total variation, e.g. 0.01 smooths"),
     "threshold": _bounded(None, False, lambda value: 0 <= value < 1,
-                          "must be in [0, 1/n) for a cage of n control points, got {value:g}: None gives 1e-3/n"),
+                          "must be in [0, 1/n) for a cage of n control points, got {value:g}: left out (None) it "
+                          "is 1e-3/n"),
     "tolerance": _bounded(None, False, lambda value: value > 0,
-                          "must be more than 0, got {value:g}: e.g. 1e-4 (None: the solver's default)"),
+                          "must be more than 0, got {value:g}: e.g. 1e-4 (left out, or None: the solver's default)"),
     "max_iterations": _bounded(DEFAULT_MAX_ITERATIONS, True, lambda value: value >= 1,
                                f"must be at least 1, got {{value}} (None: {DEFAULT_MAX_ITERATIONS})"),
     "method": _method,

@@ -85,9 +85,12 @@ def test_bind_mvc_3d_and_deform_at_rest(tmp_path, capsys, gargoyle_points):
     code, out, err = run(capsys, "bind", GARGOYLE / "cage_L16.obj", gargoyle_points, "-o", binding,
                          "--scheme", "mvc", "--cells", 300, "--quiet")
     assert code == 0 and err == "" and "with mvc" in out
-    code, out, _ = run(capsys, "deform", binding, GARGOYLE / "cage_L16.obj", "-o", tmp_path / "same.ply")
+    code, out, err = run(capsys, "deform", binding, GARGOYLE / "cage_L16.obj", "-o", tmp_path / "same.ply")
     assert code == 0
     np.testing.assert_allclose(read_mesh(tmp_path / "same.ply")[0], read_mesh(gargoyle_points)[0], atol=1e-6)
+    # A new user took the points-only file for a broken mesh.
+    assert err == (f"lbc: warning: {tmp_path / 'same.ply'} holds the deformed points only, no faces: give the bound "
+                   "mesh with --mesh MESH to keep its faces\n")
 
 
 def test_compare_2d(tmp_path, capsys):
@@ -198,14 +201,15 @@ def test_the_path_written_is_the_path_printed(tmp_path, capsys, logo_mesh):
         (["-o", "{d}/nodir/b.npz"], "the folder {d}/nodir does not exist"),
         # A new user's `-o z.obj` was written as an .npz archive named z.obj, silently.
         (["-o", "{d}/z.OBJ"], "{d}/z.OBJ: bind writes a binding (an .npz archive), not a mesh; name it {d}/z.npz, "
-                              "then `lbc deform z.npz NEW_CAGE -o deformed.OBJ` writes the deformed mesh"),
+                              "then `lbc deform z.npz NEW_CAGE --mesh {mesh} -o deformed.OBJ` writes the deformed "
+                              "mesh"),
     ],
 )
 def test_bad_options_and_outputs_are_refused_before_the_bind(tmp_path, logo_mesh, argv, message):
     argv = [str(a).format(d=tmp_path) for a in argv]
     output = [] if "-o" in argv else ["-o", tmp_path / "b.npz"]
     code, _, err = lbc("bind", LOGO, logo_mesh, *output, *argv)
-    assert_one_line_error(code, err, message.format(d=tmp_path))  # one line: no progress was printed
+    assert_one_line_error(code, err, message.format(d=tmp_path, mesh=logo_mesh))  # one line: no progress was printed
 
 
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
@@ -454,3 +458,11 @@ def test_version(capsys):
     with pytest.raises(SystemExit) as exit_status:
         main(["--version"])
     assert exit_status.value.code == 0 and capsys.readouterr().out == f"lbc {lbc_core.__version__}\n"
+
+
+def test_a_closed_pipe_ends_the_output_quietly(logo_binding):
+    """A new user's `lbc stats b.npz --json | head -5` ended in a BrokenPipeError traceback."""
+    # `true` reads nothing and is gone long before the interpreter has started.
+    result = subprocess.run(f"'{sys.executable}' -m lbc_core stats '{logo_binding}' --json | true", shell=True,
+                            capture_output=True, text=True, timeout=300)
+    assert result.stderr == ""
