@@ -16,9 +16,10 @@ SMALL_CAGE, SMALL_CAGE_TOLERANCE = 12, 2e-4
 # (cell, control point) pairs per cell at a solve's widest: PAIRS_SCALE[d] · n^PAIRS_POWER for n control points
 # (bench/RESULTS.md, "Memory and the cost model").
 PAIRS_SCALE, PAIRS_POWER = {2: 2.2, 3: 2.5}, 0.5
-# A convex 3D cage (enclosing CONVEX_SHARE of its hull) spreads its coordinates wider: times the pairs, times the
-# iterations, times the cost per pair and step (bench/RESULTS.md, "The forecast for convex cages").
-CONVEX_SHARE, WIDE_PAIRS, WIDE_ITERATIONS, WIDE_STEP_COST = 0.95, 2.5, 2.6, 0.52
+# A convex 3D cage (enclosing CONVEX_SHARE of its hull) spreads its coordinates wider: times the pairs (memory),
+# times the iterations, and seconds per step and pair of every (cell, control point) (bench/RESULTS.md, "The forecast
+# for convex cages", "The forecast recalibrated for small cages").
+CONVEX_SHARE, WIDE_PAIRS, WIDE_ITERATIONS, WIDE_SECONDS_PER_PAIR_STEP = 0.95, 2.5, 2.6, 3.6e-8
 # Peak bytes per pair (bench/RESULTS.md, "The locality solver, third round"), and per entry of the (cells, n) TV
 # weights the caller holds.
 BYTES_PER_PAIR = 620
@@ -77,11 +78,13 @@ def estimate_pairs(n_control_points, n_cells, dim, convexity=0.0):
     return pairs
 
 
-# Seconds per pair and iteration on a 2-core x86_64, the reshapes included (bench/RESULTS.md, "Memory and the cost
-# model"); rough by design: the running solve tells its own time left.
-SECONDS_PER_PAIR_STEP = 1.0e-7
-# Iterations at the default tolerance: ITERATIONS_SCALE[d] · n^ITERATIONS_POWER · (cells / 8000)^CELLS_POWER (same).
-ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 34}, 0.3, 0.25
+# Seconds per iteration on a 2-core x86_64, the reshapes included: per cell and per (cell, control point) pair
+# (bench/RESULTS.md, "The forecast recalibrated for small cages"); rough by design: the running solve tells its own
+# time left.
+SECONDS_PER_CELL_STEP, SECONDS_PER_PAIR_STEP = {2: 0.0, 3: 1.3e-6}, {2: 1.0e-7, 3: 4.25e-8}
+# Iterations at the default tolerance: ITERATIONS_SCALE[d] · n^ITERATIONS_POWER[d] · (cells / 8000)^CELLS_POWER[d]
+# (same section).
+ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 66}, {2: 0.3, 3: 0.18}, {2: 0.25, 3: 0.17}
 # Seconds per cell of meshing on a 2-core x86_64: 0.03-0.6 s for ordinary cages at 8000 cells, 1.5 s for a hand
 # whose fingers face each other across narrow gaps (bench/RESULTS.md, "Cages whose parts face each other across a
 # narrow gap").
@@ -126,11 +129,14 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     str, e.g. "solving 106 control points on about 8000 cells: about 190 MB of memory for the solve and roughly 4 s"
     """
     iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells, convexity)
-    seconds = SECONDS_PER_PAIR_STEP * estimate_pairs(n_control_points, n_cells, dim, convexity) * iterations * busy
+    if spreads_wide(n_control_points, dim, convexity):  # every pair held, no reshapes
+        step = WIDE_SECONDS_PER_PAIR_STEP * n_control_points * n_cells
+    else:
+        step = (SECONDS_PER_CELL_STEP[dim] * n_cells
+                + SECONDS_PER_PAIR_STEP[dim] * estimate_pairs(n_control_points, n_cells, dim, convexity))
+    seconds = step * iterations * busy
     if stretched:
         seconds *= STRETCHED_STEP_COST
-    if spreads_wide(n_control_points, dim, convexity):
-        seconds *= WIDE_STEP_COST
     text = ""
     if meshing:
         meshing_seconds = MESHING_SECONDS_PER_CELL * n_cells * busy
@@ -152,7 +158,8 @@ def forecast_iterations(n_control_points, dim, stretched=False, aspect=1.0, n_ce
     """About how many iterations a solve takes at the default tolerance (see :data:`ITERATIONS_SCALE`,
     :data:`STRETCHED_ITERATIONS`, :data:`THIN_FROM_ASPECT`, :data:`WIDE_ITERATIONS`); the arguments as for
     :func:`solve_forecast`."""
-    iterations = ITERATIONS_SCALE[dim] * n_control_points ** ITERATIONS_POWER * (n_cells / 8000) ** CELLS_POWER
+    iterations = (ITERATIONS_SCALE[dim] * n_control_points ** ITERATIONS_POWER[dim]
+                  * (n_cells / 8000) ** CELLS_POWER[dim])
     if stretched:
         iterations *= STRETCHED_ITERATIONS
     elif dim == 3 and aspect > THIN_FROM_ASPECT:
