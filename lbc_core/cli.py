@@ -86,7 +86,12 @@ def _parser():
     deform.add_argument("--plot", help="2D only: figure of the domain before and after, with a checkerboard")
     deform.set_defaults(command=_run_deform)
 
-    stats = commands.add_parser("stats", parents=[common], help="locality figures of a binding")
+    stats = commands.add_parser(
+        "stats", parents=[common], help="locality figures of a binding",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="The columns (the paper's Section 5, n control points):\n"
+               "  P(1e-3/n)  the mean share of the domain where a coordinate is at most 1e-3/n: near 1 is local\n"
+               "  Q(4), Q(8) the share of the domain where at least 4 (8) coordinates exceed 1e-3/n: near 0 is local")
     stats.add_argument("binding", help="binding file from `lbc bind`")
     stats.add_argument("--plot", help="figure of P(t) and Q(k) (.png/.svg)")
     stats.add_argument(

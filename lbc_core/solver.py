@@ -491,12 +491,12 @@ class _Run:
     def _why_on(self):
         """Why a solve goes on though its residual rose, or met the tolerance, for the progress message."""
         if self.wide and not self.wide_told:
-            why = " (the working sets hold every coordinate now: a tighter stop)"
+            why = " (every control point is let in everywhere now: a tighter stop)"
         elif self.reshapes > self.reshapes_told:
             # A reshape adds unknowns the step has not settled yet: the residual rises.
-            why = " after the working sets grew"
+            why = " after more control points were let in (a rise, then a fall)"
         elif self.pending_growth is not None and self.checks[-1][1] <= 1:
-            why = ": met, and the working sets grow where weights reach their edge"
+            why = ": met, but weights reach the edge of the control points let in: letting more in"
         else:
             why = ""
         self.reshapes_told, self.wide_told = self.reshapes, self.wide

@@ -466,3 +466,9 @@ def test_a_closed_pipe_ends_the_output_quietly(logo_binding):
     result = subprocess.run(f"'{sys.executable}' -m lbc_core stats '{logo_binding}' --json | true", shell=True,
                             capture_output=True, text=True, timeout=300)
     assert result.stderr == ""
+
+
+def test_stats_help_says_what_its_columns_mean():
+    """A new user met P(1e-3/n), Q(4) and Q(8) in `lbc stats` with no word on what they are."""
+    code, out, _ = lbc("stats", "--help")
+    assert code == 0 and "P(1e-3/n)  the mean share of the domain" in out and "Q(4), Q(8) the share" in out
