@@ -167,10 +167,14 @@ def _run_bind(args):
         "converged": binding.converged,
         "warnings": list(binding.cage.warnings),
     }
-    too_small = too_small_warning(figures["outside"], figures["points"])
-    if too_small:
-        figures["warnings"].append(too_small)
-        _warn([too_small], args.quiet)
+    late = [too_small_warning(figures["outside"], figures["points"])]
+    if not binding.converged:  # a new user's --json said only "converged": false, and --quiet still printed it
+        late.append(f"not converged: the solve stopped after {binding.iterations} iterations above its tolerance; "
+                    "the coordinates are usable but less local (raise --max-iterations, or a larger --tolerance "
+                    "stops sooner)")
+    late = [warning for warning in late if warning]
+    figures["warnings"] += late
+    _warn(late, args.quiet)
     if args.json:
         _print_json(figures)
     else:
@@ -181,10 +185,6 @@ def _run_bind(args):
             f"{nonzeros:.2f} stored weights per point, {outside} points outside the cage"
             f"{' (extrapolated from the closest points inside)' if outside else ''}, {total:.2f} s; wrote {args.output}"
         )
-        if not binding.converged:
-            print(f"not converged: the solve stopped after {binding.iterations} iterations above its tolerance; the "
-                  "coordinates are usable but less local (raise --max-iterations, or a larger --tolerance stops "
-                  "sooner)")
     return 0
 
 
