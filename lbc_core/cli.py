@@ -52,6 +52,12 @@ def main(argv=None):
         return 1
 
 
+# What `lbc stats` prints, told by its --help.
+STATS_COLUMNS = """The columns (the paper's Section 5, n control points):
+  P(1e-3/n)  the mean share of the domain where a coordinate is at most 1e-3/n: near 1 is local
+  Q(4), Q(8) the share of the domain where at least 4 (8) coordinates exceed 1e-3/n: near 0 is local"""
+
+
 def _parser():
     parser = argparse.ArgumentParser(prog="lbc", description="Local Barycentric Coordinates for cage deformation.")
     parser.add_argument("--version", action="version", version=f"lbc {__version__}")
@@ -86,12 +92,8 @@ def _parser():
     deform.add_argument("--plot", help="2D only: figure of the domain before and after, with a checkerboard")
     deform.set_defaults(command=_run_deform)
 
-    stats = commands.add_parser(
-        "stats", parents=[common], help="locality figures of a binding",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="The columns (the paper's Section 5, n control points):\n"
-               "  P(1e-3/n)  the mean share of the domain where a coordinate is at most 1e-3/n: near 1 is local\n"
-               "  Q(4), Q(8) the share of the domain where at least 4 (8) coordinates exceed 1e-3/n: near 0 is local")
+    stats = commands.add_parser("stats", parents=[common], help="locality figures of a binding",
+                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=STATS_COLUMNS)
     stats.add_argument("binding", help="binding file from `lbc bind`")
     stats.add_argument("--plot", help="figure of P(t) and Q(k) (.png/.svg)")
     stats.add_argument(
