@@ -434,6 +434,9 @@ class _Run:
         """The step map on the reshaped working sets, and where each entry of the flat state goes there (-1:
         dropped)."""
         sets = self.pending_growth
+        # A reshape takes as long as 10-60 steps (seconds on large cages): said, so that progress does not fall silent.
+        self.progress(self.fraction, f"ADMM iteration {self.iteration}: updating where each control point may act "
+                                     "(factorising)")
         step.ops.release()  # only its pairs and sets are read from here on: its matrices go before the new ones come
         ops = PairOperators(self.mesh, sets, self.settings.dtype, self.progress.check)
         new_step = self._step_map(ops, step.duals)
@@ -491,12 +494,12 @@ class _Run:
     def _why_on(self):
         """Why a solve goes on though its residual rose, or met the tolerance, for the progress message."""
         if self.wide and not self.wide_told:
-            why = " (every control point is let in everywhere now: a tighter stop)"
+            why = " (every control point may act everywhere now: a tighter stop)"
         elif self.reshapes > self.reshapes_told:
             # A reshape adds unknowns the step has not settled yet: the residual rises.
-            why = " after more control points were let in (a rise, then a fall)"
+            why = " after updating where control points act (a rise, then a fall)"
         elif self.pending_growth is not None and self.checks[-1][1] <= 1:
-            why = ": met, but weights reach the edge of the control points let in: letting more in"
+            why = ": met, but weights reach the edge of where their control points may act: widening it"
         else:
             why = ""
         self.reshapes_told, self.wide_told = self.reshapes, self.wide
