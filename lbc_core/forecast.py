@@ -126,7 +126,7 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
 
     Returns
     -------
-    str, e.g. "solving 106 control points on about 8000 cells: about 190 MB of memory for the solve and roughly 4 s"
+    str, e.g. "solving 106 control points on about 8000 cells: about 128 MB of memory for the solve and roughly 3 s"
     """
     iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells, convexity)
     if spreads_wide(n_control_points, dim, convexity):  # every pair held, no reshapes
