@@ -2,6 +2,7 @@
 tolerance that cost is measured at."""
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -89,9 +90,9 @@ ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 66}, {2: 0.3, 3: 0
 # whose fingers face each other across narrow gaps (bench/RESULTS.md, "Cages whose parts face each other across a
 # narrow gap").
 MESHING_SECONDS_PER_CELL = 5e-5
-# Seconds per point for the work after the solve: location, smooth fit, reduction, thinning (bench/RESULTS.md, "The
-# bind outside the solve").
-SECONDS_PER_POINT = 1e-5
+# Seconds per point for the work after the solve: smooth fit, reduction, thinning (bench/RESULTS.md, "The progress
+# bar shared by the time told").
+SECONDS_PER_POINT = 2e-5
 # A stretched solve (a very thin cage): factor on the iterations and on each one's cost (bench/thin_cages.py).
 STRETCHED_ITERATIONS, STRETCHED_STEP_COST = 2, 5
 # Principal aspect from which a thin cage needs more iterations: 1 + log10(aspect / THIN_FROM_ASPECT) times as many
@@ -101,6 +102,35 @@ THIN_FROM_ASPECT = 5
 
 # From this busy factor on, the forecast says that the machine's load lengthens it.
 BUSY_TOLD_FROM = 1.5
+
+
+@dataclass
+class BindSeconds:
+    """A bind's time told before it starts, by stage: seconds at the machine's load now."""
+
+    meshing: float
+    solve: float
+    points: float  # the work after the solve: the smooth fit, the reduction, the thinning
+
+
+def bind_seconds(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0, convexity=0.0):
+    """The time of a bind's meshing, solve and points, told before it starts; the arguments as for
+    :func:`solve_forecast`.
+
+    Example
+    -------
+    >>> told = bind_seconds(67, 8000, 3, n_points=64130)
+    >>> round(told.solve), round(told.points, 1)
+    (2, 1.3)
+    """
+    iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells, convexity)
+    if spreads_wide(n_control_points, dim, convexity):  # every pair held, no reshapes
+        step = WIDE_SECONDS_PER_PAIR_STEP * n_control_points * n_cells
+    else:
+        step = (SECONDS_PER_CELL_STEP[dim] * n_cells
+                + SECONDS_PER_PAIR_STEP[dim] * estimate_pairs(n_control_points, n_cells, dim, convexity))
+    solve = step * iterations * busy * (STRETCHED_STEP_COST if stretched else 1.0)
+    return BindSeconds(MESHING_SECONDS_PER_CELL * n_cells * busy, solve, SECONDS_PER_POINT * n_points * busy)
 
 
 def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0,
@@ -128,25 +158,17 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
     -------
     str, e.g. "solving 106 control points on about 8000 cells: about 128 MB of memory for the solve and roughly 3 s"
     """
-    iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells, convexity)
-    if spreads_wide(n_control_points, dim, convexity):  # every pair held, no reshapes
-        step = WIDE_SECONDS_PER_PAIR_STEP * n_control_points * n_cells
-    else:
-        step = (SECONDS_PER_CELL_STEP[dim] * n_cells
-                + SECONDS_PER_PAIR_STEP[dim] * estimate_pairs(n_control_points, n_cells, dim, convexity))
-    seconds = step * iterations * busy
-    if stretched:
-        seconds *= STRETCHED_STEP_COST
+    told = bind_seconds(n_control_points, n_cells, dim, stretched, aspect, busy, n_points, convexity)
+    seconds = told.solve
     text = ""
     if meshing:
-        meshing_seconds = MESHING_SECONDS_PER_CELL * n_cells * busy
-        text = f"meshing {'' if meshing_seconds < 1 else 'roughly '}{format_duration(meshing_seconds)}, then "
+        text = f"meshing {'' if told.meshing < 1 else 'roughly '}{format_duration(told.meshing)}, then "
     text += (f"solving {n_control_points} control points on about {n_cells} cells: about "
             f"{format_size(estimate_memory(n_control_points, n_cells, dim, convexity))} of memory for the solve and "
             f"{'' if seconds < 1 else 'roughly '}{format_duration(seconds)}")
     if n_points:
-        points_seconds = SECONDS_PER_POINT * n_points * busy
-        text += f", then {'' if points_seconds < 1 else 'about '}{format_duration(points_seconds)} for the {n_points} points"
+        text += (f", then {'' if told.points < 1 else 'about '}{format_duration(told.points)} for the {n_points} "
+                 "points")
     if busy >= BUSY_TOLD_FROM:
         text += f" (the machine is busy: {busy:.1f} times the time it would take idle)"
     if seconds > 3600:

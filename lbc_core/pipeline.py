@@ -29,7 +29,7 @@ from .parallel import busy_factor, counted_in_load
 from .progress import Laps, Progress
 from .reduction import interpolate_and_reduce
 from .smoothing import SmoothInterpolation
-from .forecast import check_memory, solve_forecast, solves_stretched
+from .forecast import bind_seconds, check_memory, solve_forecast, solves_stretched
 from .solver import solve_on_mesh
 
 # Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
@@ -61,11 +61,28 @@ class StageClock:
         self.progress = progress
         self._laps = Laps()
         self.timings = self._laps.seconds
-        self._parts = {}
-        total, start = sum(STAGES[name] for name in order), 0.0
-        for name in order:
-            self._parts[name] = (start, start + STAGES[name] / total)
-            start += STAGES[name] / total
+        total = sum(STAGES[name] for name in order)
+        self._share({name: STAGES[name] / total for name in order})
+
+    def _share(self, shares):
+        """Each stage's part of the bar from its share ({stage: share}, in order, summing to 1)."""
+        self._parts, start = {}, 0.0
+        for name, share in shares.items():
+            self._parts[name] = (start, start + share)
+            start += share
+
+    def weigh(self, told):
+        """Share the bar by the time told before the bind (:class:`~lbc_core.forecast.BindSeconds`, or None to keep
+        the shares): the meshing, the solve and the reduction in proportion to their seconds, within what the other
+        stages' shares leave (the reduction of 64k points is a quarter of the demo's bind)."""
+        timed = {} if told is None else {"meshing": told.meshing, "solve": told.solve, "reduction": told.points}
+        shares = {name: end - start for name, (start, end) in self._parts.items()}
+        seconds = sum(timed.get(name, 0.0) for name in shares)
+        if seconds <= 0:
+            return
+        left = sum(share for name, share in shares.items() if name in timed)
+        self._share({name: left * timed[name] / seconds if name in timed else share
+                     for name, share in shares.items()})
 
     def part(self, stage):
         """The Progress of ``stage``: its part of the bar."""
@@ -132,7 +149,8 @@ def bind(
     clock = StageClock(Progress.of(progress, cancel), BIND_STAGES)
     request = BindOptions.of(options, cells=cells, weighting=weighting, epsilon=epsilon, threshold=threshold,
                              method=method, tolerance=tolerance, max_iterations=max_iterations)
-    cage, points = check_request(cage_vertices, cage_faces, points, request, clock.progress)
+    cage, points, told = check_request(cage_vertices, cage_faces, points, request, clock.progress)
+    clock.weigh(told)
     clock.done("checks")
     # Every stage computes in the unit frame; the weights are the same in any frame.
     frame = UnitFrame.of(cage)
@@ -307,19 +325,29 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     progress : callable(fraction, message), optional
         Told, at 0, how much memory and (roughly) time the solve will take.
 
-    Returns and raises as :func:`check_cage_and_points`, and CageError for a bind the memory cannot hold.
+    Returns
+    -------
+    cage, points
+        As :func:`check_cage_and_points`.
+    told : BindSeconds or None
+        The time told for the meshing, the solve and the points (None for a simplex cage: nothing to mesh or solve).
+
+    Raises as :func:`check_cage_and_points`, and CageError for a bind the memory cannot hold.
     """
     cage, points = check_cage_and_points(cage_vertices, cage_faces, points, options)
     n_cells = options.cells or DEFAULT_CELLS[cage.dim]
     convexity = cage.convexity
     check_memory(cage.n_control_points, n_cells, cage.dim, convexity)
-    if progress is not None and cage.is_simplex:
-        progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve")
-    elif progress is not None:
-        progress(0.0, solve_forecast(cage.n_control_points, n_cells, cage.dim,
-                                     solves_stretched(cage.vertices, options.epsilon), principal_aspect(cage.vertices),
-                                     busy_factor(), len(points), meshing=True, convexity=convexity))
-    return cage, points
+    if cage.is_simplex:
+        if progress is not None:
+            progress(0.0, "a simplex cage: its coordinates are the barycentric ones, nothing to mesh or solve")
+        return cage, points, None
+    busy = 1.0 if progress is None else busy_factor()  # the bar's shares are ratios: the load cancels
+    shape = (cage.n_control_points, n_cells, cage.dim, solves_stretched(cage.vertices, options.epsilon),
+             principal_aspect(cage.vertices), busy, len(points))
+    if progress is not None:
+        progress(0.0, solve_forecast(*shape, meshing=True, convexity=convexity))
+    return cage, points, bind_seconds(*shape, convexity=convexity)
 
 
 def check_cage_and_points(cage_vertices, cage_faces, points, options=None):
