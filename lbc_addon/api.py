@@ -192,8 +192,8 @@ def save_shape_key(mesh_obj, name=""):
 
 def status(mesh_obj):
     """(ok, message): whether the deformer of a bound mesh works, and if not, why (for an unbound object: that it
-    is not bound); a mesh that follows though much of it lies outside a cage too small gets the panel's warning
-    after its message."""
+    is not bound); a mesh that follows gets the panel's notes after its message: much of it outside a cage too small,
+    a cage edited since the bind, the mesh moved as an object."""
     _require_enabled()
     if not isinstance(mesh_obj, bpy.types.Object):
         return False, f"{mesh_obj!r} is not an object: pass it as e.g. bpy.data.objects['Name']"
@@ -204,8 +204,15 @@ def status(mesh_obj):
                     "removes" if geometry.leftover_weights(mesh_obj) else "")
         return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}"
     ok, message = diagnosis.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
-    too_small = jobs.cage_too_small(mesh_obj.lbc, len(mesh_obj.data.vertices)) if ok else ""
-    return ok, f"{message}; {too_small}" if too_small else message  # following, but as the panel warns
+    if not ok:
+        return ok, message
+    # Following, with the panel's notes: a pipeline checks here what an artist reads there.
+    notes = [jobs.cage_too_small(mesh_obj.lbc, len(mesh_obj.data.vertices))]
+    if diagnosis.edited_since_bind(mesh_obj.lbc):
+        notes.append(diagnosis.edited_since_bind_note("rebind (api.rebind_all(cage))"))
+    if diagnosis.moved_as_an_object(mesh_obj):
+        notes.append(diagnosis.moved_as_an_object_note(mesh_obj, "rebind (api.bind)"))
+    return ok, "; ".join([message] + [note for note in notes if note])
 
 
 def _require_enabled():

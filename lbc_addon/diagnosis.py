@@ -213,3 +213,38 @@ def welded_apart(welded, positions):
     offset = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
     apart = np.flatnonzero(offset > POSED_APART * size)
     return tuple(pairs[apart[0]].tolist()) if len(apart) else None
+
+
+def edited_since_bind(settings):
+    """Whether the cage's own vertex positions changed since the bind (``settings``: a bound mesh's ``Object.lbc``):
+    an edit at rest, which the mesh follows as a pose until a Rebind makes it the rest (posing with bones, shape keys
+    or the object's transform leaves them as they were). False while the deformer is stopped: an edit that stops it
+    (a loop cut) is not followed, and the status already says why."""
+    cage = settings.cage
+    if settings.state != "FOLLOWING" or cage is None or cage.type != "MESH" or not settings.cage_shape:
+        return False  # (no cage_shape: bound before the shape was recorded)
+    shape = geometry.shape_fingerprint(cage.data)
+    return bool(shape) and shape != settings.cage_shape
+
+
+def moved_as_an_object(obj):
+    """Whether a bound mesh's own transform (location, rotation, scale: what G, R, S and their keys change) differs
+    from the one at bind time: the deformer puts the mesh where its cage holds it, so the move shows nothing. Moves
+    that come from a parent (the cage, or a rig carrying both) leave it as it was."""
+    then = np.array(obj.lbc.mesh_transform).reshape(4, 4)
+    if not then.any():  # bound before the transform was recorded
+        return False
+    return not np.allclose(np.array(obj.matrix_basis), then, rtol=1e-5, atol=1e-5 * max(1.0, np.abs(then).max()))
+
+
+def moved_as_an_object_note(obj, rebind):
+    """What the panel and ``api.status`` say of a bound mesh :func:`moved_as_an_object` (``rebind``: how to rebind
+    there)."""
+    return (f"'{obj.name}' was moved as an object since the bind, which does not move it: its cage alone places it. "
+            "Undo the move, then move the cage instead, or parent the mesh to the cage (Ctrl+P) to move both "
+            f"together; or {rebind} to bind it where it is now")
+
+
+def edited_since_bind_note(rebind):
+    """What ``api.status`` says of a bound mesh whose cage was :func:`edited_since_bind` (``rebind``: how)."""
+    return f"the cage was edited since the bind, and the mesh follows the edit: {rebind} to make it the rest shape"

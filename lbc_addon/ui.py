@@ -3,10 +3,10 @@
 import textwrap
 
 import bpy
-import numpy as np
 
 from . import deformer, geometry, jobs, storage
 from .core import format_size
+from .diagnosis import edited_since_bind, moved_as_an_object, moved_as_an_object_note
 from .properties import bound_to, is_bound
 
 # Above this mean the panel suggests Max Influences: where each vertex feels most of a small cage's vertices (a 50k
@@ -34,9 +34,7 @@ def draw_binding(layout, obj):
         box.label(text="and the mesh follows the edit: Rebind to make it the rest shape")
         box.operator("object.lbc_rebind", icon="FILE_REFRESH")
     if ok and moved_as_an_object(obj):  # Mesh Deform users expect the mesh to move with its object
-        wrapped_label(box, f"'{obj.name}' was moved as an object since the bind, which does not move it: its cage "
-                      "alone places it. Undo the move, then move the cage instead, or parent the mesh to the cage "
-                      "(Ctrl+P) to move both together; or Rebind to bind it where it is now", icon="INFO")
+        wrapped_label(box, moved_as_an_object_note(obj, "Rebind"), icon="INFO")
     draw_modifier_inputs(layout, obj)
     column = layout.column(align=True)
     column.label(text=f"Cage: {settings.cage.name if settings.cage else '(deleted)'}", icon="MESH_CUBE")
@@ -77,28 +75,6 @@ def wrapped_label(layout, text, icon="NONE"):
     column = layout.column(align=True)
     for number, line in enumerate(textwrap.wrap(text, width)):
         column.label(text=line, icon=icon if number == 0 else "BLANK1")
-
-
-def edited_since_bind(settings):
-    """Whether the cage's own vertex positions changed since the bind (``settings``: a bound mesh's ``Object.lbc``):
-    an edit at rest, which the mesh follows as a pose until a Rebind makes it the rest (posing with bones, shape keys
-    or the object's transform leaves them as they were). False while the deformer is stopped: an edit that stops it
-    (a loop cut) is not followed, and the status already says why."""
-    cage = settings.cage
-    if settings.state != "FOLLOWING" or cage is None or cage.type != "MESH" or not settings.cage_shape:
-        return False  # (no cage_shape: bound before the shape was recorded)
-    shape = geometry.shape_fingerprint(cage.data)
-    return bool(shape) and shape != settings.cage_shape
-
-
-def moved_as_an_object(obj):
-    """Whether a bound mesh's own transform (location, rotation, scale: what G, R, S and their keys change) differs
-    from the one at bind time: the deformer puts the mesh where its cage holds it, so the move shows nothing. Moves
-    that come from a parent (the cage, or a rig carrying both) leave it as it was."""
-    then = np.array(obj.lbc.mesh_transform).reshape(4, 4)
-    if not then.any():  # bound before the transform was recorded
-        return False
-    return not np.allclose(np.array(obj.matrix_basis), then, rtol=1e-5, atol=1e-5 * max(1.0, np.abs(then).max()))
 
 
 def draw_modifier_inputs(layout, obj):

@@ -37,6 +37,24 @@ def test_api_bind_returns_the_figures_and_unbind_restores_the_mesh():
     assert mesh_state(mesh) == before and not is_bound(mesh)
 
 
+def test_api_status_gives_the_panel_s_notes_on_an_edited_cage_and_a_moved_mesh():
+    """A new user's pipeline read "Following 'Box'" after editing the cage and after moving the mesh as an object,
+    where the panel said both."""
+    mesh, cage = sphere_in_box_scene()
+    api.bind(mesh, cage, cells=1000)
+    cage.data.vertices[0].co.x -= 0.1  # an edit of the cage at rest, which the mesh follows as a pose
+    cage.data.update()
+    ok, message = api.status(mesh)
+    assert ok and message == ("Following 'Box'; the cage was edited since the bind, and the mesh follows the edit: "
+                              "rebind (api.rebind_all(cage)) to make it the rest shape")
+    cage.data.vertices[0].co.x += 0.1
+    cage.data.update()
+    mesh.location.z += 0.5
+    ok, message = api.status(mesh)
+    assert ok and message.startswith("Following 'Box'; 'Sphere' was moved as an object since the bind, which does "
+                                     "not move it") and message.endswith("or rebind (api.bind) to bind it where it is now")
+
+
 def test_api_bind_warns_when_renders_would_see_other_cage_vertices():
     mesh, cage = sphere_in_box_scene()
     cage.modifiers.new("Subdivision", "SUBSURF").levels = 0  # nothing in the viewport, 2 levels in renders
