@@ -20,6 +20,7 @@ reopened file, or a mesh bound long ago, binds from scratch.
 """
 
 import numbers
+import re
 import threading
 import time
 from collections import OrderedDict
@@ -188,16 +189,18 @@ def read_welded(welded):
 
 def printed_progress(interval=1.0):
     """A progress callback printing "LBC bind: 42% message" lines (background mode has no status bar): a line when
-    the message says something new, else at most one per ``interval`` seconds (a stage's own counts can change
-    dozens of times a second)."""
-    last = {"message": None, "line": None, "time": -float("inf")}
+    the message says something new, else at most one per ``interval`` seconds. A message that differs from the last
+    only in its numbers says nothing new: a stage's own counts can change dozens of times a second (a new user's
+    5 s bind printed 65 lines, 21 of them geodesic counts within 0.08 s)."""
+    last = {"words": None, "line": None, "time": -float("inf")}
 
     def progress(fraction, message):
         line = f"LBC bind: {100 * fraction:3.0f}% {message}"
+        words = re.sub(r"[\d.]+", "#", message)
         now = time.perf_counter()
-        if line != last["line"] and (message != last["message"] or now - last["time"] >= interval):
+        if line != last["line"] and (words != last["words"] or now - last["time"] >= interval):
             print(line, flush=True)
-            last.update(message=message, line=line, time=now)
+            last.update(words=words, line=line, time=now)
 
     return progress
 
