@@ -78,7 +78,11 @@ class Progress:
         if self._progress is not None:
             self._progress(self.start + (self.end - self.start) * float(fraction), message)
 
-    def part(self, start, end):
-        """A Progress for the sub-range [start, end] (fractions of this one), sharing the same callbacks."""
+    def part(self, start, end, prefix=""):
+        """A Progress for the sub-range [start, end] (fractions of this one), sharing the same callbacks; its
+        messages begin with ``prefix`` (e.g. "meshing again: ")."""
         span = self.end - self.start
-        return Progress(self._progress, self._cancel, self.start + span * start, self.start + span * end)
+        report = self._progress
+        if prefix and report is not None:
+            report = lambda fraction, message: self._progress(fraction, prefix + message)  # noqa: E731
+        return Progress(report, self._cancel, self.start + span * start, self.start + span * end)

@@ -48,3 +48,14 @@ def test_of_a_progress_with_a_cancel_beside_it_polls_both():
         both.check()
     with pytest.raises(Cancelled):
         Progress.of(Progress(None, lambda: True), lambda: False).check()  # the Progress's own cancel still counts
+
+
+def test_a_part_may_begin_its_messages_with_a_prefix():
+    """The mesher's second try said "sampling the cage surface" again with the bar stepping back: a new user read it
+    as a restart. Its part now says what it is."""
+    told = []
+    progress = Progress(lambda fraction, message: told.append((fraction, message)))
+    progress.part(0.5, 1.0, "meshing again: ")(0.5, "sampling the cage surface")
+    progress.part(0.0, 0.5)(1.0, "plain")
+    assert told == [(0.75, "meshing again: sampling the cage surface"), (0.5, "plain")]
+    Progress().part(0.0, 1.0, "nobody listens: ")(0.5, "fine")  # no callback: nothing to prefix

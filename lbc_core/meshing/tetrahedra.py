@@ -102,8 +102,9 @@ def mesh(cage, cells, steps):
     ratio = len(tets) / cells
     if abs(ratio - 1.0) > _COUNT_TOLERANCE:  # thin or small cages: mostly surface band, fewer tetrahedra per volume
         try:
+            again = f"meshing again, {len(tets)} cells made for about {cells}: "  # said: progress steps back
             surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), split, deadline,
-                                                steps.part(0.6, 0.95))
+                                                steps.part(0.6, 0.95, again))
         except CageError:
             pass  # the first mesh conforms: keep it, with its cell count off target
     steps(0.95, "checking the tetrahedralisation")
