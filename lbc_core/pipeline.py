@@ -65,11 +65,13 @@ class StageClock:
         self._share({name: STAGES[name] / total for name in order})
 
     def _share(self, shares):
-        """Each stage's part of the bar from its share ({stage: share}, in order, summing to 1)."""
+        """Each stage's part of the bar from its share ({stage: share}, in order, summing to 1); the last ends at 1
+        exactly, whatever the sum's round-off (the bar never passes the final "bound")."""
         self._parts, start = {}, 0.0
         for name, share in shares.items():
-            self._parts[name] = (start, start + share)
+            self._parts[name] = (start, min(start + share, 1.0))
             start += share
+        self._parts[name] = (self._parts[name][0], 1.0)
 
     def weigh(self, told):
         """Share the bar by the time told before the bind (:class:`~lbc_core.forecast.BindSeconds`, or None to keep

@@ -146,6 +146,21 @@ def test_the_progress_bar_is_shared_by_the_time_told_for_the_solve_and_the_point
     assert [fraction for fraction, message in few if message == "solved"][0] > 0.9
 
 
+def test_the_stages_shares_end_at_1_exactly_whatever_the_time_told():
+    """The shares rescaled by the time told summed to 1.0000000000000002 under some loads: the bar passed the final
+    "bound" (a clean-clone run's find)."""
+    from lbc_core.forecast import BindSeconds
+    from lbc_core.pipeline import BIND_STAGES, StageClock
+    from lbc_core.progress import Progress
+
+    for told in (BindSeconds(2.03, 1.0, 0.46), BindSeconds(3.61, 2.63, 1.56), BindSeconds(1e-3, 1e3, 1e-2)):
+        clock = StageClock(Progress(), BIND_STAGES)
+        clock.weigh(told)
+        parts = [clock._parts[name] for name in BIND_STAGES]
+        assert parts[-1][1] == 1.0 and all(start <= end <= 1.0 for start, end in parts)
+        assert all(earlier[1] == later[0] for earlier, later in zip(parts, parts[1:]))
+
+
 def test_bad_points_are_refused():
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
     with pytest.raises(lbc_core.CageError, match=r"2 of the points \(1, 3, counted from 0\) have NaN or infinite"):
