@@ -78,7 +78,7 @@ def _bind_request(request, progress, cancel, solved=None):
         "dimension": settings.dimension,
         "control_points": settings.control_points,
         "slots": settings.slots,
-        "mean_influences": settings.mean_influences,
+        "mean_influences": round(settings.mean_influences, 3),  # stored as float32: its noise says nothing
         "outside": settings.outside,
         "warnings": found,
         "seconds": settings.bind_seconds,

@@ -84,10 +84,15 @@ def _apply_all(operator, pairs):
 
 
 def _solve_printing(requests):
-    """Solve in this thread, printing progress lines (background mode has no status bar)."""
-    progress = jobs.printed_progress()
-    pairs = []
-    for request in requests:
+    """Solve in this thread, printing progress lines (background mode has no status bar): one percentage for all the
+    meshes, each mesh's lines beginning with its name when there are several (a new user saw the percentage reach
+    100 % "bound" and start again for the second mesh)."""
+    printed = jobs.printed_progress()
+    pairs, count = [], len(requests)
+    for number, request in enumerate(requests):
+        def progress(fraction, message, number=number, name=request.mesh_name):
+            printed((number + fraction) / count, f"{name}: {message}" if count > 1 else message)
+
         pairs.append((request, jobs.solve(request, progress, earlier=pairs)))
     return pairs
 

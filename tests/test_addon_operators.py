@@ -52,6 +52,12 @@ def test_one_bind_of_two_meshes_solves_their_cage_once(capfd, monkeypatch):
     out = capfd.readouterr().out
     assert out.count("ADMM iteration 10,") == 1, out  # one solve
     assert "to the same cage: 0 of " in out and is_bound(mesh) and is_bound(other)
+    # One percentage for both meshes, each line naming its mesh (it reached 100 % "bound" and began again).
+    lines = [line for line in out.splitlines() if line.startswith("LBC bind:")]
+    percents = [int(line.split("%")[0].split()[-1]) for line in lines]
+    assert percents == sorted(percents) and percents[-1] == 100
+    assert all((percent <= 50) == (" Sphere: " in line) for percent, line in zip(percents, lines) if percent != 50)
+    assert lines[0].startswith("LBC bind:   0% Sphere: ") and lines[-1].startswith("LBC bind: 100% Other: ")
 
 
 def test_poll_explains_what_to_select():
