@@ -128,7 +128,7 @@ def edge_distances(vertices, cells, sources, progress=None):
 def _heat_distances_triangles(vertices, cells, sources, progress):
     import potpourri3d
 
-    progress(0.0, "geodesic distances: factorising")
+    progress(0.0, "geodesic distances: preparing")
     solver = potpourri3d.MeshHeatMethodDistanceSolver(np.c_[vertices, np.zeros(len(vertices))], np.asarray(cells))
     columns = []
     for count, source in enumerate(sources):
@@ -139,7 +139,7 @@ def _heat_distances_triangles(vertices, cells, sources, progress):
 
 def _heat_distances_tetrahedra(vertices, cells, sources, progress):
 
-    progress(0.0, "geodesic distances: factorising")
+    progress(0.0, "geodesic distances: preparing")
     n_vertices = len(vertices)
     cells = np.asarray(cells)
     edges = np.concatenate([cells[:, [a, b]] for a in range(4) for b in range(a + 1, 4)])

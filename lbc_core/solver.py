@@ -203,7 +203,7 @@ def solve_on_mesh(
     mesh = MeshData.of(solve_vertices, cells, boundary_vertices, boundary_weights, BETA[d], unit_controls,
                        unit_vertices)
     if len(mesh.interior):
-        progress(0.0, "finding where each coordinate may reach (factorising the solver's matrix)")
+        progress(0.0, "finding where each control point may act (preparing the solver)")
         sets, first, duals, carried = _starting_point(mesh, start, progress)
         clock.lap("factorisation")
         expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls), len(cells),

@@ -152,7 +152,7 @@ def _tetrahedralise(cage, side, split, coarsening, seed, deadline, steps):
     except OutOfBudget:
         raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
     lattice = _bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
-    steps(0.5, "tetrahedralising (Delaunay)")
+    steps(0.5, "filling the cage with tetrahedra")
     far = far_points(cage.vertices)
     samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
     n_surface = len(samples.points)
@@ -210,7 +210,7 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
             missing.append(np.count_nonzero(~is_face))
             # A report each round: refinement along a narrow gap ran 12 to 30 rounds with the bar standing still.
             steps(0.5 + 0.35 * (1.0 - 0.8 ** len(missing)),
-                  f"following the cage surface: {missing[-1]} surface triangles to recover (round {len(missing)})")
+                  f"fitting the tetrahedra to the cage's surface: {missing[-1]} triangles left (round {len(missing)})")
             regions = np.unique(samples.triangle_region[~is_face])
             if _runs_away(missing, len(samples.points), surface.budget):
                 raise _RunsAway(np.flatnonzero(np.isin(surface.region, regions)), surface.spacing)

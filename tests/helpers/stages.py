@@ -10,7 +10,7 @@ import lbc_core
 STAGE_MESSAGES = {
     "meshing": "",  # the first message of a bind is the mesher's
     "geodesics": "geodesic distances",
-    "factorisation": "finding where each coordinate may reach",
+    "factorisation": "finding where each control point may act",
     "ADMM": "ADMM iteration",
     "projection": "projecting onto the constraints",
     "interpolation": "interpolation:",
