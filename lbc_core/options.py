@@ -196,6 +196,6 @@ _CHECKS = {
     "tolerance": _bounded(None, False, lambda value: value > 0,
                           "must be more than 0, got {value:g}: e.g. 1e-4 (left out, or None: the solver's default)"),
     "max_iterations": _bounded(DEFAULT_MAX_ITERATIONS, True, lambda value: value >= 1,
-                               f"must be at least 1, got {{value}} (None: {DEFAULT_MAX_ITERATIONS})"),
+                               f"must be at least 1, got {{value}} (left out, or None: {DEFAULT_MAX_ITERATIONS})"),
     "method": _method,
 }
