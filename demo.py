@@ -12,7 +12,7 @@ import numpy as np
 
 import lbc_core
 from lbc_core.io import read_cage, read_mesh
-from lbc_core.plots import plot_coordinate, plot_deformation
+from lbc_core.compare.plots import plot_coordinate, plot_deformation
 
 ROOT = Path(__file__).resolve().parent
 DATA = ROOT / "tests" / "data"

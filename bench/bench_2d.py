@@ -5,7 +5,7 @@ numpy re-implementation of the reference ADMM (bench/reference_admm.py, iteratio
 ``lbc_core.solve_on_mesh`` is importable, our solver on the same inputs, then prints one table row per case.
 Seconds are the fastest of 2-7 wall times (short runs are repeated more) of each whole call (setup, factorisation,
 iterations) on a shared machine.
-Objectives are recomputed for both with lbc_core.objective.tv_objective, in the cage's units. Usage:
+Objectives are recomputed for both with lbc_core.solve.objective.tv_objective, in the cage's units. Usage:
 
     .venv/bin/python bench/bench_2d.py [case ...]
 """
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script, bench/ is not an installed package
 
 from bench.reference_admm import reference_admm  # noqa: E402
-from lbc_core.objective import tv_objective  # noqa: E402
+from lbc_core.solve.objective import tv_objective  # noqa: E402
 
 CASES = ["woody", "Gil_Gecko", "cactus", "LBClogo"]
 DATA = ROOT / "tests" / "data"
@@ -32,7 +32,7 @@ def our_solver():
         from lbc_core import solve_on_mesh
     except ImportError:
         try:
-            from lbc_core.solver import solve_on_mesh
+            from lbc_core.solve.solver import solve_on_mesh
         except ImportError:
             return None
     return solve_on_mesh

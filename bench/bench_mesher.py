@@ -21,7 +21,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 from helpers import cage_corpus  # noqa: E402
 import lbc_core  # noqa: E402
 from lbc_core import meshing  # noqa: E402
-from lbc_core.geometry import radius_ratios  # noqa: E402
+from lbc_core.kernel.geometry import radius_ratios  # noqa: E402
 from lbc_core.io import read_cage  # noqa: E402
 
 FAMILIES = [

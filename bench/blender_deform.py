@@ -19,7 +19,7 @@ levels: 64,130 vertices) in its 67-vertex cage L10; "suzanne507", Suzanne as Ble
 same cage, shows the deformer's cost that does not grow with the vertices; "cylinder", a 50,882-vertex UV sphere in
 Blender's default Cylinder. Variants: no deformer, Mesh Deform (precision 5), LBC bound with
 the add-on's defaults, LBC with every weight (bound with a threshold of 1e-12: nothing thinned), LBC with every
-weight thinned by other thresholds and caps (``--thin floor:cap``; see :func:`lbc_core.thinning.thin_weights`),
+weight thinned by other thresholds and caps (``--thin floor:cap``; see :func:`lbc_core.evaluate.thinning.thin_weights`),
 LBC with its weighted sum built in another shape (``--sums``; see :func:`rebuild_sum`), the default's weights with
 another number of slots evaluated for every vertex (``--shared``; see :func:`lbc_addon.node_group.build_node_group`),
 and the default's tree changed by another lever (``--trees``; see :func:`rebuild_tree`, and :func:`triplet_variant`
@@ -53,7 +53,7 @@ from helpers.blender_scenes import (  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
 from lbc_addon import api, deformer, handlers, node_group, storage  # noqa: E402
-from lbc_core.thinning import thin_weights  # noqa: E402
+from lbc_core.evaluate.thinning import thin_weights  # noqa: E402
 
 EVERY_WEIGHT = 1e-12  # a Threshold that thins nothing
 
@@ -114,7 +114,7 @@ def copy_object(mesh, name):
 
 def lbc_variant(bound, cage, name, thinning=None, sum_form=None, shared_slots=None, tree=None):
     """A copy of the bound mesh deformed by LBC, its weights thinned by ``thinning`` = (floor, cap) (None: as
-    bound; see :func:`lbc_core.thinning.thin_weights`), its weighted sum built as ``sum_form`` (see
+    bound; see :func:`lbc_core.evaluate.thinning.thin_weights`), its weighted sum built as ``sum_form`` (see
     :func:`rebuild_sum`; None: the add-on's), the slots every vertex evaluates ``shared_slots`` (see
     :func:`lbc_addon.node_group.build_node_group`; None: the add-on's choice), its tree changed as ``tree`` says (see
     :func:`rebuild_tree`, or "sorted": each vertex's slots ordered by weight, largest first; None: as built)."""
@@ -682,7 +682,7 @@ def main(argv=None):
     parser.add_argument("--scenes", default="suzanne,gargoyle")
     parser.add_argument("--thin", default="",
                         help="comma-separated floor:cap thinnings of every weight to measure besides the "
-                        "default (see lbc_core.thinning.thin_weights), e.g. 0.002:0,0.005:12")
+                        "default (see lbc_core.evaluate.thinning.thin_weights), e.g. 0.002:0,0.005:12")
     parser.add_argument("--sums", default="",
                         help="comma-separated other shapes of the weighted sum: chain,fma,fma-vector")
     parser.add_argument("--reference-cells", type=int, default=0,

@@ -80,7 +80,7 @@ def cases(applied=False):
 def measure(cells, applied):
     """Mesh every primitive with the lbc_core first on sys.path; print a line each and the totals."""
     from lbc_core import meshing
-    from lbc_core.cage import make_cage
+    from lbc_core.cage.make import make_cage
     from lbc_core.errors import CageError
 
     refused, total = 0, 0.0

@@ -21,9 +21,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-import lbc_core.geodesics as geodesics  # noqa: E402
-import lbc_core.working_sets as working_sets  # noqa: E402
-from lbc_core.factor import Factor  # noqa: E402
+import lbc_core.solve.geodesics as geodesics  # noqa: E402
+import lbc_core.solve.working_sets as working_sets  # noqa: E402
+from lbc_core.kernel.factor import Factor  # noqa: E402
 from lbc_core.io import read_cage, read_mesh  # noqa: E402
 from helpers.stages import STAGE_MESSAGES, longest_waits  # noqa: E402
 

@@ -19,13 +19,13 @@ folded by more than 30°, triangles turned over against their neighbours. LBC "d
 ``lbc_core.bind`` at its defaults, then ``thin_weights`` at the add-on's default floor.
 
 The default run prints, per scene, LBC's defaults (the rows of the points outside the cage extrapolated to them:
-lbc_core.smoothing's ``points`` and ``outside``), the same with those points following their closest point inside
+lbc_core.evaluate.smoothing's ``points`` and ``outside``), the same with those points following their closest point inside
 (as before the pipeline passed them) and Mesh Deform (precision 5, through bpy) in the same process, with their bind seconds (``--baseline REV``: also LBC's defaults with
 the evaluation, reduction and thinning of git revision REV). ``--levers`` prints, per scene, one bind per ``--binds`` setting (cells, 0 for the default,
 and the relaxation ε) and, on each, the evaluation per ``--evaluations`` setting: the fit's radius and fade (median
 edges), the thinning's floor (0: every weight) and the
 treatment of the points outside the cage ("near": each follows its closest point; "tilt": the closest point's
-coordinates plus the offset times their gradient, which reproduces the point: lbc_core.smoothing's ``points`` and
+coordinates plus the offset times their gradient, which reproduces the point: lbc_core.evaluate.smoothing's ``points`` and
 ``outside``), and optionally the fit's radius where the cage is thick (``deep``, median edges: the lever of
 bench/RESULTS.md, "A wider fit where the cage is thick"); with each the evaluation's and thinning's seconds.
 """
@@ -45,14 +45,14 @@ sys.path.insert(0, str(ROOT))
 
 import lbc_core  # noqa: E402
 from bench import capsule, figure  # noqa: E402
-from lbc_core import thinning  # noqa: E402
-from lbc_core.frame import UnitFrame  # noqa: E402
-from lbc_core.interpolation import interpolation_matrix  # noqa: E402
+from lbc_core.evaluate import thinning  # noqa: E402
+from lbc_core.kernel.frame import UnitFrame  # noqa: E402
+from lbc_core.evaluate.interpolation import interpolation_matrix  # noqa: E402
 from lbc_core.io import read_mesh  # noqa: E402
-from lbc_core.pipeline import REPRODUCTION_TOLERANCE  # noqa: E402
-from lbc_core.reduction import interpolate_and_reduce  # noqa: E402
-from lbc_core.smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation  # noqa: E402
-from lbc_core.thinning import DEFAULT_FLOOR  # noqa: E402
+from lbc_core.binding.pipeline import REPRODUCTION_TOLERANCE  # noqa: E402
+from lbc_core.evaluate.reduction import interpolate_and_reduce  # noqa: E402
+from lbc_core.evaluate.smoothing import FADE_EDGES, RADIUS_EDGES, SmoothInterpolation  # noqa: E402
+from lbc_core.evaluate.thinning import DEFAULT_FLOOR  # noqa: E402
 
 ARM = ROOT / "tests" / "data" / "cages-3d" / "arm"
 
@@ -122,7 +122,7 @@ class Evaluation:
 
 
 def thinned(binding, weights, floor=DEFAULT_FLOOR):
-    """The add-on's thinning (lbc_core.thinning.thin_weights, no cap) at ``floor``; 0 keeps every weight."""
+    """The add-on's thinning (lbc_core.evaluate.thinning.thin_weights, no cap) at ``floor``; 0 keeps every weight."""
     rest = binding.rest_cage_vertices
     return thinning.thin_weights(weights, rest, weights @ rest, floor) if floor else sp.csr_matrix(weights)
 
@@ -175,7 +175,7 @@ def default_bind(mesh, cage, cage_faces):
 @contextlib.contextmanager
 def baseline_code(revision):
     """The bind's evaluation, reduction and thinning from ``revision`` (bench/smoothness.py's baseline_modules)."""
-    import lbc_core.pipeline as pipeline
+    import lbc_core.binding.pipeline as pipeline
 
     from bench.smoothness import baseline_modules, pipeline_smoothing
 

@@ -1,4 +1,4 @@
-"""Time lbc_core.interpolation.interpolation_matrix: 1e6 points against ~50k tetrahedra.
+"""Time lbc_core.evaluate.interpolation.interpolation_matrix: 1e6 points against ~50k tetrahedra.
 
 The mesh fills the unit cube minus the block [0.5, 1]^3 (non-convex, like a cage's interior): a grid of cubes split
 into 6 tetrahedra each, interior vertices jittered so that it is unstructured and not Delaunay. The points are
@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-from lbc_core import fem
-from lbc_core.interpolation import interpolation_matrix
+from lbc_core.kernel import fem
+from lbc_core.evaluate.interpolation import interpolation_matrix
 
 # The six tetrahedra of a cube sharing its main diagonal 0-7 (corner index = 4 x + 2 y + z).
 _CUBE_TETS = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])

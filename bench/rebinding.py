@@ -40,13 +40,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import lbc_core  # noqa: E402
-from lbc_core.boundary import boundary_weights  # noqa: E402
-from lbc_core.frame import UnitFrame  # noqa: E402
+from lbc_core.solve.boundary import boundary_weights  # noqa: E402
+from lbc_core.kernel.frame import UnitFrame  # noqa: E402
 from lbc_core.io import read_cage, read_mesh  # noqa: E402
-from lbc_core import rebinding  # noqa: E402
-from lbc_core.rebinding import carry_domain, rebind  # noqa: E402
-from lbc_core.geodesics import geodesic_distances, tv_weights  # noqa: E402
-from lbc_core.solver import solve_on_mesh  # noqa: E402
+from lbc_core.binding import rebinding  # noqa: E402
+from lbc_core.binding.rebinding import carry_domain, rebind  # noqa: E402
+from lbc_core.solve.geodesics import geodesic_distances, tv_weights  # noqa: E402
+from lbc_core.solve.solver import solve_on_mesh  # noqa: E402
 
 GARGOYLE = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
 EDITS = [(1, 0.01), (1, 0.02), (3, 0.01), (5, 0.01), (1, 0.05), (3, 0.10)]
@@ -188,7 +188,7 @@ def loop_cut_cylinder(segments=32, cuts=2, depth=2.0):
 
 def points_inside(cage, faces, count=3000, seed=0):
     """``count`` random points inside a closed cage (winding number above one half), (count, 3)."""
-    from lbc_core.geometry import winding_numbers
+    from lbc_core.kernel.geometry import winding_numbers
 
     rng = np.random.default_rng(seed)
     made = lbc_core.make_cage(cage, faces)

@@ -50,8 +50,8 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from lbc_core.fem import gradient_operator
-from lbc_core.objective import tv_objective
+from lbc_core.kernel.fem import gradient_operator
+from lbc_core.solve.objective import tv_objective
 
 PENALTY = 10.0  # rho, tuned to the 250-radius frame
 RELAXATION = 1.65  # over-relaxation alpha

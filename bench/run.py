@@ -100,7 +100,7 @@ def bench_deform(level="L09", count=100_000):
     import scipy.sparse as sp
 
     import lbc_core
-    from lbc_core.baselines import mean_value_coordinates
+    from lbc_core.compare.baselines import mean_value_coordinates
     from lbc_core.io import read_cage
 
     cage_vertices, faces = read_cage(GARGOYLE / f"cage_{level}.obj")

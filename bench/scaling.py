@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 from bench.run import GARGOYLE, bench_3d  # noqa: E402
 from lbc_core.errors import CageError  # noqa: E402
 from lbc_core.io import read_cage  # noqa: E402
-from lbc_core.forecast import check_memory  # noqa: E402
+from lbc_core.solve.forecast import check_memory  # noqa: E402
 
 # (cage, cell counts asked): the larger cages stop where a bind would take many minutes on this 2-core machine.
 PLAN = [("L12", (4000, 16000, 64000)), ("L10", (4000, 16000, 64000)), ("L08", (8000, 32000)),

@@ -12,7 +12,7 @@
               settings (``--settings 0.002:0,0.005:12``), against Mesh Deform precision 5 in the same process.
 --thinning    the add-on's thinning levers on the weights of lbc_core binds (float64): the capsule,
               Suzanne in its box cage and the demo gargoyle (bench/blender_deform.py's scenes); per setting
-              ``--thinnings floor:cap`` (lbc_core.thinning.thin_weights) the influences per point, the capsule's
+              ``--thinnings floor:cap`` (lbc_core.evaluate.thinning.thin_weights) the influences per point, the capsule's
               kinks, the kinks a 60° bend of Suzanne's and the gargoyle's cage gains over every weight (Mesh Deform's
               too, as a yardstick), and the largest distance to every weight over blender_deform.py's three poses,
               beside every weight's distance to a 16,000-cell bind.
@@ -51,10 +51,10 @@ sys.path.insert(0, str(ROOT))
 
 import lbc_core  # noqa: E402
 from bench import capsule  # noqa: E402
-from lbc_core.baselines import bind_mvc  # noqa: E402
-from lbc_core.interpolation import interpolation_matrix  # noqa: E402
+from lbc_core.compare.baselines import bind_mvc  # noqa: E402
+from lbc_core.evaluate.interpolation import interpolation_matrix  # noqa: E402
 from lbc_core.io import read_cage, read_mesh  # noqa: E402
-from lbc_core.reduction import interpolate_and_reduce  # noqa: E402
+from lbc_core.evaluate.reduction import interpolate_and_reduce  # noqa: E402
 
 GARGOYLE = ROOT / "tests" / "data" / "cages-3d" / "gargoyle"
 
@@ -155,7 +155,7 @@ def bench_thinning(settings):
     sys.path.insert(0, str(ROOT / "tests"))
     from blender_deform import SCENES, pose
 
-    from lbc_core.thinning import thin_weights
+    from lbc_core.evaluate.thinning import thin_weights
 
     mesh, faces = capsule.capsule()
     scenes = {"capsule": (mesh, faces, *capsule.cage())}
@@ -241,8 +241,8 @@ def bench_speed(baseline):
     @contextlib.contextmanager
     def baseline_code():
         """The bind's evaluation, reduction and thinning from ``baseline``'s modules, on one thread (as before)."""
-        import lbc_core.parallel as parallel
-        import lbc_core.pipeline as pipeline
+        import lbc_core.kernel.parallel as parallel
+        import lbc_core.binding.pipeline as pipeline
 
         saved = pipeline.SmoothInterpolation, pipeline.interpolate_and_reduce, jobs.thin_weights, parallel.worker_count
         pipeline.SmoothInterpolation = pipeline_smoothing(old["smoothing"])
@@ -328,7 +328,7 @@ def baseline_modules(revision, names=("constraints", "smoothing", "reduction", "
 
 
 def pipeline_smoothing(module):
-    """``module``'s SmoothInterpolation as ``lbc_core.pipeline.evaluate`` calls it today (with ``reach``), for a
+    """``module``'s SmoothInterpolation as ``lbc_core.binding.pipeline.evaluate`` calls it today (with ``reach``), for a
     baseline whose class took the radius and fade in median edges instead."""
     if "reach" in inspect.signature(module.SmoothInterpolation).parameters:
         return module.SmoothInterpolation
@@ -342,11 +342,11 @@ def pipeline_smoothing(module):
 
 def bench_evaluation(baseline, rounds=3):
     """The evaluation at the demo gargoyle's points and the add-on's thinning: current code against ``baseline``'s."""
-    import lbc_core.parallel as parallel
+    import lbc_core.kernel.parallel as parallel
     from bench.rebinding import gargoyle_64k
-    from lbc_core import smoothing, thinning
-    from lbc_core.frame import UnitFrame
-    from lbc_core.pipeline import REPRODUCTION_TOLERANCE
+    from lbc_core.evaluate import smoothing, thinning
+    from lbc_core.kernel.frame import UnitFrame
+    from lbc_core.binding.pipeline import REPRODUCTION_TOLERANCE
 
     points = gargoyle_64k()
     cage, faces = read_cage(GARGOYLE / "cage_L10.obj")
@@ -358,7 +358,7 @@ def bench_evaluation(baseline, rounds=3):
     threshold = binding.options["threshold"]
     tolerance = REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal
     old = baseline_modules(baseline)
-    current = {"smoothing": smoothing, "reduction": sys.modules["lbc_core.reduction"], "thinning": thinning}
+    current = {"smoothing": smoothing, "reduction": sys.modules["lbc_core.evaluate.reduction"], "thinning": thinning}
 
     def run(modules):
         """(evaluation and reduction CPU s, wall s), (thinning CPU s, wall s), the reduced and the thinned weights."""
@@ -538,7 +538,7 @@ def main(argv=None):
                         help="--addon: comma-separated Threshold:Max Influences settings (0:0 is the defaults, "
                         "1e-12:0 every weight)")
     parser.add_argument("--thinnings", default="0.005:0,0.005:12,0.005:14",
-                        help="--thinning: comma-separated floor:cap settings (lbc_core.thinning.thin_weights)")
+                        help="--thinning: comma-separated floor:cap settings (lbc_core.evaluate.thinning.thin_weights)")
     parser.add_argument("--baseline", default="main",
                         help="--evaluation, --speed: the git revision whose evaluation, reduction and thinning to time "
                         "against")

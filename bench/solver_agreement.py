@@ -58,11 +58,11 @@ def bent(cage):
 def deformed(tree, cage_path, cells, rotate, tolerance=None, smooth=False):
     """The gargoyle's points deformed by the bent cage through ``tree``'s domain weights (its solver, in a child
     process), interpolated linearly in their cells by this tree (so that only the solver and the mesh differ)."""
-    from lbc_core.interpolation import interpolation_matrix
+    from lbc_core.evaluate.interpolation import interpolation_matrix
     from lbc_core.io import read_cage, read_mesh
-    from lbc_core.pipeline import REPRODUCTION_TOLERANCE
-    from lbc_core.reduction import interpolate_and_reduce
-    from lbc_core.smoothing import SmoothInterpolation
+    from lbc_core.binding.pipeline import REPRODUCTION_TOLERANCE
+    from lbc_core.evaluate.reduction import interpolate_and_reduce
+    from lbc_core.evaluate.smoothing import SmoothInterpolation
 
     # The baseline's binds are kept between runs (out/agreement/): it does not change.
     baseline = Path(tree).resolve() != ROOT

@@ -19,11 +19,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lbc_core import solver  # noqa: E402
-from lbc_core.boundary import boundary_weights  # noqa: E402
-from lbc_core.cage import make_cage  # noqa: E402
-from lbc_core.frame import UnitFrame  # noqa: E402
-from lbc_core.geodesics import geodesic_distances, tv_weights  # noqa: E402
+from lbc_core.solve import solver  # noqa: E402
+from lbc_core.solve.boundary import boundary_weights  # noqa: E402
+from lbc_core.cage.make import make_cage  # noqa: E402
+from lbc_core.kernel.frame import UnitFrame  # noqa: E402
+from lbc_core.solve.geodesics import geodesic_distances, tv_weights  # noqa: E402
 from lbc_core.io import read_cage  # noqa: E402
 from lbc_core.meshing import mesh_domain  # noqa: E402
 

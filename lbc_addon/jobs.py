@@ -71,7 +71,7 @@ class BindRequest:
     points: np.ndarray  # (m, 3) mesh vertices, mesh space
     cage_points: np.ndarray  # (c, 3) evaluated cage vertices, mesh space
     cage_faces: list  # faces of the evaluated cage (3D)
-    flat: object  # lbc_core.planar.FlatCage of a 2D bind (the outline and the points in the plane), else None
+    flat: object  # lbc_core.cage.planar.FlatCage of a 2D bind (the outline and the points in the plane), else None
     options: dict  # the bind options by their Object.lbc property names (0: lbc_core's default)
     cage_topology: str
     mesh_topology: str
@@ -149,7 +149,7 @@ def check_options(options):
 
 
 def core_options(options):
-    """lbc_core's :class:`~lbc_core.options.BindOptions` of the add-on's options: the one place their names and
+    """lbc_core's :class:`~lbc_core.binding.options.BindOptions` of the add-on's options: the one place their names and
     defaults meet (a Blender property cannot be None, so 0 stands for lbc_core's default).
 
     Parameters
@@ -228,7 +228,7 @@ def cage_too_small(settings, vertex_count):
 
 def _cap_warning(weights, cap):
     """A warning when Max Influences ``cap`` could not be kept everywhere: a vertex its ``cap`` largest weights cannot
-    hold in place keeps the fewest that can (lbc_core.thinning), and the panel would show more than the cap."""
+    hold in place keeps the fewest that can (lbc_core.evaluate.thinning), and the panel would show more than the cap."""
     counts = weights.getnnz(axis=1)
     over = int(np.count_nonzero(counts > cap)) if cap else 0
     if not over:
@@ -265,7 +265,7 @@ def solve(request, progress=None, cancel=None, earlier=()):
             raise CageError(f"{hint}{cause}{error}{f' ({note})' if note else ''}") from error
         raise
     column_vertex = column_base[binding.cage.first_inputs]
-    # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.thinning).
+    # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.evaluate.thinning).
     rest = binding.rest_cage_vertices
     thinning = _thinning(request.options)
     clock = time.perf_counter()

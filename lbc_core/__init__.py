@@ -6,16 +6,16 @@
     b = lbc_core.rebind(b, edited_cage_vertices, cage_faces)  # after editing the cage at rest: warm where it can
 """
 
-from .version import __version__
+from .binding.options import BindOptions
+from .binding.pipeline import bind
+from .binding.rebinding import rebind
+from .binding.record import Binding, load_binding
+from .cage.make import Cage, make_cage
+from .compare.baselines import bind_bbw, bind_harmonic, bind_mvc, mean_value_coordinates
 from .errors import CageError, Cancelled, PointsOutside
-from .cage import Cage, make_cage
-from .options import BindOptions
-from .solver import SolveResult, solve_on_mesh
-from .binding import Binding, load_binding
-from .pipeline import bind
-from .rebinding import rebind
-from .baselines import bind_bbw, bind_harmonic, bind_mvc, mean_value_coordinates
 from .io import read_cage, read_mesh, write_mesh
+from .solve.solver import SolveResult, solve_on_mesh
+from .version import __version__
 
 __all__ = [
     "BindOptions", "Binding", "Cage", "CageError", "Cancelled", "SolveResult", "bind", "bind_bbw", "bind_harmonic", "bind_mvc",

@@ -6,15 +6,16 @@ these names and their meaning leaves the add-on alone; a name the add-on needs i
 to ``lbc_addon.core``.
 """
 
-from . import forecast, options
-from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
+from .binding import options
+from .binding.options import BindOptions
+from .binding.pipeline import bind, too_small_warning
+from .binding.rebinding import WARM, rebind, solved_again_text
+from .cage.make import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
+from .cage.planar import flatten, reframed
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
-from .forecast import format_size
-from .options import BindOptions
-from .pipeline import bind, too_small_warning
-from .planar import flatten, reframed
-from .rebinding import WARM, rebind, solved_again_text
-from .thinning import DEFAULT_FLOOR, thin_changed_rows, thin_weights
+from .evaluate.thinning import DEFAULT_FLOOR, thin_changed_rows, thin_weights
+from .solve import forecast
+from .solve.forecast import format_size
 from .version import __version__
 
 __all__ = [

@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .binding.options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
 from .errors import CageError, Cancelled
-from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
+from .meshing import MESHERS, method_names
 from .version import __version__
 
 SCHEMES = ("lbc", "mvc", "harmonic", "bbw")
@@ -76,6 +77,7 @@ def _parser():
     solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default 1e-3/n)")
     solving.add_argument("--tolerance", type=float, help="LBC's ADMM stopping tolerance (default: the solver's)")
     solving.add_argument("--max-iterations", type=int, help="LBC's ADMM iteration limit (default 10000)")
+    solving.add_argument("--method", choices=method_names(), help=f"the mesher that fills the cage: {_meshers()}")
 
     bind = commands.add_parser("bind", parents=[common, solving], help="bind a mesh to a cage, save the binding")
     bind.add_argument("cage", help="cage file (.obj/.off/.ply); a file without faces is a 2D polygon")
@@ -133,9 +135,9 @@ def _scheme_list(text):
 
 
 def _run_bind(args):
-    from .cage import make_cage
+    from .binding.pipeline import too_small_warning
+    from .cage.make import make_cage
     from .io import FORMATS, check_output
-    from .pipeline import too_small_warning
 
     check_output(args.output, inputs=(args.cage, args.mesh))
     output = Path(args.output)
@@ -191,7 +193,7 @@ def _run_bind(args):
 
 
 def _run_deform(args):
-    from .binding import load_binding
+    from .binding.record import load_binding
     from .io import FORMATS, check_output, planar, read_mesh, write_mesh, write_posed_obj
 
     inputs = (args.binding, args.new_cage, args.mesh)
@@ -246,8 +248,8 @@ def _run_deform(args):
 
 
 def _run_stats(args):
-    from .binding import load_binding
-    from .statistics import summary
+    from .binding.record import load_binding
+    from .compare.statistics import summary
 
     for path in ([args.plot] if args.plot else []) + ([args.coordinate[1]] if args.coordinate else []):
         _check_figure(path, (args.binding,))
@@ -270,8 +272,8 @@ def _run_stats(args):
 
 
 def _run_compare(args):
+    from .cage.make import make_cage
     from .meshing import mesh_domain
-    from .cage import make_cage
 
     if args.plot:
         # Before binding: matplotlib missing, an unknown format, a missing folder, an input.
@@ -288,7 +290,7 @@ def _run_compare(args):
         with _Progress(f"bind ({scheme})", args.quiet) as progress:
             bindings[scheme] = _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=domain)
         domain = bindings[scheme].domain
-    from .statistics import summary
+    from .compare.statistics import summary
 
     rows = [summary(binding) for binding in bindings.values()]
     if args.plot:
@@ -307,9 +309,9 @@ def _run_compare(args):
 
 
 def _run_table1(args):
-    from .baselines import bind_mvc
-    from .cage import make_cage
-    from .statistics import table1_row
+    from .cage.make import make_cage
+    from .compare.baselines import bind_mvc
+    from .compare.statistics import table1_row
 
     pairs = [(Path(c), Path(m)) for c, m in args.pair] + _find_pairs(args.data or ([] if args.pair else None))
     rows = []
@@ -339,10 +341,10 @@ def _run_table1(args):
 def _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=None):
     """One binding with the command's options; the baselines reuse ``domain`` when given."""
     if scheme == "lbc":
-        from .pipeline import bind
+        from .binding.pipeline import bind
 
         return bind(cage_vertices, cage_faces, points, options=args.options, progress=progress)
-    from . import baselines
+    from .compare import baselines
 
     if scheme == "bbw" and not baselines.bbw_available():
         raise CageError("bounded biharmonic weights need libigl: pip install libigl")
@@ -350,10 +352,20 @@ def _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=None
     return function(cage_vertices, cage_faces, points, domain=domain, cells=args.options.cells, progress=progress)
 
 
+def _meshers():
+    """The meshers' names for --help: which dimensions each meshes, and which are not bundled."""
+    told = ["auto (the default: lbc's own)"]
+    for name in method_names()[1:]:
+        found = [MESHERS[dim][name] for dim in (2, 3) if name in MESHERS[dim]]
+        unbundled = "" if all(m.bundled for m in found) else ", installed apart"
+        told.append(f"{name} ({', '.join(f'{m.dim}D' for m in found)}{unbundled})")
+    return ", ".join(told)
+
+
 def _options(args):
     """The bind options of the command's flags, checked (a bad value exits 2 before any file is read)."""
     return BindOptions(cells=args.cells, weighting=args.weighting, epsilon=args.epsilon, threshold=args.threshold,
-                       tolerance=args.tolerance, max_iterations=args.max_iterations)
+                       tolerance=args.tolerance, max_iterations=args.max_iterations, method=args.method)
 
 
 def _read_inputs(cage_path, mesh_path=None):
@@ -366,7 +378,7 @@ def _read_inputs(cage_path, mesh_path=None):
     points : (m, 3) or, for a polygon cage, (m, 2) float array; None without ``mesh_path``
 
     A flat cage with faces whose mesh lies in its plane is returned as Blender binds it
-    (:func:`lbc_core.planar.flatten`): its outline as the polygon, the points in the plane's coordinates.
+    (:func:`lbc_core.cage.planar.flatten`): its outline as the polygon, the points in the plane's coordinates.
 
     Raises
     ------
@@ -374,7 +386,7 @@ def _read_inputs(cage_path, mesh_path=None):
         Besides the files' own errors: 2D points in another plane z = constant than the polygon cage's.
     """
     from . import io
-    from .planar import flatten
+    from .cage.planar import flatten
 
     vertices, faces = io.read_mesh(cage_path)
     cage = vertices if faces is not None else io.planar(vertices, cage_path)
@@ -396,7 +408,7 @@ def _read_inputs(cage_path, mesh_path=None):
 def _plots():
     """The plots module; matplotlib is an optional dependency, so its absence is a one-line error."""
     try:
-        from . import plots
+        from .compare import plots
     except ImportError:
         raise CageError("figures need matplotlib: pip install matplotlib") from None
     return plots

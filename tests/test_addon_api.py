@@ -453,7 +453,7 @@ def test_a_mesh_and_cage_given_the_other_way_round_are_asked_about(monkeypatch):
         api.bind(cage, mesh, cells=1000)
     assert (mesh_state(mesh), mesh_state(cage)) == before and not is_bound(cage)
     triangle = mesh_object("Triangle", [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], [[0, 1, 2]])
-    monkeypatch.setattr(lbc_core.forecast, "_available_memory", lambda: 2**20)
+    monkeypatch.setattr(lbc_core.solve.forecast, "_available_memory", lambda: 2**20)
     with pytest.raises(lbc_core.CageError, match="^binding 8 control points on 8000 cells would need"):
         api.bind(triangle, cage)  # fewer vertices than the cage, which is fine: refused for another reason
     remove_first_face(cage)

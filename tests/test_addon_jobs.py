@@ -10,7 +10,7 @@ import pytest
 
 from lbc_addon import jobs
 from lbc_core import BindOptions, Cancelled
-from lbc_core.planar import flatten
+from lbc_core.cage.planar import flatten
 
 pytestmark = pytest.mark.blender
 

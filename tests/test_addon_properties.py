@@ -4,7 +4,7 @@ import bpy
 import pytest
 
 from lbc_addon.properties import WEIGHTING_ITEMS, is_bound
-from lbc_core.options import WEIGHTINGS
+from lbc_core.binding.options import WEIGHTINGS
 from helpers.blender_scenes import bind, sphere_in_box_scene
 
 pytestmark = pytest.mark.blender

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lbc_core.baselines import bbw_available, bbw_weights, harmonic_weights, mean_value_coordinates
-from lbc_core.boundary import boundary_weights
-from lbc_core.cage import make_cage
+from lbc_core.compare.baselines import bbw_available, bbw_weights, harmonic_weights, mean_value_coordinates
+from lbc_core.solve.boundary import boundary_weights
+from lbc_core.cage.make import make_cage
 from lbc_core.io import read_cage, read_mesh
 from lbc_core.meshing import mesh_domain
 
@@ -153,7 +153,7 @@ def test_bbw_bounded_partition_of_unity():
 def test_baselines_bind_far_from_the_origin_in_the_unit_frame(scheme):
     """Like bind, the baselines compute in the unit frame: a cube at 1e6 binds and follows a scaling and shift."""
     import lbc_core
-    from lbc_core.baselines import bind_harmonic, bind_mvc
+    from lbc_core.compare.baselines import bind_harmonic, bind_mvc
 
     cage = CUBE + 1e6
     points = np.random.default_rng(3).uniform(0.05, 0.95, (50, 3)) + 1e6

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import lbc_core
-from lbc_core.binding import FILE_ARRAYS, OPTIONAL_FILE_ARRAYS
+from lbc_core.binding.record import FILE_ARRAYS, OPTIONAL_FILE_ARRAYS
 from lbc_core.errors import CageError
 from lbc_core.io import read_mesh
 from helpers.random_cages import STAR
@@ -108,7 +108,7 @@ def test_a_binding_of_poked_n_gons_loads_with_them_and_so_does_a_file_from_befor
     the facets around them. A file written while n-gons were ear-clipped has no centres: it loads, with a warning
     that binding again evens its n-gons out, and the same cage given beside it (poked now) is the cage it was bound
     to, its faces split otherwise."""
-    import lbc_core.cage as cage_module
+    import lbc_core.cage.make as cage_module
 
     angles = 2 * np.pi * np.arange(5) / 5
     prism = np.array([[np.cos(a), np.sin(a), z] for z in (0.0, 1.0) for a in angles])

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from lbc_core.boundary import boundary_weights
-from lbc_core.cage import make_cage
+from lbc_core.solve.boundary import boundary_weights
+from lbc_core.cage.make import make_cage
 from lbc_core.meshing import mesh_domain
 
 CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
@@ -54,7 +54,7 @@ def hexagonal_prism(lift=0.0):
 def test_a_flat_convex_n_gon_takes_its_outlines_mean_value_coordinates():
     """Smooth across the face, where values linear on the poke's triangles crease along each spoke; linear on the
     edges, 1 at each vertex, and every guarantee kept."""
-    from lbc_core.geometry import polygon_mean_value_coordinates
+    from lbc_core.kernel.geometry import polygon_mean_value_coordinates
 
     cage = make_cage(*hexagonal_prism())
     assert len(cage.centres) == 2

@@ -12,11 +12,11 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
-import lbc_core.cage as cage_module
-import lbc_core.geometry as geometry
-from lbc_core.cage import MAX_CONTROL_POINTS, Cage, make_cage
+import lbc_core.cage.make as cage_module
+import lbc_core.kernel.geometry as geometry
+from lbc_core.cage.make import MAX_CONTROL_POINTS, Cage, make_cage
 from lbc_core.errors import CageError, CageVertexError
-from lbc_core.geometry import intersecting_triangles, overlapping_boxes
+from lbc_core.kernel.geometry import intersecting_triangles, overlapping_boxes
 from lbc_core.io import read_cage
 from helpers.random_cages import draw_dented_sphere, lengths, sphere_directions, star_polygon, subdivided_cube
 

@@ -3,7 +3,7 @@ solver's projection of its clamped output."""
 
 import numpy as np
 
-from lbc_core.constraints import constraint_residuals, project_onto_constraints, restore_constraints
+from lbc_core.kernel.constraints import constraint_residuals, project_onto_constraints, restore_constraints
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from lbc_core import fem
+from lbc_core.kernel import fem
 
 
 def random_cells(dim, rng, n_vertices=60, n_cells=200):

@@ -4,8 +4,8 @@ and MeshingFrame (a thin cage stretched for the mesher, mapped back)."""
 import numpy as np
 import pytest
 
-from lbc_core.cage import make_cage
-from lbc_core.frame import ASPECT_FLOOR, MeshingFrame, UnitFrame
+from lbc_core.cage.make import make_cage
+from lbc_core.kernel.frame import ASPECT_FLOOR, MeshingFrame, UnitFrame
 from lbc_core.meshing import mesh_domain
 
 CUBE_FACES = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]

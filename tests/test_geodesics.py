@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from lbc_core.cage import make_cage
-from lbc_core.frame import UnitFrame
-from lbc_core.geodesics import geodesic_distances, heat_distances_sound, tv_weights
+from lbc_core.cage.make import make_cage
+from lbc_core.kernel.frame import UnitFrame
+from lbc_core.solve.geodesics import geodesic_distances, heat_distances_sound, tv_weights
 from lbc_core.meshing import mesh_domain
 
 
@@ -70,7 +70,7 @@ def test_a_thin_plate_gets_distances_no_shorter_than_the_straight_line():
     far = straight > 0.25 * straight.max()
     assert np.median(distances[far] / straight[far]) < 1.1  # the plate is convex: nearly straight paths
     # The heat method's own distances fail the check there, and pass it on a thick box.
-    import lbc_core.geodesics as geodesics
+    import lbc_core.solve.geodesics as geodesics
 
     heat = geodesics._heat_distances_tetrahedra(vertices, cells, sources, geodesics.Progress.of(None))
     assert not heat_distances_sound(vertices, sources, heat)
@@ -109,7 +109,7 @@ def test_tv_weights_shapes_and_choices():
 
 @pytest.mark.parametrize("d, n", [(2, 11), (3, 6)])
 def test_progress_is_reported_and_cancel_stops_between_sources(d, n, monkeypatch):
-    import lbc_core.geodesics as geodesics
+    import lbc_core.solve.geodesics as geodesics
     from lbc_core.errors import Cancelled
 
     monkeypatch.setattr(geodesics, "SOURCES_PER_CHUNK", 2)

@@ -1,10 +1,10 @@
-"""The geometry kernel (lbc_core/geometry.py) against independent references: determinants, brute-force sampling,
+"""The geometry kernel (lbc_core/kernel/geometry.py) against independent references: determinants, brute-force sampling,
 known shapes."""
 
 import numpy as np
 import pytest
 
-from lbc_core.geometry import (
+from lbc_core.kernel.geometry import (
     circumspheres,
     closest_on_segments,
     closest_on_triangles,
@@ -104,7 +104,7 @@ def test_circumspheres_pass_through_every_corner_in_the_triangles_plane():
 
 
 def test_polygon_mean_value_coordinates_reproduce_points_and_are_linear_on_edges_either_way_round():
-    from lbc_core.geometry import polygon_mean_value_coordinates
+    from lbc_core.kernel.geometry import polygon_mean_value_coordinates
 
     square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
     points = np.random.default_rng(4).uniform(0.05, 1.95, (50, 2))

@@ -1,12 +1,12 @@
-"""Tests of lbc_core.interpolation: barycentric interpolation matrix and binding of outside points."""
+"""Tests of lbc_core.evaluate.interpolation: barycentric interpolation matrix and binding of outside points."""
 
 import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from lbc_core import fem
+from lbc_core.kernel import fem
 from lbc_core.errors import CageError, Cancelled
-from lbc_core.interpolation import interpolation_matrix
+from lbc_core.evaluate.interpolation import interpolation_matrix
 
 # Kuhn split of a unit cube (corner index = 4 x + 2 y + z) into 6 tetrahedra around its diagonal 0-7: conforming
 # across cubes, so grids of cubes give valid tetrahedral meshes.

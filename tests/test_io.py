@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lbc_core.cage import make_cage
+from lbc_core.cage.make import make_cage
 from lbc_core.errors import CageError
 from lbc_core.io import FORMATS, check_output, read_cage, read_mesh, write_mesh, write_posed_obj
 

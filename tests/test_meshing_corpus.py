@@ -13,7 +13,7 @@ import pytest
 from helpers import cage_corpus
 import lbc_core
 from lbc_core import meshing
-from lbc_core.cage import make_cage
+from lbc_core.cage.make import make_cage
 from lbc_core.errors import CageError, Cancelled, GapTooNarrow
 from test_meshing import CAGES_2D, CUBE_QUADS, CUBE_VERTICES, check_contract, load_cage
 

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lbc_core.objective import tv_objective
+from lbc_core.solve.objective import tv_objective
 
 DATA = Path(__file__).parent / "data"
 PACKS = ["woody", "Gil_Gecko", "cactus", "LBClogo"]

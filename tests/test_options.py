@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import lbc_core
-from lbc_core import forecast
+from lbc_core.solve import forecast
 from lbc_core.errors import CageError
 from lbc_core import BindOptions
-from lbc_core.options import WEIGHTINGS
+from lbc_core.binding.options import WEIGHTINGS
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -26,7 +26,7 @@ def test_defaults():
 
 
 def test_the_names_agree_with_the_stages_that_use_them():
-    # The meshing stage takes DEFAULT_CELLS and METHODS from lbc_core.options, the weighting names come from the
+    # The meshing stage takes DEFAULT_CELLS and METHODS from lbc_core.binding.options, the weighting names come from the
     # geodesics stage; the tolerances live beside the cost model (forecast), so their keys are checked here.
     assert WEIGHTINGS[0] == "quadratic"  # the paper's choice, the default
     assert set(forecast.DEFAULT_TOLERANCE) == {2, 3}
@@ -114,7 +114,7 @@ def test_bind_refuses_bad_options_before_meshing(monkeypatch, options, message):
     def no_meshing(*args, **kwargs):
         raise AssertionError("meshing started with bad options")
 
-    monkeypatch.setattr("lbc_core.pipeline.mesh_domain", no_meshing)
+    monkeypatch.setattr("lbc_core.binding.pipeline.mesh_domain", no_meshing)
     with pytest.raises(CageError, match=message):
         lbc_core.bind(SQUARE, None, [[0.5, 0.5]], **options)
 

@@ -5,7 +5,7 @@ import threading
 import numpy as np
 import pytest
 
-from lbc_core import parallel
+from lbc_core.kernel import parallel
 
 
 @pytest.mark.parametrize("threads, m, most", [(2, 48_612, 16_384), (2, 64_130, 16_384), (3, 10, 4), (2, 1, 100),

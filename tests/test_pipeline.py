@@ -1,4 +1,4 @@
-"""bind end to end (lbc_core.pipeline): every shipped cage within the quality bounds, random cages bound or refused
+"""bind end to end (lbc_core.binding.pipeline): every shipped cage within the quality bounds, random cages bound or refused
 with a CageError, rest pose and locality, outside and empty point sets, frames far from the origin, progress, and a
 cancel that stops every stage promptly."""
 
@@ -41,7 +41,7 @@ def test_a_fine_jittered_cage_at_few_cells_gives_every_point_weights_that_meet_t
     bound at 2000 cells. The smooth fit overshot at 60 of 3000 points (coarse cells beside the fine surface) so far
     that no non-negative weights on its support could reproduce them: they summed to 1 ± 0.016 and missed their point
     by up to a quarter of the diagonal. Those points now take their barycentric row's reduction."""
-    from lbc_core.geometry import winding_numbers
+    from lbc_core.kernel.geometry import winding_numbers
 
     rng = np.random.default_rng(11)
     vertices, faces = subdivided_cube(7)
@@ -149,9 +149,9 @@ def test_the_progress_bar_is_shared_by_the_time_told_for_the_solve_and_the_point
 def test_the_stages_shares_end_at_1_exactly_whatever_the_time_told():
     """The shares rescaled by the time told summed to 1.0000000000000002 under some loads: the bar passed the final
     "bound" (a clean-clone run's find)."""
-    from lbc_core.forecast import BindSeconds
-    from lbc_core.pipeline import BIND_STAGES, StageClock
-    from lbc_core.progress import Progress
+    from lbc_core.solve.forecast import BindSeconds
+    from lbc_core.binding.pipeline import BIND_STAGES, StageClock
+    from lbc_core.kernel.progress import Progress
 
     for told in (BindSeconds(2.03, 1.0, 0.46), BindSeconds(3.61, 2.63, 1.56), BindSeconds(1e-3, 1e3, 1e-2)):
         clock = StageClock(Progress(), BIND_STAGES)
@@ -598,7 +598,7 @@ def test_points_far_outside_a_thin_cage_follow_their_closest_points_where_no_ext
     binding = lbc_core.bind(polygon, None, points, cells=300)
     weights = binding.weights.toarray()
     np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=UNITY)
-    from lbc_core.interpolation import interpolation_matrix
+    from lbc_core.evaluate.interpolation import interpolation_matrix
 
     reproduced = weights @ binding.cage.vertices
     on_point = np.abs(reproduced - points).max(axis=1) <= REPRODUCTION * binding.cage.bbox_diagonal

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from lbc_core import CageError
-from lbc_core.planar import boundary_loop, flat_frame, flatten, reframed
+from lbc_core.cage.planar import boundary_loop, flat_frame, flatten, reframed
 
 
 def grid(size=3):

@@ -5,13 +5,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lbc_core.baselines import bind_harmonic, bind_mvc
+from lbc_core.compare.baselines import bind_harmonic, bind_mvc
 from lbc_core.io import read_cage, read_mesh
 
 pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
 
 pytest.importorskip("matplotlib", reason="the figures need matplotlib (pyproject.toml's plots extra)")
-from lbc_core.plots import _lattice, plot_coordinate, plot_deformation, plot_locality  # noqa: E402
+from lbc_core.compare.plots import _lattice, plot_coordinate, plot_deformation, plot_locality  # noqa: E402
 
 DATA = Path(__file__).parent / "data"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

@@ -3,7 +3,7 @@
 import pytest
 
 from lbc_core.errors import Cancelled
-from lbc_core.progress import Progress
+from lbc_core.kernel.progress import Progress
 
 
 def test_parts_map_onto_the_parent_range():

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 import lbc_core
-from lbc_core.boundary import boundary_weights
-from lbc_core.frame import UnitFrame
-from lbc_core.geodesics import geodesic_distances, tv_weights
+from lbc_core.solve.boundary import boundary_weights
+from lbc_core.kernel.frame import UnitFrame
+from lbc_core.solve.geodesics import geodesic_distances, tv_weights
 from lbc_core.io import read_cage, read_mesh
-from lbc_core.geometry import orient_positive, signed_measures
-from lbc_core.rebinding import STALE, _flipped_slivers, _squashed, carry_domain, rebind
-from lbc_core.smoothing import median_edge
-from lbc_core.solver import solve_on_mesh
+from lbc_core.kernel.geometry import orient_positive, signed_measures
+from lbc_core.binding.rebinding import STALE, _flipped_slivers, _squashed, carry_domain, rebind
+from lbc_core.evaluate.smoothing import median_edge
+from lbc_core.solve.solver import solve_on_mesh
 
 pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
 
@@ -99,7 +99,7 @@ def test_warm_rebind_meets_every_guarantee_and_matches_a_cold_solve_on_its_mesh(
 def test_a_warm_rebind_runs_the_pipelines_stages_on_one_progress_bar_and_times_them(gargoyle):
     """The re-bind's stages are the pipeline's (one table of shares, STAGES): the bar runs from 0 to 1 without going
     back, and the timings name the pipeline's stages (the solve by the solver's own parts)."""
-    from lbc_core.pipeline import REBIND_STAGES, STAGES
+    from lbc_core.binding.pipeline import REBIND_STAGES, STAGES
 
     cage, faces, points, first = gargoyle
     fractions = []
@@ -311,9 +311,9 @@ def test_a_quad_bent_out_of_its_plane_rebinds_warm_when_the_mesh_follows_its_dia
 def surface_off_cage(binding):
     """How far the domain's boundary triangles leave the cage (at their centroids and edge midpoints: chords across a
     bent cage edge), over the median cell edge."""
-    from lbc_core.fem import boundary_facets
-    from lbc_core.geometry import closest_on_facets
-    from lbc_core.smoothing import median_edge
+    from lbc_core.kernel.fem import boundary_facets
+    from lbc_core.kernel.geometry import closest_on_facets
+    from lbc_core.evaluate.smoothing import median_edge
 
     cage, domain = binding.cage, binding.domain
     corners = domain.vertices[boundary_facets(domain.cells)]  # (K, 3, 3)
@@ -330,7 +330,7 @@ def test_a_quad_bent_a_little_rebinds_warm_with_the_mesh_split_along_its_diagona
     boundary faces across them. Bent by a small edit, a diagonal is a crease of the boundary values: the mesh edges
     it crosses are split there, so the carried surface follows it, and no face is left across it (the re-bind stays
     warm even with no chord allowed, CHORD_KEPT 0)."""
-    import lbc_core.rebinding as rebinding
+    import lbc_core.binding.rebinding as rebinding
 
     box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 0.3)], dtype=float)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
@@ -389,8 +389,8 @@ def test_a_loop_cut_cylinder_rebinds_warm_after_a_loop_is_scaled_or_a_cap_vertex
 def test_chord_distances_measure_how_far_a_face_across_a_fold_leaves_the_cage():
     """A triangle across the fold of a roof (two facets meeting at 90° along x = 0) leaves it at its midpoints;
     one lying in a facet does not."""
-    from lbc_core.cage import Cage
-    from lbc_core.rebinding import _chord_distances
+    from lbc_core.cage.make import Cage
+    from lbc_core.binding.rebinding import _chord_distances
 
     roof = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 1.0], [-1.0, 0.0, 0.0], [-1.0, 1.0, 0.0], [1.0, 0.0, 0.0],
                      [1.0, 1.0, 0.0]])
@@ -405,7 +405,7 @@ def test_chord_distances_measure_how_far_a_face_across_a_fold_leaves_the_cage():
 
 def test_a_cold_bind_for_many_bent_faces_names_five_and_counts_the_others(monkeypatch):
     """A new user read a list of bent faces cut at five as if it were all of them."""
-    import lbc_core.rebinding as rebinding
+    import lbc_core.binding.rebinding as rebinding
 
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
@@ -512,7 +512,7 @@ def test_a_simplex_cage_binds_again_from_scratch_and_says_why():
 def test_a_cage_moved_far_in_all_since_its_last_cold_bind_binds_from_scratch(gargoyle):
     """A new user's finding: a side vertex of a subdivided cube moved out by 10 % and back, re-bound warm both ways,
     ended 2.6 times the remeshing noise from a fresh bind. The moves add up across warm re-binds."""
-    from lbc_core.rebinding import CARRY_LIMIT
+    from lbc_core.binding.rebinding import CARRY_LIMIT
 
     cage, faces, points, first = gargoyle
     diagonal = np.linalg.norm(np.ptp(cage, axis=0))

@@ -3,7 +3,7 @@
 import numpy as np
 import scipy.sparse as sp
 
-from lbc_core.reduction import interpolate_and_reduce
+from lbc_core.evaluate.reduction import interpolate_and_reduce
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -85,9 +85,9 @@ def test_a_point_whose_smooth_row_cannot_meet_the_constraints_is_reduced_from_it
 def test_reduce_reports_each_round_of_chunks_of_rows_and_stops_on_cancel(monkeypatch):
     import pytest
 
-    import lbc_core.reduction as reduction
+    import lbc_core.evaluate.reduction as reduction
     from lbc_core.errors import Cancelled
-    from lbc_core.parallel import worker_count
+    from lbc_core.kernel.parallel import worker_count
 
     monkeypatch.setattr(reduction, "ROWS_PER_CHUNK", 100)
     threads = worker_count()

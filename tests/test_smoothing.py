@@ -1,4 +1,4 @@
-"""Smooth evaluation of the coordinates at the points (lbc_core.smoothing), and what a bind guarantees with it."""
+"""Smooth evaluation of the coordinates at the points (lbc_core.evaluate.smoothing), and what a bind guarantees with it."""
 
 import numpy as np
 import pytest
@@ -7,10 +7,10 @@ from scipy.spatial import cKDTree
 import lbc_core
 from bench import capsule
 from lbc_core.errors import Cancelled
-from lbc_core.interpolation import interpolation_matrix
-from lbc_core.progress import Progress
-from lbc_core.reduction import interpolate_and_reduce
-from lbc_core.smoothing import (RADIUS_EDGES, SmoothInterpolation, fade_in, fit_gradients, kernel,
+from lbc_core.evaluate.interpolation import interpolation_matrix
+from lbc_core.kernel.progress import Progress
+from lbc_core.evaluate.reduction import interpolate_and_reduce
+from lbc_core.evaluate.smoothing import (RADIUS_EDGES, SmoothInterpolation, fade_in, fit_gradients, kernel,
                                 median_edge, moving_least_squares, neighbour_distances)
 
 
@@ -161,7 +161,7 @@ def test_median_edge_of_a_unit_tetrahedron():
 
 
 def test_the_conditioning_test_gives_what_the_eigenvalues_give():
-    from lbc_core.smoothing import MAX_CONDITION, well_conditioned
+    from lbc_core.evaluate.smoothing import MAX_CONDITION, well_conditioned
 
     rng = np.random.default_rng(0)
     spread = rng.normal(size=(3000, 4, 4))

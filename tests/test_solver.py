@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import lbc_core
-from lbc_core.solver import SolverState, solve_on_mesh
+from lbc_core.solve.solver import SolverState, solve_on_mesh
 
 pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
 
@@ -92,7 +92,7 @@ def test_bad_shapes_are_refused():
 
 
 def test_memory_estimate_refuses_what_the_machine_cannot_hold():
-    from lbc_core.forecast import check_memory
+    from lbc_core.solve.forecast import check_memory
 
     check_memory(26, 3000, 2)  # the paper's 2D problems fit anywhere
     # The share it may take is said: "18.2 GB ... and 22.3 GB are available" read as a contradiction.
@@ -106,7 +106,7 @@ def test_the_memory_estimate_is_near_a_binds_traced_peak(dim, gargoyle):
     1.05 in 3D when measured, the solve's state being most of it."""
     import tracemalloc
 
-    from lbc_core.forecast import estimate_memory
+    from lbc_core.solve.forecast import estimate_memory
 
     if dim == 2:
         cage, faces = np.array([[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2], [-1, 1.5], [-0.5, 0.5]]), None
@@ -124,7 +124,7 @@ def test_the_memory_estimate_is_near_a_binds_traced_peak(dim, gargoyle):
 
 
 def test_the_forecast_tells_memory_and_time_before_a_solve():
-    from lbc_core.forecast import estimate_memory, solve_forecast
+    from lbc_core.solve.forecast import estimate_memory, solve_forecast
 
     # The gargoyle's L12 at 8000 cells solves in about 2 s: a new user was told 2 s for 5.8 s at 16,000 cells, when
     # the time was a cost per pair only (bench/RESULTS.md, "The forecast recalibrated for small cages").
@@ -166,7 +166,7 @@ def test_progress_says_the_time_left_once_the_residual_has_fallen():
 def test_the_time_left_counts_the_end_game_where_the_working_sets_grow_after_the_tolerance_is_met():
     """Gargoyle L08 at 32,000 cells met its tolerance at iteration 120 of 240 and said "under 1 s left" for the
     remaining 10 s while its working sets grew; the progress bar stood at 97 % for half the solve."""
-    from lbc_core import solver
+    from lbc_core.solve import solver
 
     problem = _corpus_problem("limbs", cells=3000)
     times, reports = [], []
@@ -187,7 +187,7 @@ def test_the_time_left_early_on_is_bounded_by_the_iterations_the_forecast_expect
     """A new user's 314-vertex UV sphere cage: "about 2 min left" with 8 s to go, while the residual still fell
     slowly. A cold solve at the default tolerance now says at most what its expected iterations take at its own pace;
     a solve with another tolerance has no such bound."""
-    from lbc_core import solver
+    from lbc_core.solve import solver
 
     monkeypatch.setattr(solver, "seconds_left", lambda *arguments: 3600.0)  # what a slow residual would say
     problem = _corpus_problem("cube", cells=2000)
@@ -206,10 +206,10 @@ def _corpus_problem(name, thickness=None, cells=None):
     """The solve_on_mesh arguments of a corpus cage, flattened along z to ``thickness`` × its width if given, meshed
     at ``cells`` (None: the default) and weighted as the pipeline does (unit frame)."""
     from helpers import cage_corpus
-    from lbc_core.boundary import boundary_weights
-    from lbc_core.cage import make_cage
-    from lbc_core.frame import UnitFrame
-    from lbc_core.geodesics import geodesic_distances, tv_weights
+    from lbc_core.solve.boundary import boundary_weights
+    from lbc_core.cage.make import make_cage
+    from lbc_core.kernel.frame import UnitFrame
+    from lbc_core.solve.geodesics import geodesic_distances, tv_weights
     from lbc_core.meshing import mesh_domain
 
     vertices, faces = cage_corpus.load(name)
@@ -229,8 +229,8 @@ def _corpus_problem(name, thickness=None, cells=None):
 
 @pytest.mark.parametrize("axis_scale", [(1.0, 1.0, 40.0), (1.0, 3.0, 250.0), (1.0, 1.0, 1.0)])
 def test_the_weighted_prox_minimises_its_problem(axis_scale):
-    from lbc_core.shrink import shrink_factor as _shrink_factor
-    from lbc_core.shrink import weighted_shrink_factors as _weighted_shrink_factors
+    from lbc_core.solve.shrink import shrink_factor as _shrink_factor
+    from lbc_core.solve.shrink import weighted_shrink_factors as _weighted_shrink_factors
 
     rng = np.random.default_rng(4)
     values = rng.normal(size=(3, 200, 7)) * rng.choice([1e-3, 1.0, 30.0], size=(1, 200, 7))
@@ -254,7 +254,7 @@ def test_the_weighted_prox_minimises_its_problem(axis_scale):
 def test_a_thin_cage_is_solved_in_its_stretched_frame_as_its_own_problem(monkeypatch):
     """A cage 1/10 as thick as wide is meshed stretched; solving there, the norm weighted per axis, reaches the same
     optimum as solving in the cage's frame (where a cage this thick converges too)."""
-    from lbc_core import stretch
+    from lbc_core.solve import stretch
 
     problem = _corpus_problem("cube", 0.1)
     monkeypatch.setattr(stretch, "STRETCHED_SOLVE_FROM", 2.0)  # this cage is stretched 2.5 times
@@ -276,7 +276,7 @@ def test_a_very_thin_cage_converges():
 
 
 def test_the_forecast_knows_a_very_thin_cage_solves_slower():
-    from lbc_core.forecast import solve_forecast, solves_stretched
+    from lbc_core.solve.forecast import solve_forecast, solves_stretched
 
     box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
     assert not solves_stretched(box) and not solves_stretched(box * [1, 1, 0.01])  # 1/100: the cage's frame
@@ -295,7 +295,7 @@ def test_the_forecast_knows_a_very_thin_cage_solves_slower():
 
 def test_the_forecast_of_a_bind_counts_its_meshing():
     """A new user's hand cage spent most of its bind meshing, which the forecast left out."""
-    from lbc_core.forecast import solve_forecast
+    from lbc_core.solve.forecast import solve_forecast
 
     assert solve_forecast(44, 8000, 3, meshing=True).startswith("meshing under 1 s, then solving 44 control points")
     assert solve_forecast(44, 64000, 3, meshing=True).startswith("meshing roughly 3 s, then solving")
@@ -303,7 +303,7 @@ def test_the_forecast_of_a_bind_counts_its_meshing():
 
 
 def test_the_time_left_blends_the_share_of_the_way_and_the_residuals_power_law():
-    from lbc_core.forecast import seconds_left as _seconds_left
+    from lbc_core.solve.forecast import seconds_left as _seconds_left
 
     # A residual falling as (300 / k)^1.5 from its first check at k = 10: it meets the tolerance at k = 300.
     checks = [(k, (300 / k) ** 1.5) for k in range(10, 101, 10)]
@@ -328,7 +328,7 @@ def test_a_penalty_far_off_is_balanced_against_the_residuals_early_on(monkeypatc
     """A starting penalty 30 times too large (or small) leaves one residual far behind the other; balanced, the
     penalty moves back towards the default, and the solve reaches the same objective in fewer iterations than with
     the penalty held."""
-    from lbc_core import solver
+    from lbc_core.solve import solver
 
     problem = _corpus_problem("cube", cells=2000)
     default = solver.PENALTY_SCALE[3] / problem[4].shape[0] ** 0.5
@@ -345,9 +345,9 @@ def test_a_penalty_far_off_is_balanced_against_the_residuals_early_on(monkeypatc
 
 
 def test_a_change_of_penalty_keeps_the_split_variables_and_rescales_the_duals():
-    from lbc_core import solver
-    from lbc_core.splitting import DouglasRachford
-    from lbc_core.working_sets import MeshData, PairOperators
+    from lbc_core.solve import solver
+    from lbc_core.solve.splitting import DouglasRachford
+    from lbc_core.solve.working_sets import MeshData, PairOperators
 
     vertices, cells, boundary, fixed, controls, omega = _corpus_problem("cube", cells=500)
     mesh = MeshData.of(vertices, cells, boundary, fixed, solver.BETA[3], controls, vertices)
@@ -381,7 +381,7 @@ def test_a_state_follows_its_cells_restricted_updated_and_replaced():
     """SolverState's parts per cell (its pairs' states and thresholds, √|c|) follow the cells they are taken for; the
     parts per interior vertex (its slots, duals, √(βm)) follow the vertices: a sub-problem's state written back lands
     where it came from, and a state for another list of cells takes each one's part from its source cell."""
-    from lbc_core.working_sets import WorkingSets
+    from lbc_core.solve.working_sets import WorkingSets
 
     interior = np.array([5, 7, 9])
     sets = WorkingSets(np.array([0, 2, 3, 5]), np.array([0, 1, 1, 0, 1]), 2)
@@ -423,8 +423,8 @@ def test_first_working_sets_end_where_a_row_cannot_grow_further(monkeypatch):
 
     import scipy.sparse as sp
 
-    import lbc_core.working_sets as working_sets
-    from lbc_core.working_sets import _until_feasible
+    import lbc_core.solve.working_sets as working_sets
+    from lbc_core.solve.working_sets import _until_feasible
 
     monkeypatch.setattr(working_sets, "WHOLE_FROM", 1.0)  # the sets as grown, not made whole
 
@@ -451,7 +451,7 @@ def test_cancel_is_heard_inside_a_layouts_long_parts(function_name, monkeypatch)
     them: a cancel turning true there stops the solve from inside that function, not after it."""
     import sys
 
-    import lbc_core.working_sets as working_sets
+    import lbc_core.solve.working_sets as working_sets
 
     monkeypatch.setattr(working_sets, "GRADIENT_CHUNK_PAIRS", 500)
     monkeypatch.setattr(working_sets, "FACTOR_GROUP_SLOTS", 500)
@@ -470,7 +470,7 @@ def test_cancel_is_heard_inside_a_layouts_long_parts(function_name, monkeypatch)
 def test_wide_working_sets_are_made_whole_and_share_one_factor(monkeypatch):
     """Blender's Cylinder (n-gon caps) spreads its coordinates over nearly every control point: its working sets are
     made whole, and one factorisation then solves every control point's block."""
-    import lbc_core.working_sets as working_sets
+    import lbc_core.solve.working_sets as working_sets
 
     shared = []
     group_factors = working_sets._group_factors
@@ -505,7 +505,7 @@ def test_whole_working_sets_reach_the_dense_optimum():
     """A UV sphere spreads every coordinate over its 114 control points: on whole working sets the residuals fall
     long before the objective settles, so they stop at a fifth of the tolerance; within 0.1 % of the dense solver
     run tight (0.36 % above it at the plain tolerance). Progress says why the residual jumps there."""
-    from lbc_core import dense_solver
+    from helpers import dense_solver
 
     problem = _corpus_problem("uv-sphere", cells=2000)
     messages = []
@@ -520,7 +520,7 @@ def test_whole_working_sets_reach_the_dense_optimum():
 def test_whole_sets_take_the_products_on_blocks(monkeypatch):
     """On whole working sets the gradient products act on the (vertices, control points) block through the cells'
     operator, and give what the pairs' matrix gives; the projection's rows are the slots reshaped."""
-    from lbc_core.working_sets import MeshData, PairOperators, WorkingSets
+    from lbc_core.solve.working_sets import MeshData, PairOperators, WorkingSets
 
     vertices, cells, boundary, fixed, controls, _ = _corpus_problem("cylinder-8-ngon", cells=500)
     mesh = MeshData.of(vertices, cells, boundary, fixed, 1280.0, controls, vertices)

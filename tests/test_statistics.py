@@ -9,10 +9,10 @@ import pytest
 import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
-from lbc_core.baselines import harmonic_weights, mean_value_coordinates
-from lbc_core.cage import make_cage
+from lbc_core.compare.baselines import harmonic_weights, mean_value_coordinates
+from lbc_core.cage.make import make_cage
 from lbc_core.io import read_cage
-from lbc_core.statistics import (
+from lbc_core.compare.statistics import (
     _fraction_below,
     deform_seconds,
     influence,

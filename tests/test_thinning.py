@@ -6,8 +6,8 @@ import scipy.sparse as sp
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from lbc_core.constraints import constraint_residuals
-from lbc_core.thinning import MOST_REMOVED, removing, thin_weights, thresholds, tilt
+from lbc_core.kernel.constraints import constraint_residuals
+from lbc_core.evaluate.thinning import MOST_REMOVED, removing, thin_weights, thresholds, tilt
 
 CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
 CHECKS = settings(max_examples=40, deadline=None)
@@ -167,8 +167,9 @@ def test_empty_input():
 
 
 def test_cancel_stops_between_rounds_of_chunks_of_rows(monkeypatch):
-    from lbc_core import Cancelled, thinning
-    from lbc_core.parallel import worker_count
+    from lbc_core import Cancelled
+    from lbc_core.evaluate import thinning
+    from lbc_core.kernel.parallel import worker_count
 
     monkeypatch.setattr(thinning, "ROWS_PER_CHUNK", 10)
     controls, weights, positions = random_weights(3, 30 * worker_count())  # three rounds of one chunk per thread
@@ -188,7 +189,7 @@ def weights_off(weights, control, rows):
 
 @pytest.mark.parametrize("chunk", [7, 8192])
 def test_thinning_the_changed_rows_only_gives_what_thinning_every_row_gives(monkeypatch, chunk):
-    from lbc_core import thinning
+    from lbc_core.evaluate import thinning
 
     monkeypatch.setattr(thinning, "ROWS_PER_CHUNK", chunk)
     controls, weights, _ = random_weights(5, 50)
@@ -207,7 +208,7 @@ def test_thinning_the_changed_rows_only_gives_what_thinning_every_row_gives(monk
 
 
 def test_thinning_the_changed_rows_keeps_the_rows_an_extent_change_leaves_within_tolerance():
-    from lbc_core.thinning import thin_changed_rows
+    from lbc_core.evaluate.thinning import thin_changed_rows
 
     controls, weights, _ = random_weights(5, 20)
     weights[10:, 0] = 0.0  # rows 10-19 have no weight on corner 0, the origin
@@ -229,7 +230,7 @@ def test_thinning_the_changed_rows_keeps_the_rows_an_extent_change_leaves_within
     assert count == 11
 
 def test_rows_with_negative_weights_are_kept_as_they_are():
-    """Rows of points outside the cage extrapolate (lbc_core.smoothing), continuously from point to point, with some
+    """Rows of points outside the cage extrapolate (lbc_core.evaluate.smoothing), continuously from point to point, with some
     negative weights: they pass through whole. Thinned, a row whose point lies inside the hull of its positive
     weights' control points would turn non-negative while its neighbours outside that hull could not, a jump."""
     controls = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [0.5, 0.5]])

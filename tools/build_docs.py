@@ -5,7 +5,7 @@
 
 The docstrings are NumPy style with Sphinx roles (:func:`bind`). The build fails, with exit status 1, on any warning
 pdoc gives and on any broken cross-reference: a role whose target does not exist in lbc_core. A role may name
-something outside the reference (a constant of lbc_core.options, say): it is then shown as code, not as a link.
+something outside the reference (a constant of lbc_core.binding.options, say): it is then shown as code, not as a link.
 tests/test_docs_build.py runs this build.
 """
 

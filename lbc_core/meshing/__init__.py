@@ -13,8 +13,8 @@ Every backend returns a :class:`DomainMesh` with the same guarantees, which the 
   n-gon or a quad was split into are one region). A boundary triangle may straddle the split lines inside a region
   (they are no features), never an edge between two regions.
 
-Backends (modules of this package)
-----------------------------------
+Backends (modules of this package, listed by name in :data:`MESHERS`)
+---------------------------------------------------------------------
 ``polygon``: 2D. ``"delaunay"`` (bundled; also ``"auto"``): boundary samples at the reference solver's spacing, a
 hexagonal lattice inside, scipy's Delaunay triangulation, boundary recovery by splitting missing boundary pieces,
 Laplacian smoothing. ``"triangle"``: Shewchuk's Triangle with the reference solver's switches, only when asked for
@@ -24,8 +24,8 @@ Delaunay triangulation. ``tetrahedra``: 3D. ``"delaunay"`` (also ``"auto"``): a 
 tetrahedralisation of the surface samples and a body-centred cubic lattice (see :mod:`.tetrahedra`).
 
 Every backend works on the cage moved to its centre and scaled to unit diagonal (3D: also stretched along its
-principal axes when it is very thin, see :class:`lbc_core.frame.MeshingFrame`); the result is mapped back, its boundary vertices
-recomputed from their barycentric coordinates on the original cage, so the guarantees above hold in the user's units.
+principal axes when it is very thin, see :class:`lbc_core.kernel.frame.MeshingFrame`); the result is mapped back, its boundary
+vertices recomputed from their barycentric coordinates on the original cage, so the guarantees above hold in the user's units.
 
 fTetWild (pytetwild) was measured and not used: its tetrahedra do not contain the cage vertices (misses up to 0.35 %
 of the cage diagonal on the gargoyle cage_L08), its boundary lies only within an envelope of the cage and does not
@@ -38,11 +38,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import CageError, GapTooNarrow
-from ..options import DEFAULT_CELLS, METHODS
-from ..progress import Progress
+from ..kernel.progress import Progress
 
-# The defaults and the method names live with the other bind options (lbc_core.options); named here as well for the
-# callers of mesh_domain.
+# Triangles / tetrahedra filling the cage by default: 2D the paper's reference resolution, 3D chosen by fidelity and
+# time (bench/RESULTS.md, "3D (gargoyle cage L08: 168 control points, 4083 tetrahedra)", "The resolution's price").
+DEFAULT_CELLS = {2: 3000, 3: 8000}
 DEFAULT_CELLS_2D = DEFAULT_CELLS[2]
 DEFAULT_CELLS_3D = DEFAULT_CELLS[3]
 # Below this many tetrahedra per control point a fine cage may not mesh: Blender's cube subdivided with 9 cuts (602
@@ -53,6 +53,87 @@ FEW_CELLS_PER_CONTROL_POINT = 20
 # quads, and planes dented by round-off or by an artist's nudge. 1e-3 rad bends a boundary triangle of side h off
 # the cage by at most about 2.5e-4 h.
 COPLANAR_ANGLE = 1e-3
+# What the method "auto" means, per dimension: a mesher that is bundled, so that "auto" gives the same weights
+# everywhere, Blender included.
+AUTO = "auto"
+
+
+@dataclass(frozen=True)
+class Mesher:
+    """A domain mesher backend, as :data:`MESHERS` lists it.
+
+    Attributes
+    ----------
+    name : str
+        What ``BindOptions(method=...)``, ``lbc bind --method`` and the add-on's *Mesher* option call it.
+    dim : int
+        2 (triangles) or 3 (tetrahedra).
+    mesh : callable(cage, cells, steps) -> DomainMesh
+        Meshes a cage already in its meshing frame (centred, unit diagonal) with about ``cells`` cells, reporting to
+        ``steps`` (a :class:`~lbc_core.kernel.progress.Progress`); returns the raw mesh, before :func:`mesh_domain`
+        maps it back and checks it.
+    bundled : bool
+        Shipped with the Blender extension (its licence GPL-compatible): only a bundled mesher may be a default.
+    summary : str
+        One line for ``--help`` and the docs.
+    """
+
+    name: str
+    dim: int
+    mesh: object
+    bundled: bool
+    summary: str
+
+
+def _tetrahedra(cage, cells, steps):
+    from . import tetrahedra  # imported on use: the backends import this package's DomainMesh
+
+    return tetrahedra.mesh(cage, cells, steps)
+
+
+def _polygon_delaunay(cage, cells, steps):
+    from . import polygon
+
+    return polygon.mesh_delaunay(cage, cells, steps)
+
+
+def _polygon_triangle(cage, cells, steps):
+    from . import polygon
+
+    return polygon.mesh_triangle(cage, cells, steps)
+
+
+# Every mesher by dimension and name, the default ("auto") first.
+MESHERS = {
+    2: {"delaunay": Mesher("delaunay", 2, _polygon_delaunay, True,
+                           "boundary samples, a hexagonal lattice, scipy's Delaunay triangulation (bundled)"),
+        "triangle": Mesher("triangle", 2, _polygon_triangle, False,
+                           "Shewchuk's Triangle, as the paper's reference solver (pip install triangle)")},
+    3: {"delaunay": Mesher("delaunay", 3, _tetrahedra, True,
+                           "a conforming Delaunay tetrahedralisation of surface samples and a BCC lattice (bundled)")},
+}
+
+
+def method_names(dim=None):
+    """The names ``method`` takes: "auto" then the meshers of ``dim`` (2 or 3), or of every dimension (None)."""
+    dims = (2, 3) if dim is None else (dim,)
+    return (AUTO,) + tuple(dict.fromkeys(name for d in dims for name in MESHERS[d]))
+
+
+def mesher(dim, method=AUTO):
+    """The :class:`Mesher` that ``method`` names for a ``dim``-D cage ("auto": the first bundled one).
+
+    Raises
+    ------
+    CageError
+        When no mesher of that name meshes ``dim``-D cages.
+    """
+    if method == AUTO:
+        return next(m for m in MESHERS[dim].values() if m.bundled)
+    if method not in MESHERS[dim]:
+        known = "does not mesh {dim}D cages" if method in method_names() else "is an unknown meshing method"
+        raise CageError(f"method {method!r} {known.format(dim=dim)}: use one of {', '.join(method_names(dim))}")
+    return MESHERS[dim][method]
 
 
 @dataclass
@@ -96,7 +177,7 @@ def simplex_domain(cage):
 
     Parameters
     ----------
-    cage : lbc_core.cage.Cage
+    cage : lbc_core.cage.make.Cage
         With ``cage.is_simplex``.
 
     Returns
@@ -125,11 +206,11 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
 
     Parameters
     ----------
-    cage : lbc_core.cage.Cage
+    cage : lbc_core.cage.make.Cage
     cells : int or None
         About how many triangles / tetrahedra to make; None for DEFAULT_CELLS_2D or DEFAULT_CELLS_3D.
     method : str
-        2D: "auto" (the bundled Delaunay mesher), "delaunay" or "triangle". 3D: "auto" or "delaunay".
+        A name of :data:`MESHERS` for the cage's dimension, or "auto" (the bundled default): see :func:`mesher`.
     progress : callable(fraction, message), Progress or None
         Told the fraction done (0 to 1) and what is being done.
     cancel : callable() -> bool or None
@@ -142,18 +223,17 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
     Raises
     ------
     CageError
-        When the cage cannot be meshed; the message says why and what to do.
+        When the cage cannot be meshed, or ``method`` names no mesher of its dimension; the message says why and
+        what to do.
     Cancelled
     """
-    from . import polygon, tetrahedra
-    from ..frame import MeshingFrame
+    from ..kernel.frame import MeshingFrame
     from .common import finish
 
     dim = cage.dim
-    if method not in METHODS[dim]:
-        raise ValueError(f"unknown {dim}D meshing method {method!r}: choose one of {', '.join(METHODS[dim])}")
+    backend = mesher(dim, method)
     if cells is None:
-        cells = DEFAULT_CELLS_2D if dim == 2 else DEFAULT_CELLS_3D
+        cells = DEFAULT_CELLS[dim]
     if not cells >= 10:
         raise ValueError(f"the target cell count must be at least 10, got {cells}")
     steps = Progress.of(progress, cancel)
@@ -162,12 +242,7 @@ def mesh_domain(cage, cells=None, method="auto", progress=None, cancel=None):
     frame = MeshingFrame(surface.vertices)
     local = frame.cage(surface)
     try:
-        if dim == 3:
-            mesh = tetrahedra.mesh(local, int(cells), steps.part(0.0, 0.95))
-        elif method == "triangle":
-            mesh = polygon.mesh_triangle(local, int(cells), steps.part(0.0, 0.95))
-        else:
-            mesh = polygon.mesh_delaunay(local, int(cells), steps.part(0.0, 0.95))
+        mesh = backend.mesh(local, int(cells), steps.part(0.0, 0.95))
         steps(0.95, "checking the mesh")
         mesh = finish(surface, frame.to_world(mesh.vertices), mesh.cells, mesh.boundary_vertices, mesh.boundary_facet,
                       mesh.boundary_bary)

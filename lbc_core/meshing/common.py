@@ -1,11 +1,11 @@
 """What the 2D and 3D backends share: boundary samples' positions, small mesh utilities, and the final check that
-packs a :class:`~lbc_core.meshing.DomainMesh`. The frame they mesh in is :class:`lbc_core.frame.MeshingFrame`."""
+packs a :class:`~lbc_core.meshing.DomainMesh`. The frame they mesh in is :class:`lbc_core.kernel.frame.MeshingFrame`."""
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import CageError
-from ..geometry import bary_positions, row_keys, signed_measures
+from ..kernel.geometry import bary_positions, row_keys, signed_measures
 from . import DomainMesh
 
 

@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import CageError
-from ..geometry import distance_to_segments, orient_positive, winding_numbers
+from ..kernel.geometry import distance_to_segments, orient_positive, winding_numbers
 from .common import bary_positions, cell_edges, far_points, on_common, raw_mesh, rows_in, smooth, split_counts
 
 # 2D sizing as in the reference solver (bldeng/LBC): maximum triangle area 1.6 × mean, boundary spacing 1.6 × the

@@ -13,7 +13,7 @@ across a gap narrower than the spacing is sampled finer, by the gap (:data:`GAP_
 A quad whose two triangles are well shaped for the spacing (:func:`split_facets`) is the exception: each of its
 triangles is a region of its own, its diagonal and edges features. An artist's edit at rest bends the quads around
 the moved vertex along those lines, and a mesh that follows them keeps every boundary triangle on the bent cage: the
-warm re-bind (:mod:`lbc_core.rebinding`) can carry it instead of meshing again.
+warm re-bind (:mod:`lbc_core.binding.rebinding`) can carry it instead of meshing again.
 """
 
 import time
@@ -24,8 +24,16 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
-from ..geometry import circumcircles, closest_on_segments, closest_on_triangles, cross2, distance_to_segments
-from ..geometry import orient_positive, triangle_normals, unit
+from ..kernel.geometry import (
+    circumcircles,
+    closest_on_segments,
+    closest_on_triangles,
+    cross2,
+    distance_to_segments,
+    orient_positive,
+    triangle_normals,
+    unit,
+)
 from . import COPLANAR_ANGLE
 from .common import bary_positions, far_points, rows_in, split_counts
 

@@ -29,8 +29,18 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import CageError, GapTooNarrow
-from ..geometry import circumspheres, closest_on_triangles, orient_positive, radius_ratios, row_keys, signed_measures
-from ..geometry import signed_radius_ratios_by_coordinate, triangle_normals, unit, winding_numbers
+from ..kernel.geometry import (
+    circumspheres,
+    closest_on_triangles,
+    orient_positive,
+    radius_ratios,
+    row_keys,
+    signed_measures,
+    signed_radius_ratios_by_coordinate,
+    triangle_normals,
+    unit,
+    winding_numbers,
+)
 from .common import far_points, on_common, raw_mesh, rows_in
 from .surface import JITTER, OutOfBudget, Surface, split_facets
 
@@ -382,7 +392,7 @@ def polish(vertices, tets, movable, side, rng, steps, poor_below=_POLISH_RATIO):
     move is kept only when every tetrahedron around the vertex stays positively oriented (with the boundary fixed,
     the mesh then stays a valid filling of the cage) and their least radius ratio rises. This does what a round of
     sliver perturbation followed by a new Delaunay tetrahedralisation did, for a fraction of its cost. The warm
-    re-bind uses it too, on the cells an edit of the cage squashed (:mod:`lbc_core.rebinding`).
+    re-bind uses it too, on the cells an edit of the cage squashed (:mod:`lbc_core.binding.rebinding`).
 
     Parameters
     ----------

@@ -6,14 +6,14 @@
                w = fixed boundary values on the cage
 
 The constraints are a per-vertex block: the split variable W = Z is projected, vertex by vertex, onto them
-(:mod:`lbc_core.projection`), so every iterate W is exactly feasible and no basis couples the coordinates. Each
-vertex holds only the coordinates of its working set (:mod:`lbc_core.working_sets`): they start from the harmonic
+(:mod:`lbc_core.solve.projection`), so every iterate W is exactly feasible and no basis couples the coordinates. Each
+vertex holds only the coordinates of its working set (:mod:`lbc_core.solve.working_sets`): they start from the harmonic
 coordinates' largest and grow where a coordinate turns positive next to a vertex that cannot hold it, so a
 step's cost follows the (cell, coordinate) pairs near the supports, not the number of control points. The step
-itself is :mod:`lbc_core.splitting`; Anderson extrapolation (:mod:`lbc_core.anderson`) with the safeguard of Zhang,
+itself is :mod:`lbc_core.solve.splitting`; Anderson extrapolation (:mod:`lbc_core.solve.anderson`) with the safeguard of Zhang,
 Peng, Deng et al. (ACM TOG 2019) accelerates it; the penalty is balanced against the residuals early on (Boyd et al.
 2011, §3.4.1); the stopping rule is relative (§3.3.1). A very thin 3D cage with few control points iterates in the
-stretched frame it was meshed in (:mod:`lbc_core.stretch`). Measurements: bench/RESULTS.md, "The locality solver".
+stretched frame it was meshed in (:mod:`lbc_core.solve.stretch`). Measurements: bench/RESULTS.md, "The locality solver".
 """
 
 import time
@@ -22,15 +22,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from . import fem
+from ..errors import CageError
+from ..kernel import fem
+from ..kernel.factor import Factor
+from ..kernel.frame import UnitFrame, principal_aspect
+from ..kernel.geometry import hull_share, signed_measures
+from ..kernel.progress import Laps, Progress
 from .anderson import Anderson
-from .errors import CageError
-from .factor import Factor
 from .forecast import SMALL_CAGE, default_tolerance, forecast_iterations, format_remaining, seconds_left
-from .frame import UnitFrame, principal_aspect
-from .geometry import hull_share, signed_measures
 from .objective import tv_objective
-from .progress import Laps, Progress
 from .splitting import DouglasRachford
 from .stretch import Stretch
 from .working_sets import MeshData, PairOperators, WorkingSets, feasible_working_sets, first_working_sets
@@ -135,14 +135,14 @@ def solve_on_mesh(
         Their weights; each row sums to 1 and reproduces the vertex's position.
     control_points : (n, d) float array
     tv_weights : (F, n) float array
-        ω per cell and coordinate (:func:`lbc_core.geodesics.tv_weights` of the geodesic distances).
+        ω per cell and coordinate (:func:`lbc_core.solve.geodesics.tv_weights` of the geodesic distances).
     epsilon : float
         C¹ relaxation width: |∇w| is replaced by its Huber smoothing (quadratic below ε, in 1/length units of the
         unit-diagonal cage, linear above), smoother coordinates at the cost of some locality. 0 is the paper's plain
         total variation.
     tolerance : float, optional
         Relative primal residual tolerance of the stopping rule (the dual one is DUAL_TOLERANCE_FACTOR times larger);
-        None: :func:`lbc_core.forecast.default_tolerance`.
+        None: :func:`lbc_core.solve.forecast.default_tolerance`.
     max_iterations : int
     penalty : float, optional
         The starting ADMM penalty ρ on the unit-diagonal cage; None picks the one ``start`` ended with, else
@@ -161,7 +161,7 @@ def solve_on_mesh(
         float64 either way.
     start : SolverState, optional
         A previous solve's final state (``SolveResult.state``) on the same cells and interior vertices, whose
-        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.rebinding`).
+        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.binding.rebinding`).
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
         Polled between the steps of every stage; when it returns True the solve raises :class:`lbc_core.Cancelled`.
@@ -542,7 +542,7 @@ def balancing_factor(residuals, high):
 
 
 def _convexity(vertices, cells):
-    """The domain's area or volume over its convex hull's: the cage's :attr:`~lbc_core.cage.Cage.convexity`."""
+    """The domain's area or volume over its convex hull's: the cage's :attr:`~lbc_core.cage.make.Cage.convexity`."""
     return hull_share(vertices, np.abs(signed_measures(vertices, cells)).sum())
 
 
@@ -592,7 +592,7 @@ def _check_start(start, cells, n, n_interior):
 class SolverState:
     """A solve's final state on its working sets, for a warm start on the same mesh carried onto an edited cage.
 
-    Measure-scaled as in :mod:`lbc_core.splitting`: per slot v_W = W̃ + Ṽ, per (cell, control point) pair
+    Measure-scaled as in :mod:`lbc_core.solve.splitting`: per slot v_W = W̃ + Ṽ, per (cell, control point) pair
     v_X = X̃ + Ũ; a solve on the same cells and vertices, moved, rescales each by its own measure.
 
     Attributes

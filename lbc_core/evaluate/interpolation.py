@@ -17,10 +17,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from . import fem
-from .errors import CageError
-from .geometry import closest_on_facets
-from .progress import Progress
+from ..errors import CageError
+from ..kernel import fem
+from ..kernel.geometry import closest_on_facets
+from ..kernel.progress import Progress
 
 TOLERANCE = 1e-12  # relative to the domain's bounding-box diagonal: points this close to the domain are inside
 

@@ -6,7 +6,7 @@ Variables in measure-scaled form, so that the penalty's norms are Euclidean:
 - the free coordinates z per slot, found by the least-squares step each iteration.
 
 One step: X̃ = shrink(v_X) (the weighted TV's prox per pair), W̃ = the projection of each vertex's row onto
-{w ≥ 0, Σ w = 1, Σ w c = x} (:mod:`lbc_core.projection`), z from (Gᵀ G + diag(√(βm))²) z = Gᵀ(2X̃ − v_X − E) +
+{w ≥ 0, Σ w = 1, Σ w c = x} (:mod:`lbc_core.solve.projection`), z from (Gᵀ G + diag(√(βm))²) z = Gᵀ(2X̃ − v_X − E) +
 √(βm)(2W̃ − v_W) (one factorised solve, block-diagonal over the control points), then v += α (the new split values'
 targets − the split values). Nothing couples the coordinates but the per-vertex projection.
 """
@@ -37,7 +37,7 @@ class Step:
 
 
 class DouglasRachford:
-    """The step map on one layout of working sets (:class:`lbc_core.working_sets.PairOperators`).
+    """The step map on one layout of working sets (:class:`lbc_core.solve.working_sets.PairOperators`).
 
     Attributes
     ----------

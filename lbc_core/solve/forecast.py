@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CageError
+from ..errors import CageError
 from .stretch import Stretch
 
 # Relative primal residual a solve stops at by default, per dimension (bench/RESULTS.md, "The stopping tolerance"),

@@ -9,10 +9,9 @@ where even that cannot (a smooth fit that overshoots, below), the point is reduc
 import numpy as np
 import scipy.sparse as sp
 
-from .constraints import csr_from_padded, grow_support, padded_rows, restore_and_check, scatter_rows
-from .parallel import map_row_chunks
-from .progress import Progress
-
+from ..kernel.constraints import csr_from_padded, grow_support, padded_rows, restore_and_check, scatter_rows
+from ..kernel.parallel import map_row_chunks
+from ..kernel.progress import Progress
 
 # Rows reduced by one thread at a time: the padded (rows, K, d+1) work arrays of a million points would take
 # gigabytes, so at most this many rows per thread are in flight (the smooth evaluation's own chunk).
@@ -32,7 +31,7 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     ----------
     located : (m, N) scipy.sparse.csr_matrix, or any object with ``shape`` whose row slices are one
         Interpolation from the domain's N vertices to the points (barycentric, or
-        :class:`lbc_core.smoothing.SmoothInterpolation`, whose ``linear`` barycentric rows are the fallback of a
+        :class:`lbc_core.evaluate.smoothing.SmoothInterpolation`, whose ``linear`` barycentric rows are the fallback of a
         point its fit leaves with no non-negative weights that meet the constraints, and whose ``outside`` rows, if
         any, extrapolate to points outside the cage: those are reduced without the sign constraint, which no
         weights reproducing such a point can meet).
@@ -150,7 +149,7 @@ def _reduce_signed(full, controls, positions, threshold, tolerance):
 
 def _by_chunks(m, n, reduce_chunk, progress):
     """``reduce_chunk(rows)`` over consecutive equal row slices of at most ROWS_PER_CHUNK, one per thread at a time
-    (:func:`~lbc_core.parallel.map_row_chunks`), stacked into an (m, n) CSR; ``progress`` is told before each round."""
+    (:func:`~lbc_core.kernel.parallel.map_row_chunks`), stacked into an (m, n) CSR; ``progress`` is told before each round."""
     chunks = map_row_chunks(reduce_chunk, m, ROWS_PER_CHUNK,
                             lambda start: progress(start / m, f"reducing the weights: {start} of {m} points done"))
     progress(1.0, "reducing the weights: done")

@@ -1,6 +1,6 @@
 """Binding: the record of a bind (sparse coordinates of points with respect to a cage), deformation, and files.
 
-:func:`lbc_core.pipeline.bind` makes one; :meth:`Binding.save` and :func:`load_binding` write and read it. What the
+:func:`lbc_core.binding.pipeline.bind` makes one; :meth:`Binding.save` and :func:`load_binding` write and read it. What the
 bind was asked (``Binding.options``) and how it went (:class:`BindOutcome`) are kept apart.
 """
 
@@ -14,21 +14,49 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .cage import POKE_SIDES, Cage, make_cage, some_indices
-from .errors import CageError
-from .forecast import format_size
-from .io import writing
-from .meshing import DomainMesh
-from .parallel import thread_map, worker_count
-from .statistics import influence_counts
-from .version import __version__
+from ..cage.make import POKE_SIDES, Cage, make_cage, some_indices
+from ..errors import CageError
+from ..io import writing
+from ..kernel.parallel import thread_map, worker_count
+from ..meshing import DomainMesh
+from ..solve.forecast import format_size
+from ..version import __version__
 
 # Deforming fewer points than this is faster on one thread.
 PARALLEL_MIN_POINTS = 50_000
+INFLUENCE_FACTOR = 1e-3  # τ = INFLUENCE_FACTOR / n, the paper's threshold for "influenced"
 # BindOutcome.start: where the solver started.
 WARM, COLD = "previous solution", "harmonic"
 # The counts of BindOutcome.solved_again.
 SOLVED_AGAIN = ("cells solved", "cells", "points evaluated", "points")
+
+
+def influence_threshold(n_control_points):
+    """The paper's threshold τ = 1e-3 / n above which a coordinate influences a point (dimensionless)."""
+    return INFLUENCE_FACTOR / n_control_points
+
+
+def influence_counts(weights, threshold=None):
+    """How many control points influence each point: #{i : |w_i| > threshold}.
+
+    Parameters
+    ----------
+    weights : (m, n) scipy.sparse matrix or float array
+    threshold : float, optional
+        None: the paper's τ = 1e-3 / n (:func:`influence_threshold`).
+
+    Returns
+    -------
+    (m,) int array
+    """
+    if threshold is None:
+        threshold = influence_threshold(weights.shape[1])
+    if sp.issparse(weights):
+        weights = sp.csr_matrix(weights)
+        large = np.abs(weights.data) > threshold
+        rows = np.repeat(np.arange(weights.shape[0]), np.diff(weights.indptr))
+        return np.bincount(rows[large], minlength=weights.shape[0])
+    return np.count_nonzero(np.abs(weights) > threshold, axis=1)
 
 
 @dataclass(frozen=True)
@@ -95,12 +123,12 @@ class Binding:
         ``outcome.iterations`` and ``outcome.converged``.
     objective : float
         The weighted total variation of ``domain_weights`` (NaN for baselines).
-    solver_state : lbc_core.solver.SolverState or None
+    solver_state : lbc_core.solve.solver.SolverState or None
         The solver's final state, kept in memory (not saved) for a warm re-bind (:func:`lbc_core.rebind`).
     stale : (N,) float array or None
         Per domain vertex, how much its coordinates (the largest change of one) and position (in median cell edges)
         have changed since the points near it were last evaluated (None: not at all); kept in memory for a warm
-        re-bind, which evaluates the points near a vertex again once this passes :data:`lbc_core.rebinding.STALE`.
+        re-bind, which evaluates the points near a vertex again once this passes :data:`lbc_core.binding.rebinding.STALE`.
     """
 
     cage: Cage
@@ -133,7 +161,7 @@ class Binding:
     def influence_counts(self, threshold=None):
         """Number of control points with a weight above ``threshold`` per point; (m,) int array.
 
-        None: the paper's 1e-3 / n, as :func:`lbc_core.statistics.influence_counts` counts.
+        None: the paper's 1e-3 / n, as :func:`lbc_core.binding.record.influence_counts` counts.
         """
         return influence_counts(self.weights, threshold)
 

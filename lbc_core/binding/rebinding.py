@@ -25,7 +25,7 @@ before, the cage's topology or welding
 changed, or the previous binding has no solver state (one loaded from a file), the re-bind is a cold bind with the
 previous options, and ``Binding.outcome.report`` says why.
 
-The stages are :mod:`lbc_core.pipeline`'s, with its one table of progress shares and timings: this module carries
+The stages are :mod:`lbc_core.binding.pipeline`'s, with its one table of progress shares and timings: this module carries
 the previous mesh (in place of meshing), chooses the vertices to solve again and the points to evaluate again, and
 merges the rows it kept; the geodesics, the solve, the interpolation, the evaluation and the binding record are the
 pipeline's stage functions.
@@ -37,25 +37,44 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .binding import SOLVED_AGAIN, WARM, BindOutcome
-from .boundary import boundary_weights
-from .cage import ZERO_LENGTH, edge_pairing, make_cage
-from .constraints import padded_rows
-from .errors import CageError
-from .fem import boundary_facets
-from .frame import UnitFrame
-from .geometry import (bary_positions, closest_on_facets, orient_positive, radius_ratios, row_keys, signed_measures,
-                       triangle_normals, unit)
-from .meshing import COPLANAR_ANGLE
-from .meshing.common import cell_edges
-from .meshing.tetrahedra import polish
-from .objective import tv_objective
-from .parallel import counted_in_load
-from .pipeline import (REBIND_STAGES, REPRODUCTION_TOLERANCE, StageClock, bind, check_points, evaluate,
-                       geodesic_weights, lbc_binding, locate, request_of, solve)
-from .progress import Progress
-from .smoothing import DEEP_RADIUS_EDGES, RADIUS_EDGES, median_edge
-from .solver import SolveResult
+from ..cage.make import ZERO_LENGTH, edge_pairing, make_cage
+from ..errors import CageError
+from ..evaluate.smoothing import DEEP_RADIUS_EDGES, RADIUS_EDGES, median_edge
+from ..kernel.constraints import padded_rows
+from ..kernel.fem import boundary_facets
+from ..kernel.frame import UnitFrame
+from ..kernel.geometry import (
+    bary_positions,
+    closest_on_facets,
+    orient_positive,
+    radius_ratios,
+    row_keys,
+    signed_measures,
+    triangle_normals,
+    unit,
+)
+from ..kernel.parallel import counted_in_load
+from ..kernel.progress import Progress
+from ..meshing import COPLANAR_ANGLE
+from ..meshing.common import cell_edges
+from ..meshing.tetrahedra import polish
+from ..solve.boundary import boundary_weights
+from ..solve.objective import tv_objective
+from ..solve.solver import SolveResult
+from .pipeline import (
+    REBIND_STAGES,
+    REPRODUCTION_TOLERANCE,
+    StageClock,
+    bind,
+    check_points,
+    evaluate,
+    geodesic_weights,
+    lbc_binding,
+    locate,
+    request_of,
+    solve,
+)
+from .record import SOLVED_AGAIN, WARM, BindOutcome
 
 # Share of its radius ratio a carried cell with a corner off the cage must keep (bench/RESULTS.md, "The warm re-bind
 # keeps a carried mesh whose squashed cells lie wholly on the cage").
@@ -100,8 +119,8 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     Returns
     -------
     Binding
-        Its ``outcome`` (:class:`~lbc_core.binding.BindOutcome`): ``start`` is "previous solution" (:data:`WARM`)
-        for a warm re-bind, "harmonic" (:data:`lbc_core.binding.COLD`) for a cold one; ``report`` says, for the user, how many cells
+        Its ``outcome`` (:class:`~lbc_core.binding.record.BindOutcome`): ``start`` is "previous solution" (:data:`WARM`)
+        for a warm re-bind, "harmonic" (:data:`lbc_core.binding.record.COLD`) for a cold one; ``report`` says, for the user, how many cells
         were solved again, or why the bind started from scratch; a warm one's ``solved_again`` holds those counts as
         numbers (see :func:`solved_again_text`), its ``travel`` how far the cage moved since its last bind from
         scratch.

@@ -34,19 +34,23 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from . import fem
-from .objective import tv_objective
-from .parallel import thread_map, worker_count
-from .errors import CageError
-from .progress import Laps, Progress
-from .anderson import Anderson
-from .constraints import project_onto_constraints
-from .factor import Factor
-from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
-from .frame import UnitFrame, principal_aspect
-from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
-from .solver import SolveSettings, balancing_factor, check_problem  # the same options, checks and balancing
-from .stretch import Stretch
+from lbc_core.errors import CageError
+from lbc_core.kernel import fem
+from lbc_core.kernel.constraints import project_onto_constraints
+from lbc_core.kernel.factor import Factor
+from lbc_core.kernel.frame import UnitFrame, principal_aspect
+from lbc_core.kernel.parallel import thread_map, worker_count
+from lbc_core.kernel.progress import Laps, Progress
+from lbc_core.solve.anderson import Anderson
+from lbc_core.solve.forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
+from lbc_core.solve.objective import tv_objective
+from lbc_core.solve.shrink import scaled_tv, shrink_factor, weighted_shrink_factors
+from lbc_core.solve.solver import (  # the same options, checks and balancing
+    SolveSettings,
+    balancing_factor,
+    check_problem,
+)
+from lbc_core.solve.stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
@@ -207,7 +211,7 @@ def solve_on_mesh(
         Their weights; each row sums to 1 and reproduces the vertex's position.
     control_points : (n, d) float array
     tv_weights : (F, n) float array
-        ω per cell and coordinate (:func:`lbc_core.geodesics.tv_weights` of the geodesic distances).
+        ω per cell and coordinate (:func:`lbc_core.solve.geodesics.tv_weights` of the geodesic distances).
     epsilon : float
         C¹ relaxation width: |∇w| is replaced by its Huber smoothing (quadratic below ε, in 1/length units of the
         unit-diagonal cage, linear above), which makes the coordinates smoother at the cost of some locality.
@@ -236,7 +240,7 @@ def solve_on_mesh(
         to round-off either way.
     start : SolverState, optional
         A previous solve's final state (``SolveResult.state``) on the same cells and interior vertices, whose
-        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.rebinding`): the iterations
+        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.binding.rebinding`): the iterations
         start there instead of from the harmonic coordinates.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
@@ -270,7 +274,7 @@ def solve_on_mesh(
     scale = frame.scale
     unit_vertices, unit_controls = frame.to_unit(vertices), frame.to_unit(control_points)
 
-    # A very thin 3D cage is meshed stretched (lbc_core.frame.MeshingFrame), so its cells are flat, and a splitting
+    # A very thin 3D cage is meshed stretched (lbc_core.kernel.frame.MeshingFrame), so its cells are flat, and a splitting
     # that treats their steep and flat directions alike takes thousands of iterations. Past STRETCHED_SOLVE_FROM the
     # iterations run in the stretched frame, where the cells are round, the total variation's norm weighted per axis
     # so that the problem stays the cage's own.

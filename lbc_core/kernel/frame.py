@@ -39,7 +39,7 @@ class UnitFrame:
 
     @classmethod
     def of(cls, cage):
-        """The frame of a :class:`~lbc_core.cage.Cage`: its bounding box's centre, its diagonal rounded to 2^k."""
+        """The frame of a :class:`~lbc_core.cage.make.Cage`: its bounding box's centre, its diagonal rounded to 2^k."""
         low, high = cage.vertices.min(axis=0), cage.vertices.max(axis=0)
         return cls(centre=(low + high) / 2, scale=float(2.0 ** np.round(np.log2(cage.bbox_diagonal))))
 

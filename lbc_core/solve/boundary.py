@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from .constraints import constraint_residuals, restore_constraints
-from .geometry import is_convex_polygon, newell_normal, plane_axes, polygon_mean_value_coordinates, unit
+from ..kernel.constraints import constraint_residuals, restore_constraints
+from ..kernel.geometry import is_convex_polygon, newell_normal, plane_axes, polygon_mean_value_coordinates, unit
 
 # Rows on a poked n-gon take its outline's mean value coordinates when corrected to reproduce their point within this
 # share of the cage's diagonal (and to sum to 1 within it); the others keep the values linear on the poke's triangles.

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cage import check_coordinates
-from .errors import CageError
-from .frame import principal_extents
+from ..errors import CageError
+from ..kernel.frame import principal_extents
+from .make import check_coordinates
 
 # A cage is flat when its thickness is below this fraction of its bounding-box diagonal; points lie in the cage's
 # plane when every one is this close to it. Image planes and flat meshes are exactly flat, so this is generous.
@@ -142,7 +142,7 @@ def flatten(cage_vertices, cage_faces, points, edges=None):
     Raises
     ------
     CageError
-        When the cage has NaN, infinite or far-off coordinates (:func:`~lbc_core.cage.check_coordinates`), or is flat
+        When the cage has NaN, infinite or far-off coordinates (:func:`~lbc_core.cage.make.check_coordinates`), or is flat
         but its outline is not one closed loop.
     """
     cage_vertices = np.asarray(cage_vertices, dtype=float)

@@ -9,7 +9,7 @@ in 2D (area * 1/length) and with length^2 in 3D.
 import numpy as np
 import scipy.sparse as sp
 
-from .fem import gradient_operator
+from ..kernel.fem import gradient_operator
 
 
 def tv_objective(vertices, cells, weights, tv_weights):

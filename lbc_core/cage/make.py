@@ -13,7 +13,7 @@ keeps the Lagrange and linearity properties on every edge of the input:
   n-gon, a star). The centre is no control point: it is a surface vertex whose boundary values are 1/k for each of
   the face's k control points, so values linear on the poke's triangles and the surface are one linear construction
   (partition of unity and reproduction hold on the face), and no vertex of the face is favoured (a convex n-gon
-  takes its outline's smooth mean value coordinates instead, :mod:`lbc_core.boundary`). The cage's surface vertices
+  takes its outline's smooth mean value coordinates instead, :mod:`lbc_core.solve.boundary`). The cage's surface vertices
   (``surface_vertices``) are its control points followed by these centres;
 * any other n-gon is ear-clipped in the plane of its Newell normal, always cutting the first ear in the face's vertex
   order.
@@ -42,10 +42,22 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
-from .errors import CageError, CageVertexError
-from .geometry import (cross2, enclosed_measure, hull_share, in_triangle_2d, intersecting_triangles,
-                       is_convex_polygon, newell_normal, overlapping_boxes, plane_axes, segments_touch, triangle_normals,
-                       unit, winding_numbers)
+from ..errors import CageError, CageVertexError
+from ..kernel.geometry import (
+    cross2,
+    enclosed_measure,
+    hull_share,
+    in_triangle_2d,
+    intersecting_triangles,
+    is_convex_polygon,
+    newell_normal,
+    overlapping_boxes,
+    plane_axes,
+    segments_touch,
+    triangle_normals,
+    unit,
+    winding_numbers,
+)
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
 # A vertex a million times farther from the cage's middle than the rest of the cage is wide is no part of it: it would
@@ -165,7 +177,7 @@ class Cage:
     @property
     def convexity(self):
         """The enclosed area or volume over its convex hull's: 1 for a convex cage (whose coordinates spread wider,
-        so that its solve costs more: :mod:`lbc_core.forecast`)."""
+        so that its solve costs more: :mod:`lbc_core.solve.forecast`)."""
         return hull_share(self.surface_vertices, self.measure)
 
     def fingerprint(self):

@@ -1,4 +1,4 @@
-"""The bind pipeline: a cage and points in, a :class:`~lbc_core.binding.Binding` out, every stage called here in order.
+"""The bind pipeline: a cage and points in, a :class:`~lbc_core.binding.record.Binding` out, every stage called here in order.
 
     check the request → unit frame → domain mesh → boundary values → interpolation to the points (refused when
     every point lies outside) → geodesic TV weights → solve (ADMM) → smooth evaluation and reduction → back to the
@@ -7,30 +7,30 @@
 Each stage is a public function of its own module; this module orders them, gives each its share of the progress bar
 (one table, :data:`STAGES`) and times it (:class:`StageClock`). The stage functions below (:func:`mesh_cage`,
 :func:`locate`, :func:`geodesic_weights`, :func:`solve`, :func:`evaluate`, :func:`lbc_binding`) are what
-:func:`bind` and the warm re-bind (:mod:`lbc_core.rebinding`) both run: the re-bind carries the previous mesh in
+:func:`bind` and the warm re-bind (:mod:`lbc_core.binding.rebinding`) both run: the re-bind carries the previous mesh in
 place of meshing, solves again only part of it and evaluates again only some points, through the same functions.
-The baselines (:mod:`lbc_core.baselines`) run the same first stages through :func:`check_cage_and_points`.
+The baselines (:mod:`lbc_core.compare.baselines`) run the same first stages through :func:`check_cage_and_points`.
 """
 
 from dataclasses import replace
 
 import numpy as np
 
-from .binding import COLD, Binding, BindOutcome
-from .boundary import boundary_weights
-from .cage import make_cage, real_array, some_indices
-from .errors import CageError, PointsOutside
-from .frame import UnitFrame, principal_aspect
-from .geodesics import geodesic_distances, tv_weights
-from .interpolation import interpolation_matrix
-from .meshing import mesh_domain, simplex_domain
+from ..cage.make import make_cage, real_array, some_indices
+from ..errors import CageError, PointsOutside
+from ..evaluate.interpolation import interpolation_matrix
+from ..evaluate.reduction import interpolate_and_reduce
+from ..evaluate.smoothing import SmoothInterpolation
+from ..kernel.frame import UnitFrame, principal_aspect
+from ..kernel.parallel import busy_factor, counted_in_load
+from ..kernel.progress import Laps, Progress
+from ..meshing import mesh_domain, simplex_domain
+from ..solve.boundary import boundary_weights
+from ..solve.forecast import bind_seconds, check_memory, solve_forecast, solves_stretched
+from ..solve.geodesics import geodesic_distances, tv_weights
+from ..solve.solver import solve_on_mesh
 from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
-from .parallel import busy_factor, counted_in_load
-from .progress import Laps, Progress
-from .reduction import interpolate_and_reduce
-from .smoothing import SmoothInterpolation
-from .forecast import bind_seconds, check_memory, solve_forecast, solves_stretched
-from .solver import solve_on_mesh
+from .record import COLD, Binding, BindOutcome
 
 # Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
 REPRODUCTION_TOLERANCE = 1e-9
@@ -74,7 +74,7 @@ class StageClock:
         self._parts[name] = (self._parts[name][0], 1.0)
 
     def weigh(self, told):
-        """Share the bar by the time told before the bind (:class:`~lbc_core.forecast.BindSeconds`, or None to keep
+        """Share the bar by the time told before the bind (:class:`~lbc_core.solve.forecast.BindSeconds`, or None to keep
         the shares): the meshing, the solve and the reduction in proportion to their seconds, within what the other
         stages' shares leave (the reduction of 64k points is a quarter of the demo's bind)."""
         timed = {} if told is None else {"meshing": told.meshing, "solve": told.solve, "reduction": told.points}
@@ -127,7 +127,7 @@ def bind(
     points : (m, d) float array
         The points to bind (a mesh's vertices). 2D points may be given with a constant z.
     cells, weighting, epsilon, threshold, method, tolerance, max_iterations : optional
-        The fields of :class:`lbc_core.options.BindOptions` (None: the default): about how many triangles /
+        The fields of :class:`lbc_core.binding.options.BindOptions` (None: the default): about how many triangles /
         tetrahedra fill the cage (3000 in 2D, 8000 in 3D; more is finer and slower), ρ of the geodesic TV weights
         ("quadratic", the paper's default, "linear", "sqrt", "constant" or a function), the C¹ relaxation width
         (0: plain total variation), the reduction threshold (1e-3 / n), the domain mesher ("auto"), the ADMM
@@ -211,7 +211,7 @@ def geodesic_weights(clock, domain, weighting):
 
 
 def solve(clock, vertices, cells, fixed, values, control_points, omega, request, start=None):
-    """The solve stage: :func:`~lbc_core.solver.solve_on_mesh` on ``cells`` with the vertices ``fixed`` held at
+    """The solve stage: :func:`~lbc_core.solve.solver.solve_on_mesh` on ``cells`` with the vertices ``fixed`` held at
     ``values``, as ``request`` (:class:`BindOptions`) asks, from ``start`` (a SolverState) if given; the solver's
     own stage times are the timings."""
     result = solve_on_mesh(vertices, cells, fixed, values, control_points, omega, epsilon=request.epsilon,
@@ -225,7 +225,7 @@ def evaluate(clock, domain, located, domain_weights, unit_cage, threshold, reach
     """The reduction stage: the smooth evaluation at the located points, reduced (weights below ``threshold``
     dropped, the constraints restored); ``reach`` scales the fit's radii, depths and fade, in median edges.
     With the (unit frame) ``points`` and their ``outside`` flags, the rows of points outside the cage extrapolate
-    to them (:class:`~lbc_core.smoothing.SmoothInterpolation`).
+    to them (:class:`~lbc_core.evaluate.smoothing.SmoothInterpolation`).
 
     Returns the (m, n) sparse weights.
     """

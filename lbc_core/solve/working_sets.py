@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from . import fem
-from .constraints import constraint_residuals, nearest_feasible, restore_constraints
-from .factor import Factor
-from .parallel import thread_map, worker_count
+from ..kernel import fem
+from ..kernel.constraints import constraint_residuals, nearest_feasible, restore_constraints
+from ..kernel.factor import Factor
+from ..kernel.parallel import thread_map, worker_count
 from .projection import PADDING_VALUE, STEP_TOLERANCE, corner_products, project_rows
 
 # Newton steps of the projection within an iteration (bench/RESULTS.md, "The locality solver").

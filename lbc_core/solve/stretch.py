@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from .frame import MeshingFrame
+from ..kernel.frame import MeshingFrame
 
 # The stretch (in the meshing frame: frame.ASPECT_FLOOR / the cage's thinnest aspect) from which the solve runs
 # stretched, and the most control points it does so for (bench/RESULTS.md, "Thin cages").
@@ -11,7 +11,7 @@ STRETCHED_MOST_CONTROL_POINTS = 20
 
 
 class Stretch:
-    """The linear map into the frame a thin 3D cage was meshed in (:class:`lbc_core.frame.MeshingFrame`), where its
+    """The linear map into the frame a thin 3D cage was meshed in (:class:`lbc_core.kernel.frame.MeshingFrame`), where its
     cells are round, and how the total variation reads there.
 
     u = x A with A = R diag(σ) (R the cage's principal axes), so ∇ₓw = A ∇ᵤw and |∇ₓw| = |σ ∘ ∇ᵤw|, and

@@ -13,19 +13,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .errors import CageError
-from .geodesics import WEIGHTINGS as _RHO
+from ..errors import CageError
+from ..meshing import AUTO, DEFAULT_CELLS, mesher, method_names
+from ..solve.geodesics import WEIGHTINGS as _RHO
 
-# Triangles / tetrahedra filling the cage by default: 2D the paper's reference resolution, 3D chosen by fidelity and
-# time (bench/RESULTS.md, "3D (gargoyle cage L08: 168 control points, 4083 tetrahedra)", "The resolution's price").
-DEFAULT_CELLS = {2: 3000, 3: 8000}
 MIN_CELLS = 10
-# The names of ρ in the geodesic TV weights ω = ρ(D), the paper's first: those lbc_core.geodesics implements.
+# The names of ρ in the geodesic TV weights ω = ρ(D), the paper's first: those lbc_core.solve.geodesics implements.
 WEIGHTINGS = tuple(_RHO)
 DEFAULT_EPSILON = 0.0
 DEFAULT_MAX_ITERATIONS = 10000
-# Domain meshers per dimension (lbc_core.meshing.mesh_domain).
-METHODS = {2: ("auto", "triangle", "delaunay"), 3: ("auto", "delaunay")}
 # Weights below this fraction of 1/n are dropped from the stored coordinates by default.
 DEFAULT_THRESHOLD_SHARE = 1e-3
 
@@ -50,7 +46,8 @@ class BindOptions:
     max_iterations : int
         At least 1.
     method : str
-        Domain mesher, one of :data:`METHODS` for the cage's dimension.
+        Domain mesher: "auto" (the default, the bundled mesher) or a name of :data:`lbc_core.meshing.MESHERS` for
+        the cage's dimension.
 
     Raises
     ------
@@ -102,10 +99,7 @@ class BindOptions:
                 f"are equal (they are 1/n = {1.0 / n_control_points:.4g}): give a threshold below that, e.g. "
                 f"{DEFAULT_THRESHOLD_SHARE / n_control_points:.2g} (the default), or 0 to keep every weight"
             )
-        if self.method not in METHODS[dim]:
-            raise CageError(
-                f"method {self.method!r} does not mesh {dim}D cages: use one of {', '.join(METHODS[dim])}"
-            )
+        mesher(dim, self.method)  # refuses a name that meshes no cage of this dimension
 
     def threshold_for(self, n_control_points):
         """The reduction threshold for a cage of ``n_control_points`` (the default 1e-3 / n when None)."""
@@ -176,8 +170,8 @@ def _bounded(default, whole, accept, advice):
 
 def _method(value):
     if value is None:
-        return METHODS[2][0]
-    names = sorted({name for names in METHODS.values() for name in names})
+        return AUTO
+    names = method_names()
     if not isinstance(value, str) or value not in names:
         raise _Bad(f"{value!r} is not one of {', '.join(names)}")
     return value

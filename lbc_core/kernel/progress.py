@@ -7,7 +7,7 @@ the user's ``cancel()`` returns True. :meth:`Progress.part` hands a sub-stage it
 
 import time
 
-from .errors import Cancelled
+from ..errors import Cancelled
 
 
 class Laps:

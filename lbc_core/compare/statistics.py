@@ -21,15 +21,10 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .fem import cell_gradients
+from ..binding.record import influence_counts, influence_threshold
+from ..kernel.fem import cell_gradients
 
-INFLUENCE_FACTOR = 1e-3  # τ = INFLUENCE_FACTOR / n, the paper's threshold for "influenced"
 SPARSE_SCHEMES = ("lbc",)  # stored as CSR; every other scheme's weights are dense
-
-
-def influence_threshold(n_control_points):
-    """The paper's threshold τ = 1e-3 / n above which a coordinate influences a point (dimensionless)."""
-    return INFLUENCE_FACTOR / n_control_points
 
 
 def locality(domain, weights, thresholds):
@@ -156,29 +151,6 @@ def influence(domain, weights, ks=None):
     by_count = np.bincount(counts, weights=measures, minlength=n + 1)
     at_least = np.minimum(np.cumsum(by_count[::-1])[::-1] / measures.sum(), 1.0)  # round-off can pass 1
     return ks, np.where(ks > n, 0.0, at_least[np.clip(ks, 0, n)])
-
-
-def influence_counts(weights, threshold=None):
-    """How many control points influence each point: #{i : |w_i| > threshold}.
-
-    Parameters
-    ----------
-    weights : (m, n) scipy.sparse matrix or float array
-    threshold : float, optional
-        None: the paper's τ = 1e-3 / n (:func:`influence_threshold`).
-
-    Returns
-    -------
-    (m,) int array
-    """
-    if threshold is None:
-        threshold = influence_threshold(weights.shape[1])
-    if sp.issparse(weights):
-        weights = sp.csr_matrix(weights)
-        large = np.abs(weights.data) > threshold
-        rows = np.repeat(np.arange(weights.shape[0]), np.diff(weights.indptr))
-        return np.bincount(rows[large], minlength=weights.shape[0])
-    return np.count_nonzero(np.abs(weights) > threshold, axis=1)
 
 
 def stored_weights(binding):

@@ -7,7 +7,7 @@ radius of it (moving least squares). The fit is a fixed linear map of the vertex
 reproduces any linear function of the vertices exactly; the coordinates at the vertices sum to 1 and reproduce the
 vertices, so the fitted coordinates sum to 1 and reproduce the point, before any correction. What the fit can lose,
 non-negativity where a coordinate's support ends, the reduction restores on each point's support
-(:mod:`lbc_core.reduction`).
+(:mod:`lbc_core.evaluate.reduction`).
 
 Near the cage the fit fades into the plain P1 interpolation, by each point's own distance to the cage: a point on the
 cage gets the interpolated boundary values, and a point on a cage vertex is that vertex's alone (Lagrange). Where the
@@ -18,8 +18,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from ..kernel.progress import Progress
 from .interpolation import FacetSearch
-from .progress import Progress
 
 # The fit's radius in median cell edges: wider is smoother and costs more influences per point (bench/RESULTS.md).
 RADIUS_EDGES = 2.0
@@ -51,7 +51,7 @@ class SmoothInterpolation:
     reproduces p itself (where the fit at q can: else q's row), and the part outside turns with the cage around it
     instead of only following q (a tip poking out of a curled tentacle's cage stays a tip; bench/RESULTS.md). Such a
     row may hold negative weights: no non-negative weights reproduce a point outside the hull of their control
-    points. Used like a CSR matrix by :func:`lbc_core.reduction.interpolate_and_reduce`: ``shape``, row slices,
+    points. Used like a CSR matrix by :func:`lbc_core.evaluate.reduction.interpolate_and_reduce`: ``shape``, row slices,
     ``linear`` and ``outside``.
 
     Parameters
@@ -61,7 +61,7 @@ class SmoothInterpolation:
     cells : (F, d+1) int array
         Domain mesh cells (their boundary is the cage).
     located : (m, N) scipy.sparse.csr_matrix
-        The points' P1 barycentric rows (:func:`lbc_core.interpolation.interpolation_matrix`).
+        The points' P1 barycentric rows (:func:`lbc_core.evaluate.interpolation.interpolation_matrix`).
     radius_edges, fade_edges : float
         The fit's radius near the cage and the fade's width, in median cell edge lengths.
     deep_radius_edges : float
@@ -76,7 +76,7 @@ class SmoothInterpolation:
     points : (m, d) float array, optional
         The points themselves (``located`` holds where the outside ones are bound).
     outside : (m,) bool array, optional
-        The points outside the cage (:func:`~lbc_core.interpolation.interpolation_matrix`'s flags), whose rows
+        The points outside the cage (:func:`~lbc_core.evaluate.interpolation.interpolation_matrix`'s flags), whose rows
         extrapolate to the point; with ``points``.
     """
 

@@ -12,9 +12,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from . import fem
-from .progress import Progress
-from .factor import Factor
+from ..kernel import fem
+from ..kernel.factor import Factor
+from ..kernel.progress import Progress
 
 
 def _constant(d):
@@ -23,7 +23,7 @@ def _constant(d):
     return d
 
 
-# ρ of each weighting, by name; the paper's first (lbc_core.options.WEIGHTINGS lists these names for the options).
+# ρ of each weighting, by name; the paper's first (lbc_core.binding.options.WEIGHTINGS lists these names for the options).
 # They work in place on the (F, n) array tv_weights made for them: a fresh one costs as much as the arithmetic.
 WEIGHTINGS = {
     "quadratic": lambda d: np.multiply(d, d, out=d),

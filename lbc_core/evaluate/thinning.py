@@ -17,9 +17,9 @@ box cage, bench/RESULTS.md, "The floor's rise withdrawn").
 import numpy as np
 import scipy.sparse as sp
 
-from .constraints import csr_from_padded, padded_rows, scatter_rows
-from .parallel import map_row_chunks
-from .progress import Progress
+from ..kernel.constraints import csr_from_padded, padded_rows, scatter_rows
+from ..kernel.parallel import map_row_chunks
+from ..kernel.progress import Progress
 
 # Default floor: keeps the bent capsule (bench/capsule.py) less creased than Mesh Deform with a margin (0.005 did
 # once, and on today's meshes reached 3.48° against its 3.33°; 0.004 gives 2.53°, at 4 % more influences;
@@ -167,7 +167,7 @@ def _thin_rows(weights, controls, positions, floor, max_influences):
     raises = np.ones(len(values), dtype=int)
     failed = np.zeros(len(values), dtype=int)  # the largest cap a row failed at
     # A row with negative weights reproduces a point outside the hull of its control points (a point outside the
-    # cage, extrapolated: lbc_core.smoothing): no non-negative weights can, so it keeps its input.
+    # cage, extrapolated: lbc_core.evaluate.smoothing): no non-negative weights can, so it keeps its input.
     pending = np.flatnonzero(~(values < 0).any(axis=1))
     for _ in range(RELAXATIONS + 1):
         if not len(pending):

@@ -1,6 +1,6 @@
 """Baseline coordinates to compare LBC with: mean value, harmonic and (optionally) bounded biharmonic.
 
-Each ``bind_*`` function returns the same :class:`~lbc_core.binding.Binding` as :func:`lbc_core.bind`, so that every
+Each ``bind_*`` function returns the same :class:`~lbc_core.binding.record.Binding` as :func:`lbc_core.bind`, so that every
 statistic and plot works on each scheme. The harmonic and bounded biharmonic baselines are solved on the same
 :class:`~lbc_core.meshing.DomainMesh` with the same Dirichlet boundary values as LBC (pass ``domain=binding.domain``
 to share an LBC binding's mesh); mean value coordinates have a closed form, evaluated at the points themselves and
@@ -17,15 +17,15 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .binding import Binding
-from .boundary import boundary_weights
-from .fem import stiffness_matrix
-from .frame import UnitFrame
-from .geometry import polygon_mean_value_coordinates
-from .interpolation import interpolation_matrix
-from .meshing import mesh_domain
-from .pipeline import check_cage_and_points
-from .progress import Laps, Progress
+from ..binding.pipeline import check_cage_and_points
+from ..binding.record import Binding
+from ..evaluate.interpolation import interpolation_matrix
+from ..kernel.fem import stiffness_matrix
+from ..kernel.frame import UnitFrame
+from ..kernel.geometry import polygon_mean_value_coordinates
+from ..kernel.progress import Laps, Progress
+from ..meshing import mesh_domain
+from ..solve.boundary import boundary_weights
 
 # A point closer than this fraction of the cage's bounding-box diagonal to a vertex, edge or face is on it.
 ON_CAGE_TOLERANCE = 1e-10
@@ -166,7 +166,7 @@ def harmonic_weights(domain, boundary_values):
     ----------
     domain : DomainMesh
     boundary_values : (B, n) float array
-        Values at ``domain.boundary_vertices`` (from :func:`lbc_core.boundary.boundary_weights`).
+        Values at ``domain.boundary_vertices`` (from :func:`lbc_core.solve.boundary.boundary_weights`).
 
     Returns
     -------
