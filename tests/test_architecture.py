@@ -349,6 +349,18 @@ def _all_of(path):
     return set()
 
 
+def folder_violations(layers):
+    """Messages for each sub-package whose modules the doc puts in more than one layer: the folders are the layers."""
+    folders = {module.split(".")[0] for module in layers if "." in module}
+    by_folder = {}
+    for module, layer in layers.items():
+        if module.split(".")[0] in folders:
+            by_folder.setdefault(module.split(".")[0], set()).add(layer)
+    return [f"docs/ARCHITECTURE.md puts the modules of lbc_core/{folder}/ in layers {sorted(found)}: a folder is one "
+            "layer; move the module that does not belong into the folder of its layer"
+            for folder, found in sorted(by_folder.items()) if len(found) > 1]
+
+
 def all_violations(root, text):
     """Every message of every check, for the tree at ``root`` and the doc ``text``."""
     allowed, layers = allowed_imports(text)
@@ -359,7 +371,7 @@ def all_violations(root, text):
             + [f"the doc's imports block names {name}, which is no module of lbc_core: remove its line"
                for name in unknown]
             + arrow_violations(root, allowed, layers) + stale_allowances(root, allowed) + layer_violations(allowed, layers)
-            + loop_violations(root) + private_violations(root, private_allowances(text))
+            + folder_violations(layers) + loop_violations(root) + private_violations(root, private_allowances(text))
             + blender_in_core_violations(root) + addon_violations(root, addon_api_names(text)))
 
 
@@ -389,6 +401,11 @@ def test_the_doc_allows_no_arrow_the_code_does_not_make(doc):
 
 def test_the_doc_arrows_never_point_up_a_layer(doc):
     message = "\n".join(layer_violations(*allowed_imports(doc)))
+    assert not message, message
+
+
+def test_each_folder_of_lbc_core_is_one_layer(doc):
+    message = "\n".join(folder_violations(allowed_imports(doc)[1]))
     assert not message, message
 
 
@@ -504,6 +521,13 @@ def test_the_checker_catches_an_arrow_up_a_layer_in_the_doc(tmp_path):
     root = synthetic_tree(tmp_path, {"lbc_core/errors.py": "def f():\n    from .cage import x\n"})
     messages = all_violations(root, doc)
     assert any("errors (layer 1) → cage (layer 2) points up a layer" in message for message in messages), messages
+
+
+def test_the_checker_catches_a_folder_split_across_layers(tmp_path):
+    doc = SYNTHETIC_DOC.replace("meshing.common: meshing geometry\n", "").replace(
+        "addon_api: errors\n", "addon_api: errors\nmeshing.common: meshing geometry\n")
+    messages = all_violations(synthetic_tree(tmp_path, {}), doc)
+    assert any("lbc_core/meshing/ in layers [2, 3]" in message for message in messages), messages
 
 
 def test_the_checker_catches_a_module_missing_from_the_doc(tmp_path):
