@@ -59,6 +59,20 @@ STATS_COLUMNS = """The columns (the paper's Section 5, n control points):
   Q(4), Q(8) the share of the domain where at least 4 (8) coordinates exceed 1e-3/n: near 0 is local"""
 
 
+def _solving_options():
+    """The options of a bind, shared by the commands that bind (a parent parser)."""
+    solving = argparse.ArgumentParser(add_help=False)
+    solving.add_argument("--cells", type=int, help="about how many domain triangles / tetrahedra (default: "
+                         f"{DEFAULT_CELLS[2]} in 2D, {DEFAULT_CELLS[3]} in 3D)")
+    solving.add_argument("--weighting", choices=WEIGHTINGS, help=f"LBC's TV weighting (default {WEIGHTINGS[0]})")
+    solving.add_argument("--epsilon", type=float, help="LBC's C1 relaxation width (default 0: plain TV)")
+    solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default 1e-3/n)")
+    solving.add_argument("--tolerance", type=float, help="LBC's ADMM stopping tolerance (default: the solver's)")
+    solving.add_argument("--max-iterations", type=int, help="LBC's ADMM iteration limit (default 10000)")
+    solving.add_argument("--method", choices=method_names(), help=f"the mesher that fills the cage: {_meshers()}")
+    return solving
+
+
 def _parser():
     parser = argparse.ArgumentParser(prog="lbc", description="Local Barycentric Coordinates for cage deformation.")
     parser.add_argument("--version", action="version", version=f"lbc {__version__}")
@@ -69,15 +83,7 @@ def _parser():
                         "cage's warnings)")
     common.add_argument("--json", action="store_true", help="print the figures as JSON on stdout")
 
-    solving = argparse.ArgumentParser(add_help=False)
-    solving.add_argument("--cells", type=int, help="about how many domain triangles / tetrahedra (default: "
-                         f"{DEFAULT_CELLS[2]} in 2D, {DEFAULT_CELLS[3]} in 3D)")
-    solving.add_argument("--weighting", choices=WEIGHTINGS, help=f"LBC's TV weighting (default {WEIGHTINGS[0]})")
-    solving.add_argument("--epsilon", type=float, help="LBC's C1 relaxation width (default 0: plain TV)")
-    solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default 1e-3/n)")
-    solving.add_argument("--tolerance", type=float, help="LBC's ADMM stopping tolerance (default: the solver's)")
-    solving.add_argument("--max-iterations", type=int, help="LBC's ADMM iteration limit (default 10000)")
-    solving.add_argument("--method", choices=method_names(), help=f"the mesher that fills the cage: {_meshers()}")
+    solving = _solving_options()
 
     bind = commands.add_parser("bind", parents=[common, solving], help="bind a mesh to a cage, save the binding")
     bind.add_argument("cage", help="cage file (.obj/.off/.ply); a file without faces is a 2D polygon")
@@ -136,7 +142,7 @@ def _scheme_list(text):
 
 def _run_bind(args):
     from .binding.pipeline import too_small_warning
-    from .cage.make import make_cage
+    from .cage import make_cage
     from .io import FORMATS, check_output
 
     check_output(args.output, inputs=(args.cage, args.mesh))
@@ -272,7 +278,7 @@ def _run_stats(args):
 
 
 def _run_compare(args):
-    from .cage.make import make_cage
+    from .cage import make_cage
     from .meshing import mesh_domain
 
     if args.plot:
@@ -309,7 +315,7 @@ def _run_compare(args):
 
 
 def _run_table1(args):
-    from .cage.make import make_cage
+    from .cage import make_cage
     from .compare.baselines import bind_mvc
     from .compare.statistics import table1_row
 
