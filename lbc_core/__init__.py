@@ -10,7 +10,7 @@ from .binding.options import BindOptions
 from .binding.pipeline import bind
 from .binding.rebinding import rebind
 from .binding.record import Binding, load_binding
-from .cage.make import Cage, make_cage
+from .cage import Cage, make_cage
 from .compare.baselines import bind_bbw, bind_harmonic, bind_mvc, mean_value_coordinates
 from .errors import CageError, Cancelled, PointsOutside
 from .io import read_cage, read_mesh, write_mesh

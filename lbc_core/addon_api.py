@@ -10,7 +10,7 @@ from .binding import options
 from .binding.options import BindOptions
 from .binding.pipeline import bind, too_small_warning
 from .binding.rebinding import WARM, rebind, solved_again_text
-from .cage.make import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
+from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
 from .cage.planar import flatten, reframed
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
 from .evaluate.thinning import DEFAULT_FLOOR, thin_changed_rows, thin_weights

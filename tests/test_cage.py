@@ -14,7 +14,8 @@ from scipy.spatial.transform import Rotation
 
 import lbc_core.cage.make as cage_module
 import lbc_core.kernel.geometry as geometry
-from lbc_core.cage.make import MAX_CONTROL_POINTS, Cage, make_cage
+from lbc_core.cage.make import MAX_CONTROL_POINTS, make_cage
+from lbc_core.cage.record import Cage
 from lbc_core.errors import CageError, CageVertexError
 from lbc_core.kernel.geometry import intersecting_triangles, overlapping_boxes
 from lbc_core.io import read_cage

@@ -12,7 +12,8 @@ import pytest
 from scipy.spatial import Delaunay
 
 from lbc_core import meshing
-from lbc_core.cage.make import Cage, make_cage
+from lbc_core.cage.make import make_cage
+from lbc_core.cage.record import Cage
 from lbc_core.kernel.geometry import closest_on_triangles, orient_positive, radius_ratios, signed_measures
 from lbc_core.kernel.geometry import signed_radius_ratios_by_coordinate
 from lbc_core.meshing import polygon, tetrahedra

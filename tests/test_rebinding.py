@@ -389,7 +389,7 @@ def test_a_loop_cut_cylinder_rebinds_warm_after_a_loop_is_scaled_or_a_cap_vertex
 def test_chord_distances_measure_how_far_a_face_across_a_fold_leaves_the_cage():
     """A triangle across the fold of a roof (two facets meeting at 90° along x = 0) leaves it at its midpoints;
     one lying in a facet does not."""
-    from lbc_core.cage.make import Cage
+    from lbc_core.cage.record import Cage
     from lbc_core.binding.rebinding import _chord_distances
 
     roof = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 1.0], [-1.0, 0.0, 0.0], [-1.0, 1.0, 0.0], [1.0, 0.0, 0.0],

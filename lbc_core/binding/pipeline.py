@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..cage.make import make_cage, real_array, some_indices
+from ..cage import make_cage, real_array, some_indices
 from ..errors import CageError, PointsOutside
 from ..evaluate.interpolation import interpolation_matrix
 from ..evaluate.reduction import interpolate_and_reduce

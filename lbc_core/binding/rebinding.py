@@ -37,7 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from ..cage.make import ZERO_LENGTH, edge_pairing, make_cage
+from ..cage import ZERO_LENGTH, edge_pairing, make_cage
 from ..errors import CageError
 from ..evaluate.smoothing import DEEP_RADIUS_EDGES, RADIUS_EDGES, median_edge
 from ..kernel.constraints import padded_rows

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from ..cage.make import POKE_SIDES, Cage, make_cage, some_indices
+from ..cage import POKE_SIDES, Cage, make_cage, some_indices
 from ..errors import CageError
 from ..io import writing
 from ..kernel.parallel import thread_map, worker_count
