@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.random_cages import STAR
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -15,7 +16,6 @@ import lbc_core
 from lbc_core.binding.record import FILE_ARRAYS, OPTIONAL_FILE_ARRAYS
 from lbc_core.errors import CageError
 from lbc_core.io import read_mesh
-from helpers.random_cages import STAR
 
 pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
 
@@ -108,7 +108,7 @@ def test_a_binding_of_poked_n_gons_loads_with_them_and_so_does_a_file_from_befor
     the facets around them. A file written while n-gons were ear-clipped has no centres: it loads, with a warning
     that binding again evens its n-gons out, and the same cage given beside it (poked now) is the cage it was bound
     to, its faces split otherwise."""
-    import lbc_core.cage.make as cage_module
+    import lbc_core.cage.triangulate as triangulate
 
     angles = 2 * np.pi * np.arange(5) / 5
     prism = np.array([[np.cos(a), np.sin(a), z] for z in (0.0, 1.0) for a in angles])
@@ -128,7 +128,7 @@ def test_a_binding_of_poked_n_gons_loads_with_them_and_so_does_a_file_from_befor
     with pytest.raises(CageError, match="poked n-gon 0 does not match the facets around its centre"):
         lbc_core.load_binding(_rewritten(tmp_path / "poked.npz", tmp_path / "edited.npz", other_centre))
 
-    monkeypatch.setattr(cage_module, "POKE_SIDES", 1000)
+    monkeypatch.setattr(triangulate, "POKE_SIDES", 1000)
     clipped = lbc_core.bind(prism, faces, points, cells=300)
     assert clipped.cage.centres == ()
     clipped.save(tmp_path / "clipped.npz")
@@ -212,6 +212,10 @@ def _index_out_of_range(arrays):
     arrays["weights_indices"] = arrays["weights_indices"] + 1000
 
 
+def _negative_face(arrays):
+    arrays["cage_facet_face"] = arrays["cage_facet_face"] - 1  # found by test_fuzz_edited_arrays: a crash, not a refusal
+
+
 def _missing_key(arrays):
     del arrays["weights_indptr"]
 
@@ -238,13 +242,14 @@ def _bad_counts(arrays):
         (_times_five, "sum to 5, not 1"),  # every row does; which one is named depends on rounding
         (_reversed, "the weights of point"),
         (_index_out_of_range, "weights_indices holds indices outside 0 … 3"),
+        (_negative_face, "cage_facet_face holds indices outside 0 … 3"),
         (_missing_key, "it lacks weights_indptr"),
         (_short_indptr, "weights_indptr has shape (5,), not (6,)"),
         (_bad_options_json, "its options record is not valid JSON"),
         (_bad_outcome, "its outcome record holds start = 5"),
         (_bad_counts, "its outcome record holds solved_again = {'cells': 'all'}"),
     ],
-    ids=["times-five", "reversed", "index-out-of-range", "missing-key", "short-indptr", "bad-options-json",
+    ids=["times-five", "reversed", "index-out-of-range", "negative-face", "missing-key", "short-indptr", "bad-options-json",
          "bad-outcome", "bad-counts"],
 )
 def test_edited_binding_files_are_refused(square_file, tmp_path, edit, message):

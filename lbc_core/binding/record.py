@@ -485,7 +485,8 @@ def _checked_parts(arrays, damaged):
     if tuple(arrays["weights_shape"]) != (m, n):
         damaged(f"its weights claim shape {tuple(arrays['weights_shape'])} for {m} points and {n} control points")
     ranges = {
-        "cage_facets": n + len(centres), "cage_vertex_map": n, "weights_indices": n, "domain_cells": n_domain,
+        "cage_facets": n + len(centres), "cage_facet_face": len(facets), "cage_vertex_map": n, "weights_indices": n,
+        "domain_cells": n_domain,
         "domain_boundary_vertices": n_domain, "domain_boundary_facet": len(facets),
         "domain_control_vertices": n_domain,
     }
