@@ -44,7 +44,8 @@ from lbc_core.solve.boundary import boundary_weights  # noqa: E402
 from lbc_core.kernel.frame import UnitFrame  # noqa: E402
 from lbc_core.io import read_cage, read_mesh  # noqa: E402
 from lbc_core.binding import rebinding  # noqa: E402
-from lbc_core.binding.rebinding import carry_domain, rebind  # noqa: E402
+from lbc_core.binding.carry import carry_domain, split_as_before  # noqa: E402
+from lbc_core.binding.rebinding import rebind  # noqa: E402
 from lbc_core.solve.geodesics import geodesic_distances, tv_weights  # noqa: E402
 from lbc_core.solve.solver import solve_on_mesh  # noqa: E402
 
@@ -113,7 +114,7 @@ def differences(a, b, cage):
 def on_carried_mesh(previous, edited_cage, faces, tolerance=None):
     """A cold solve (SolveResult, unit frame) on the mesh the warm re-bind carries, at ``tolerance`` (None: the
     default); None where the carried mesh is not valid."""
-    cage, why_not = rebinding._split_as_before(previous.cage, lbc_core.make_cage(edited_cage, faces))
+    cage, why_not = split_as_before(previous.cage, lbc_core.make_cage(edited_cage, faces))
     if why_not is not None:
         return None
     unit_cage = UnitFrame.of(cage).cage_to_unit(cage)

@@ -12,7 +12,8 @@ from lbc_core.kernel.frame import UnitFrame
 from lbc_core.solve.geodesics import geodesic_distances, tv_weights
 from lbc_core.io import read_cage, read_mesh
 from lbc_core.kernel.geometry import orient_positive, signed_measures
-from lbc_core.binding.rebinding import STALE, _flipped_slivers, _squashed, carry_domain, rebind
+from lbc_core.binding.carry import _squashed, carry_domain, flipped_slivers
+from lbc_core.binding.rebinding import STALE, rebind
 from lbc_core.evaluate.smoothing import median_edge
 from lbc_core.solve.solver import solve_on_mesh
 
@@ -225,11 +226,11 @@ def test_a_sliver_on_the_cage_turned_inside_out_is_mended_by_a_3_2_flip():
     edited = rest + [[0, 0, 0], [0, 0, 0], [0, 0, 0.2], [0, 0, 0.2], [0, 0, 0], [0, 0, 0]]
     folded = signed_measures(edited, cells) <= 0
     assert folded.tolist() == [True, False, False]
-    mended = _flipped_slivers(edited, cells, np.array([e1, e2, a, b]), folded)
+    mended = flipped_slivers(edited, cells, np.array([e1, e2, a, b]), folded)
     assert sorted(map(sorted, mended.tolist())) == [[e1, e2, a, p], [e1, e2, b, p]]
     assert np.all(signed_measures(edited, mended) > 0)
     crowded = np.concatenate([cells, [[a, b, q, e1]]])
-    assert np.array_equal(_flipped_slivers(edited, crowded, np.array([e1, e2, a, b]), np.r_[folded, False]), crowded)
+    assert np.array_equal(flipped_slivers(edited, crowded, np.array([e1, e2, a, b]), np.r_[folded, False]), crowded)
 
 
 def test_an_edit_that_turns_a_sliver_on_the_cage_inside_out_rebinds_warm():
@@ -330,7 +331,7 @@ def test_a_quad_bent_a_little_rebinds_warm_with_the_mesh_split_along_its_diagona
     boundary faces across them. Bent by a small edit, a diagonal is a crease of the boundary values: the mesh edges
     it crosses are split there, so the carried surface follows it, and no face is left across it (the re-bind stays
     warm even with no chord allowed, CHORD_KEPT 0)."""
-    import lbc_core.binding.rebinding as rebinding
+    import lbc_core.binding.carry as carry
 
     box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 0.3)], dtype=float)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
@@ -339,7 +340,7 @@ def test_a_quad_bent_a_little_rebinds_warm_with_the_mesh_split_along_its_diagona
     assert surface_off_cage(first) < 1e-12
     edited = box.copy()
     edited[7, 0] -= 0.01  # bends the faces at vertex 7 that are not perpendicular to x
-    monkeypatch.setattr(rebinding, "CHORD_KEPT", 0.0)
+    monkeypatch.setattr(carry, "CHORD_KEPT", 0.0)
     again = rebind(first, edited, quads)
     assert again.outcome.start == "previous solution", again.outcome.report
     assert len(again.domain.vertices) > len(first.domain.vertices)  # the crossed mesh edges split
@@ -390,7 +391,7 @@ def test_chord_distances_measure_how_far_a_face_across_a_fold_leaves_the_cage():
     """A triangle across the fold of a roof (two facets meeting at 90° along x = 0) leaves it at its midpoints;
     one lying in a facet does not."""
     from lbc_core.cage.record import Cage
-    from lbc_core.binding.rebinding import _chord_distances
+    from lbc_core.binding.carry import _chord_distances
 
     roof = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 1.0], [-1.0, 0.0, 0.0], [-1.0, 1.0, 0.0], [1.0, 0.0, 0.0],
                      [1.0, 1.0, 0.0]])
@@ -405,12 +406,12 @@ def test_chord_distances_measure_how_far_a_face_across_a_fold_leaves_the_cage():
 
 def test_a_cold_bind_for_many_bent_faces_names_five_and_counts_the_others(monkeypatch):
     """A new user read a list of bent faces cut at five as if it were all of them."""
-    import lbc_core.binding.rebinding as rebinding
+    import lbc_core.binding.carry as carry
 
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
     first = lbc_core.bind(cube, quads, cube * 0.5 + 0.25, cells=300)
-    monkeypatch.setattr(rebinding, "_faces_off_cage", lambda *args: np.arange(7))
+    monkeypatch.setattr(carry, "_faces_off_cage", lambda *args: np.arange(7))
     assert rebind(first, cube * 1.01, quads).outcome.report.startswith(
         "bound from scratch: cage faces 0, 1, 2, 3, 4 and 2 more bent too far")
 

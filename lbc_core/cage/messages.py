@@ -29,7 +29,6 @@ class NamesVertices(str):
     """A defect message that names cage vertices by their input numbers (:func:`raise_all` raises it as a
     CageVertexError)."""
 
-
 def raise_all(defects):
     """Raise one CageError listing every defect message found (nothing when there is none); a CageVertexError when
     one of them names cage vertices."""
