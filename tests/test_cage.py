@@ -13,11 +13,11 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 import lbc_core.cage.make as cage_module
-import lbc_core.kernel.geometry as geometry
+import lbc_core.kernel.intersections as intersections
 from lbc_core.cage.make import MAX_CONTROL_POINTS, make_cage
 from lbc_core.cage.record import Cage
 from lbc_core.errors import CageError, CageVertexError
-from lbc_core.kernel.geometry import intersecting_triangles, overlapping_boxes
+from lbc_core.kernel.intersections import intersecting_triangles, overlapping_boxes
 from lbc_core.io import read_cage
 from helpers.random_cages import draw_dented_sphere, lengths, sphere_directions, star_polygon, subdivided_cube
 
@@ -445,8 +445,8 @@ def test_self_intersection_check_tests_only_nearby_triangles(monkeypatch):
     vertices, triangles = sphere(502)  # 1000 triangles
     assert len(triangles) == 1000
     found = []
-    broad_phase = geometry.overlapping_boxes
-    monkeypatch.setattr(geometry, "overlapping_boxes",
+    broad_phase = intersections.overlapping_boxes
+    monkeypatch.setattr(intersections, "overlapping_boxes",
                         lambda *arguments: found.append(broad_phase(*arguments)) or found[-1])
     make_cage(vertices, triangles)
     assert len(found) == 1 and len(found[0]) < 20 * len(triangles)

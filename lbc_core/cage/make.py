@@ -39,12 +39,8 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..errors import CageError, CageVertexError
-from ..kernel.geometry import (
-    cross2,
-    enclosed_measure,
-    overlapping_boxes,
-    segments_touch,
-)
+from ..kernel.geometry import cross2, enclosed_measure
+from ..kernel.intersections import overlapping_boxes, segments_touch
 from .messages import NamesVertices, count_of, first_inputs, raise_all, real_array, some_indices, some_items
 from .record import Cage
 from .topology import check_closed_manifold, check_self_intersection, orient_outward

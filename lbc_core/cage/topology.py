@@ -7,11 +7,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from ..kernel.geometry import (
-    enclosed_measure,
-    intersecting_triangles,
-    winding_numbers,
-)
+from ..kernel.geometry import enclosed_measure, winding_numbers
+from ..kernel.intersections import intersecting_triangles
 from .messages import LISTED, NamesVertices, count_of, some_indices, some_items
 
 
