@@ -8,12 +8,12 @@ every bundled wheel is one from PyPI, unmodified; in the project's tree (tests, 
 top-level package beside ``lbc_addon``.
 """
 
-import importlib
-import importlib.util
+from pathlib import Path
 
-_BUNDLED = f"{__package__}.lbc_core"
-
-_api = importlib.import_module(f"{_BUNDLED if importlib.util.find_spec(_BUNDLED) else 'lbc_core'}.addon_api")
+if (Path(__file__).parent / "lbc_core").is_dir():  # the extension: lbc_core bundled beside this module
+    from .lbc_core import addon_api as _api
+else:  # the project's tree: lbc_core the top-level package beside lbc_addon
+    from lbc_core import addon_api as _api
 
 BindOptions = _api.BindOptions
 CageError = _api.CageError

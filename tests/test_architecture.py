@@ -305,9 +305,9 @@ def addon_violations(root, api_names):
             names = []
             if isinstance(node, ast.Import):
                 names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.level == 0:
-                names = [node.module]
-            if any(name.split(".")[0] == CORE for name in names):
+            elif isinstance(node, ast.ImportFrom) and node.level in (0, 1):  # lbc_core, or the bundled .lbc_core
+                names = [node.module or ""]
+            if any(name.split(".")[0] == CORE for name in names) and source != "core":
                 found.append(f"lbc_addon/{path.name}:{node.lineno} imports lbc_core itself: take the name from "
                              "lbc_addon.core (an absolute import would fail in the extension, where lbc_core is a "
                              "sub-package of the add-on)")
@@ -325,19 +325,34 @@ def addon_violations(root, api_names):
 
 
 def _core_py_violations(path, api_names):
-    """lbc_addon/core.py imports only lbc_core.addon_api (by importlib) and takes only the listed names from it."""
+    """lbc_addon/core.py imports only lbc_core.addon_api (``from lbc_core import addon_api``, or the bundled
+    ``from .lbc_core import addon_api``) and takes only the listed names from it."""
     found = []
-    nodes = parsed(path)
-    for node in nodes:
-        if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "import_module":
-            text = ast.unparse(node.args[0])
-            if not text.rstrip("'\"").endswith(".addon_api"):
-                found.append(f"lbc_addon/core.py:{node.lineno} imports {text}: the add-on takes lbc_core only through "
-                             "lbc_core.addon_api")
+    for node in parsed(path):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == CORE and node.level in (0, 1):
+            taken = [alias.name for alias in node.names]
+            if node.module != CORE or taken != ["addon_api"]:
+                found.append(f"lbc_addon/core.py:{node.lineno} imports {', '.join(taken)} from {node.module}: the "
+                             "add-on takes lbc_core only through lbc_core.addon_api")
         if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "_api"
                 and node.attr not in api_names):
             found.append(f"lbc_addon/core.py:{node.lineno} takes {node.attr} from lbc_core.addon_api, which is not in "
                          "the doc's addon-api block: add it there and to addon_api's __all__, or do without")
+    return found
+
+
+def dynamic_import_violations(root):
+    """Messages for each import by name at run time (importlib.import_module, __import__) in lbc_core or lbc_addon:
+    it hides an arrow from this test and from an editor's go-to-definition."""
+    found = []
+    for package in (CORE, ADDON):
+        for source, path in modules_of(root, package).items():
+            for node in parsed(path):
+                called = getattr(node, "func", None) if isinstance(node, ast.Call) else None
+                name = getattr(called, "attr", None) or getattr(called, "id", None)
+                if name in ("import_module", "__import__"):
+                    found.append(f"{path.relative_to(root).as_posix()}:{node.lineno} imports by name at run time "
+                                 f"({name}): import the module plainly, so the import graph shows the arrow")
     return found
 
 
@@ -372,7 +387,8 @@ def all_violations(root, text):
                for name in unknown]
             + arrow_violations(root, allowed, layers) + stale_allowances(root, allowed) + layer_violations(allowed, layers)
             + folder_violations(layers) + loop_violations(root) + private_violations(root, private_allowances(text))
-            + blender_in_core_violations(root) + addon_violations(root, addon_api_names(text)))
+            + blender_in_core_violations(root) + addon_violations(root, addon_api_names(text))
+            + dynamic_import_violations(root))
 
 
 # -------------------------------------------------------------------------------------------------------- tests
@@ -424,6 +440,11 @@ def test_lbc_core_never_imports_blender_or_the_add_on():
     assert not message, message
 
 
+def test_no_module_imports_by_name_at_run_time():
+    message = "\n".join(dynamic_import_violations(ROOT))
+    assert not message, message
+
+
 def test_the_add_on_uses_only_its_api_of_lbc_core(doc):
     message = "\n".join(addon_violations(ROOT, addon_api_names(doc)))
     assert not message, message
@@ -467,8 +488,7 @@ def synthetic_tree(tmp_path, files):
         "lbc_core/meshing/common.py": "from . import DomainMesh\nfrom ..geometry import unit\n",
         "lbc_core/addon_api.py": "from .errors import CageError\n__all__ = ['CageError']\n",
         "lbc_addon/__init__.py": "",
-        "lbc_addon/core.py": "import importlib\n_api = importlib.import_module('lbc_core.addon_api')\n"
-                             "CageError = _api.CageError\n",
+        "lbc_addon/core.py": "from lbc_core import addon_api as _api\nCageError = _api.CageError\n",
         "lbc_addon/jobs.py": "from .core import CageError\n",
     }
     for relative, source in {**base, **files}.items():
@@ -505,10 +525,14 @@ def test_the_synthetic_tree_keeps_its_doc(tmp_path):
     # The add-on past its API.
     ("lbc_addon/jobs.py", "from .core import CageError, Cancelled\n", "takes Cancelled from lbc_addon.core"),
     ("lbc_addon/jobs.py", "import lbc_core\n", "imports lbc_core itself"),
-    ("lbc_addon/core.py", "import importlib\n_api = importlib.import_module('lbc_core.addon_api')\nX = _api.bind\n",
-     "takes bind from lbc_core.addon_api"),
-    ("lbc_addon/core.py", "import importlib\n_m = importlib.import_module('lbc_core.solver')\n",
-     "the add-on takes lbc_core only through lbc_core.addon_api"),
+    ("lbc_addon/jobs.py", "from .lbc_core import addon_api\n", "imports lbc_core itself"),
+    ("lbc_addon/core.py", "from lbc_core import addon_api as _api\nX = _api.bind\n", "takes bind from lbc_core.addon_api"),
+    ("lbc_addon/core.py", "from lbc_core.solve import solver\n", "the add-on takes lbc_core only through lbc_core.addon_api"),
+    ("lbc_addon/core.py", "from .lbc_core import binding\n", "the add-on takes lbc_core only through lbc_core.addon_api"),
+    # Imports by name at run time hide their arrows.
+    ("lbc_addon/core.py", "import importlib\n_api = importlib.import_module('lbc_core.addon_api')\n",
+     "imports by name at run time (import_module)"),
+    ("lbc_core/cage.py", "def f():\n    return __import__('lbc_core.errors')\n", "imports by name at run time (__import__)"),
     ("lbc_core/addon_api.py", "__all__ = ['CageError', 'bind']\n", "only in __all__ ['bind']"),
 ])
 def test_the_checker_catches(tmp_path, relative, source, expected):
