@@ -117,7 +117,7 @@ class Evaluation:
                                      deep_radius_edges=radius if deep is None else deep,
                                      **extra)
         return interpolate_and_reduce(smooth, binding.domain_weights, self.unit_cage.vertices, self.vertices,
-                                      binding.options["threshold"],
+                                      binding.outcome.threshold,
                                       REPRODUCTION_TOLERANCE * self.unit_cage.bbox_diagonal)
 
 

@@ -76,7 +76,7 @@ def piecewise_linear(binding):
     domain = binding.domain
     located, _, _ = interpolation_matrix(domain.vertices, domain.cells, binding.points)
     weights = interpolate_and_reduce(located, binding.domain_weights, binding.cage.vertices, domain.vertices,
-                                     binding.options["threshold"], 1e-9 * binding.cage.bbox_diagonal)
+                                     binding.outcome.threshold, 1e-9 * binding.cage.bbox_diagonal)
     return weights, time.perf_counter() - start
 
 
@@ -355,7 +355,7 @@ def bench_evaluation(baseline, rounds=3):
     unit_cage = frame.cage_to_unit(binding.cage)
     vertices, cells = frame.to_unit(binding.domain.vertices), binding.domain.cells
     located, _, _ = interpolation_matrix(vertices, cells, frame.to_unit(points))
-    threshold = binding.options["threshold"]
+    threshold = binding.outcome.threshold
     tolerance = REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal
     old = baseline_modules(baseline)
     current = {"smoothing": smoothing, "reduction": sys.modules["lbc_core.evaluate.reduction"], "thinning": thinning}

@@ -6,10 +6,11 @@
     b = lbc_core.rebind(b, edited_cage_vertices, cage_faces)  # after editing the cage at rest: warm where it can
 """
 
+from .binding.files import load_binding
 from .binding.options import BindOptions
 from .binding.pipeline import bind
 from .binding.rebinding import rebind
-from .binding.record import Binding, load_binding
+from .binding.record import Binding
 from .cage import Cage, make_cage
 from .compare.baselines import bind_bbw, bind_harmonic, bind_mvc, mean_value_coordinates
 from .errors import CageError, Cancelled, PointsOutside

@@ -9,7 +9,8 @@ to ``lbc_addon.core``.
 from .binding import options
 from .binding.options import BindOptions
 from .binding.pipeline import bind, too_small_warning
-from .binding.rebinding import WARM, rebind, solved_again_text
+from .binding.rebinding import rebind
+from .binding.record import Start
 from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
 from .cage.planar import flatten, reframed
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
@@ -42,6 +43,6 @@ def rebind_report(binding):
 def solved_again(binding):
     """What a warm re-bind solved again, for the user ("s of c cells solved, e of p points evaluated"); "" for any
     other binding, one bound from scratch included."""
-    if binding.outcome.start != WARM:
+    if binding.outcome.start is not Start.WARM:
         return ""
-    return solved_again_text(binding.outcome.solved_again)
+    return str(binding.outcome.solved_again)

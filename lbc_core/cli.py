@@ -199,7 +199,7 @@ def _run_bind(args):
 
 
 def _run_deform(args):
-    from .binding.record import load_binding
+    from .binding.files import load_binding
     from .io import FORMATS, check_output, planar, read_mesh, write_mesh, write_posed_obj
 
     inputs = (args.binding, args.new_cage, args.mesh)
@@ -254,7 +254,7 @@ def _run_deform(args):
 
 
 def _run_stats(args):
-    from .binding.record import load_binding
+    from .binding.files import load_binding
     from .compare.statistics import summary
 
     for path in ([args.plot] if args.plot else []) + ([args.coordinate[1]] if args.coordinate else []):

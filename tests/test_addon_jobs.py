@@ -281,7 +281,7 @@ def test_a_2d_re_bind_after_moving_one_cage_vertex_solves_only_near_it(new_sessi
     edited[5, :2] += 0.02 * np.ptp(outline, axis=0)  # one vertex moved, in the plane
     again = jobs.solve(request(edited, faces, points, flat=flatten(edited, faces, points)))
     counts = again.binding.outcome.solved_again
-    assert 0 < counts["cells solved"] < counts["cells"] / 4
+    assert 0 < counts.cells_solved < counts.cells / 4
     np.testing.assert_allclose(again.rest, points, atol=1e-5 * np.ptp(outline))  # the mesh at rest, in 3D
 
 

@@ -13,7 +13,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import lbc_core
-from lbc_core.binding.record import FILE_ARRAYS, OPTIONAL_FILE_ARRAYS
+from lbc_core.binding.files import FILE_ARRAYS, OPTIONAL_FILE_ARRAYS
+from lbc_core.binding.record import SolvedAgain, Start
 from lbc_core.errors import CageError
 from lbc_core.io import read_mesh
 
@@ -33,37 +34,69 @@ def test_save_and_load_give_identical_deformations(gargoyle, tmp_path):
     assert loaded.outcome == binding.outcome and loaded.outcome.start == "harmonic"
 
 
-def test_a_warm_rebinds_outcome_is_saved_apart_from_its_options_and_a_file_holding_it_among_them_still_loads(
-        tmp_path):
-    """A binding keeps what it was asked (options) apart from how it went (outcome). Files written while the options
-    record held the outcome's fields ("start", "rebind", "solved_again", "travel") load with them as the outcome."""
-    import json
-
+def test_a_warm_rebinds_outcome_is_saved_apart_from_its_options(tmp_path):
+    """A binding keeps what it was asked (options, a BindOptions) apart from how it went (outcome), typed both."""
     first = lbc_core.bind(SQUARE, None, INSIDE, cells=200)
     edited = SQUARE.copy()
     edited[2] += 0.01
     warm = lbc_core.rebind(first, edited)
-    assert warm.outcome.start == "previous solution" and warm.outcome.solved_again is not None
-    assert not {"start", "rebind", "solved_again", "travel"} & set(warm.options)
+    assert warm.outcome.start is Start.WARM and isinstance(warm.outcome.solved_again, SolvedAgain)
+    assert warm.options == first.options == lbc_core.BindOptions(cells=200)
+    assert warm.outcome.cells == len(warm.domain.cells) and warm.outcome.threshold == 1e-3 / 4
     warm.save(tmp_path / "warm.npz")
     loaded = lbc_core.load_binding(tmp_path / "warm.npz")
     assert loaded.outcome == warm.outcome and loaded.options == warm.options
     assert (loaded.iterations, loaded.converged) == (warm.iterations, warm.converged)
+
+
+def test_files_of_version_0_1_load_with_their_options_and_outcome_and_bind_again(tmp_path):
+    """Files 0.1.0 wrote (tests/data/bindings-0.1.0, made by that release): their options record held the cells
+    reached, the cells asked as cells_asked and the threshold resolved; their solved-again counts had prose names."""
+    cold = lbc_core.load_binding(DATA / "bindings-0.1.0" / "square.npz")
+    assert cold.options == lbc_core.BindOptions(cells=200, epsilon=0.01, threshold=0.00025)
+    assert (cold.outcome.start, cold.outcome.cells, cold.outcome.threshold) == (Start.COLD, 206, 0.00025)
+    warm = lbc_core.load_binding(DATA / "bindings-0.1.0" / "square-warm.npz")
+    assert warm.outcome.start is Start.WARM and warm.outcome.solved_again == SolvedAgain(203, 206, 5, 5)
+    assert warm.outcome.report.endswith("203 of 206 cells solved, 5 of 5 points evaluated")
+    again = lbc_core.rebind(cold, SQUARE * 1.01)  # bound from scratch (no solver state in a file), as asked then
+    assert again.options == cold.options and again.outcome.cells == 206
+
+
+def test_files_before_0_1_holding_the_outcome_among_the_options_load(tmp_path):
+    """Files written while the options record held the outcome's fields ("start", "rebind", "solved_again",
+    "travel"), and before that without a start, load with them as the outcome."""
+    import json
+
+    source = DATA / "bindings-0.1.0" / "square-warm.npz"
+    warm = lbc_core.load_binding(source)
 
     def options_holding_the_outcome(arrays):
         outcome = json.loads(str(arrays.pop("outcome")))
         outcome["rebind"] = outcome.pop("report")
         arrays["options"] = np.array(json.dumps(dict(json.loads(str(arrays["options"])), **outcome)))
 
-    old = lbc_core.load_binding(_rewritten(tmp_path / "warm.npz", tmp_path / "old.npz", options_holding_the_outcome))
+    old = lbc_core.load_binding(_rewritten(source, tmp_path / "old.npz", options_holding_the_outcome))
     assert old.outcome == warm.outcome and old.options == warm.options
 
     def before_the_outcome(arrays):  # a bind from scratch recorded no start
         del arrays["outcome"]
 
-    first.save(tmp_path / "first.npz")
-    old = lbc_core.load_binding(_rewritten(tmp_path / "first.npz", tmp_path / "old.npz", before_the_outcome))
-    assert old.outcome == first.outcome and old.outcome.start == "harmonic"
+    first = lbc_core.load_binding(DATA / "bindings-0.1.0" / "square.npz")
+    old = lbc_core.load_binding(_rewritten(DATA / "bindings-0.1.0" / "square.npz", tmp_path / "old.npz",
+                                           before_the_outcome))
+    assert old.outcome == first.outcome and old.outcome.start is Start.COLD
+
+
+def test_a_binding_made_with_a_weighting_function_loads_and_refuses_to_bind_again(tmp_path):
+    def flat(distances):
+        return np.ones_like(distances)
+
+    binding = lbc_core.bind(SQUARE, None, INSIDE, cells=200, weighting=flat)
+    binding.save(tmp_path / "own.npz")
+    loaded = lbc_core.load_binding(tmp_path / "own.npz")
+    np.testing.assert_array_equal(loaded.deform(SQUARE + 1.0), binding.deform(SQUARE + 1.0))
+    with pytest.raises(lbc_core.CageError, match=r"weighting function of its own \(flat\).*weighting=that function"):
+        lbc_core.rebind(loaded, SQUARE * 1.01)
 
 
 def test_load_against_another_cage_is_refused(woody, tmp_path):

@@ -351,7 +351,7 @@ def test_fuzz_lbc_with_damaged_binding_files(tmp_path, capsys, logo_binding, cut
 
 def test_a_flat_cage_with_faces_binds_in_2d_as_in_blender(tmp_path, capsys):
     from lbc_addon import jobs
-    from lbc_core.binding.record import load_binding
+    from lbc_core.binding.files import load_binding
     from lbc_core.cage.planar import flatten
 
     # A tilted 4 × 4 grid of quads: its outline (12 vertices) is the cage, the 4 inner vertices control nothing.

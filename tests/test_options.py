@@ -122,5 +122,5 @@ def test_bind_refuses_bad_options_before_meshing(monkeypatch, options, message):
 def test_bind_takes_an_options_object_and_records_it():
     binding = lbc_core.bind(SQUARE, None, [[0.5, 0.5]], options=BindOptions(cells=200, epsilon=0.01),
                             max_iterations=500)
-    assert binding.options["epsilon"] == 0.01 and binding.options["max_iterations"] == 500
-    assert binding.options["weighting"] == "quadratic" and binding.options["threshold"] == 1e-3 / 4
+    assert binding.options.epsilon == 0.01 and binding.options.max_iterations == 500
+    assert binding.options.weighting == "quadratic" and binding.outcome.threshold == 1e-3 / 4

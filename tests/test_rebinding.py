@@ -128,8 +128,8 @@ def test_points_out_of_reach_of_the_edit_keep_their_weights_and_the_rest_match_a
     edited = moved(cage, [4], 0.01)
     warm = rebind(first, edited, faces)
     counts = warm.outcome.solved_again
-    evaluated = counts["points evaluated"]
-    assert 0 < evaluated < counts["points"] == len(points)
+    evaluated = counts.points_evaluated
+    assert 0 < evaluated < counts.points == len(points)
     assert warm.outcome.report.endswith(f"{evaluated} of {len(points)} points evaluated")
     kept = np.flatnonzero(np.asarray(abs(warm.weights - first.weights).sum(axis=1)).ravel() == 0)
     assert len(kept) >= len(points) - evaluated
@@ -282,7 +282,7 @@ def test_another_topology_or_a_loaded_binding_falls_back_to_a_cold_bind(gargoyle
     assert again.outcome.report.startswith("bound from scratch: the previous binding's solver state is not at hand")
     # From scratch is the bind the artist made, at the cells asked for (not those the first mesh reached).
     fresh = lbc_core.bind(edited, faces, points, cells=3000)
-    assert len(first.domain.cells) != 3000 and again.options["cells_asked"] == 3000
+    assert len(first.domain.cells) != 3000 and again.options.cells == 3000
     assert abs(again.weights - fresh.weights).max() == 0
     # The cube's quads split along their other diagonals: other facets, so the carried mesh no longer fits.
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)

@@ -106,7 +106,7 @@ def test_smoothing_halves_the_bent_capsules_kinks(scene):
     domain = binding.domain
     located, _, _ = interpolation_matrix(domain.vertices, domain.cells, mesh)
     linear = interpolate_and_reduce(located, binding.domain_weights, binding.cage.vertices, domain.vertices,
-                                    binding.options["threshold"], 1e-9 * binding.cage.bbox_diagonal)
+                                    binding.outcome.threshold, 1e-9 * binding.cage.bbox_diagonal)
     piecewise = capsule.kink_figures(mesh, mesh + linear @ displacement, faces)
     # Measured: p99 2.9° against 5.8°, max 4.2° against 10.8° (3000 cells).
     assert smooth["p99"] < 0.6 * piecewise["p99"] and smooth["max"] < 0.6 * piecewise["max"]
@@ -126,7 +126,7 @@ def test_a_wider_fit_where_the_cage_is_thick_creases_the_capsule_less(scene):
     for deep in (RADIUS_EDGES, WIDER):
         smooth = SmoothInterpolation(domain.vertices, domain.cells, located, deep_radius_edges=deep)
         weights = interpolate_and_reduce(smooth, binding.domain_weights, binding.cage.vertices, domain.vertices,
-                                         binding.options["threshold"], 1e-9 * binding.cage.bbox_diagonal)
+                                         binding.outcome.threshold, 1e-9 * binding.cage.bbox_diagonal)
         found[deep] = [capsule.kink_figures(mesh, mesh + weights @ (pose(cage) - cage), faces)["max"]
                        for pose in (capsule.bend, capsule.twist)]
     assert all(wide < 0.95 * near for wide, near in zip(found[WIDER], found[RADIUS_EDGES]))
@@ -195,7 +195,7 @@ def test_a_mesh_near_the_cage_is_fitted_smoothly_and_creases_less_than_with_a_wi
     located, _, _ = interpolation_matrix(domain.vertices, domain.cells, mesh)
     wide = interpolate_and_reduce(SmoothInterpolation(domain.vertices, domain.cells, located, fade_edges=1.0),
                                   binding.domain_weights, binding.cage.vertices, domain.vertices,
-                                  binding.options["threshold"], 1e-9 * binding.cage.bbox_diagonal)
+                                  binding.outcome.threshold, 1e-9 * binding.cage.bbox_diagonal)
     narrow = capsule.kink_figures(mesh, binding.weights @ bent, faces)
     widened = capsule.kink_figures(mesh, wide @ bent, faces)
     assert narrow["p99"] < 0.9 * widened["p99"] and narrow["creased"] < widened["creased"], (narrow, widened)
@@ -256,7 +256,7 @@ def test_a_thin_curled_tentacle_creases_less_than_piecewise_linear():
     domain = binding.domain
     located, _, _ = interpolation_matrix(domain.vertices, domain.cells, mesh)
     linear = interpolate_and_reduce(located, binding.domain_weights, binding.cage.vertices, domain.vertices,
-                                    binding.options["threshold"], 1e-9 * binding.cage.bbox_diagonal)
+                                    binding.outcome.threshold, 1e-9 * binding.cage.bbox_diagonal)
     smooth = capsule.kink_figures(mesh, mesh + binding.weights @ displacement, faces)
     piecewise = capsule.kink_figures(mesh, mesh + linear @ displacement, faces)
     assert smooth["p99"] < 0.6 * piecewise["p99"], (smooth, piecewise)
@@ -307,7 +307,7 @@ def test_a_tentacle_tip_poking_out_of_its_cage_curls_with_it():
     located, _, _ = interpolation_matrix(domain.vertices, domain.cells, mesh)
     following = SmoothInterpolation(domain.vertices, domain.cells, located)  # no points: rows of the closest points
     weights = interpolate_and_reduce(following, binding.domain_weights, binding.cage.vertices, domain.vertices,
-                                     binding.options["threshold"], 1e-9 * scale)
+                                     binding.outcome.threshold, 1e-9 * scale)
     displacement = binding.cage.control_points_from_input(pose(180.0, 90.0)) - binding.rest_cage_vertices
     nearest = capsule.kink_figures(mesh, mesh + weights @ displacement, faces)
     extrapolated = capsule.kink_figures(mesh, mesh + binding.weights @ displacement, faces)  # the bind's own rows

@@ -108,6 +108,18 @@ class BindOptions:
         return self.threshold
 
 
+@dataclass(frozen=True)
+class SavedWeighting:
+    """A weighting function of the user's own, as a saved binding names it: the file keeps its name, not the function,
+    so the binding loads and deforms, but nothing can be solved with it again (``lbc_core.rebind`` refuses it)."""
+
+    name: str
+
+    def __call__(self, distances):
+        raise CageError(f"this binding was made with a weighting function of its own ({self.name}), which a saved "
+                        "binding does not keep: bind from scratch with lbc_core.bind(..., weighting=that function)")
+
+
 class _Bad(Exception):
     """One bad field: the message continues '<name> ...'."""
 
@@ -132,6 +144,8 @@ def _number(value, whole):
 def _weighting(value):
     if value is None:
         return WEIGHTINGS[0]
+    if isinstance(value, SavedWeighting):
+        return value  # a loaded binding's: it refuses to be solved with, with its message
     if isinstance(value, str):
         if value not in WEIGHTINGS:
             raise _Bad(f"{value!r} is not one of {', '.join(WEIGHTINGS)} (or pass a function of the distance)")

@@ -29,7 +29,7 @@ from ..solve.boundary import boundary_weights
 from ..solve.forecast import bind_seconds, check_memory, solve_forecast, solves_stretched
 from ..solve.geodesics import geodesic_distances, tv_weights
 from ..solve.solver import solve_on_mesh
-from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
+from .options import DEFAULT_CELLS, BindOptions, SavedWeighting
 from .record import COLD, Binding, BindOutcome
 
 # Largest reproduction error |Σ w c - x| the reduction accepts, relative to the cage's diagonal.
@@ -264,7 +264,8 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, re
         :attr:`Binding.stale`.
     """
     outcome = replace(outcome or BindOutcome(start=COLD), iterations=solution.iterations,
-                      converged=solution.converged)
+                      converged=solution.converged, cells=len(unit_domain.cells),
+                      threshold=request.threshold_for(cage.n_control_points))
     return Binding(
         cage=cage,
         rest_cage_vertices=cage.vertices.copy(),
@@ -274,7 +275,7 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, re
         outside=outside,
         points=points,
         scheme="lbc",
-        options=options_record(request, len(unit_domain.cells), request.threshold_for(cage.n_control_points)),
+        options=request,
         outcome=outcome,
         timings=clock.timings,
         objective=solution.objective * frame.scale ** (cage.dim - 1),  # TV scales as length^(d-1)
@@ -283,34 +284,17 @@ def lbc_binding(frame, cage, unit_domain, solution, weights, outside, points, re
     )
 
 
-def options_record(request, cells, threshold):
-    """What a binding records of its options (JSON-able): the cell count reached and the one asked (None: the
-    default), and the resolved threshold."""
-    record = {"weighting": request.weighting, "epsilon": request.epsilon, "max_iterations": request.max_iterations}
-    if request.tolerance is not None:
-        record["tolerance"] = request.tolerance
-    return dict(record, cells=cells, cells_asked=request.cells, threshold=threshold, method=request.method)
-
-
 def request_of(binding):
-    """The :class:`BindOptions` ``binding`` was made with: the cell count asked for, so that a bind from scratch is the
-    bind the artist made (bindings saved before it was recorded give the count they reached).
+    """The :class:`BindOptions` ``binding`` was made with, checked that it can be solved again.
 
     Raises
     ------
     CageError
         For a binding saved with a weighting function of its own, which its file names but does not keep.
     """
-    recorded = dict(binding.options)
-    weighting = recorded.get("weighting")
-    if isinstance(weighting, str) and weighting not in WEIGHTINGS:
-        raise CageError(f"this binding was made with a weighting function of its own ({weighting}), which a saved "
-                        "binding does not keep: bind from scratch with lbc_core.bind(..., weighting=that function)")
-    if "cells_asked" in recorded:
-        recorded["cells"] = recorded["cells_asked"]
-    return BindOptions.of(None, **{key: recorded[key] for key in ("cells", "weighting", "epsilon", "threshold",
-                                                                 "method", "tolerance", "max_iterations")
-                                  if recorded.get(key) is not None})
+    if isinstance(binding.options.weighting, SavedWeighting):
+        binding.options.weighting(None)  # raises, saying so
+    return binding.options
 
 
 def check_request(cage_vertices, cage_faces, points, options, progress=None):

@@ -63,7 +63,7 @@ from .pipeline import (
     request_of,
     solve,
 )
-from .record import SOLVED_AGAIN, WARM, BindOutcome
+from .record import WARM, BindOutcome, SolvedAgain
 
 # Rings of mesh vertices around the moved control points' supports solved again, room for a support to grow
 # (bench/RESULTS.md, "A Rebind's fixed costs, and one ring around the supports").
@@ -101,11 +101,12 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     Returns
     -------
     Binding
-        Its ``outcome`` (:class:`~lbc_core.binding.record.BindOutcome`): ``start`` is "previous solution" (:data:`WARM`)
-        for a warm re-bind, "harmonic" (:data:`lbc_core.binding.record.COLD`) for a cold one; ``report`` says, for the user, how many cells
-        were solved again, or why the bind started from scratch; a warm one's ``solved_again`` holds those counts as
-        numbers (see :func:`solved_again_text`), its ``travel`` how far the cage moved since its last bind from
-        scratch.
+        Its ``outcome`` (:class:`~lbc_core.binding.record.BindOutcome`): ``start`` is
+        :attr:`~lbc_core.binding.record.Start.WARM` for a warm re-bind, :attr:`~lbc_core.binding.record.Start.COLD`
+        for a cold one; ``report`` says, for the user, how many cells were solved again, or why the bind started from
+        scratch; a warm one's ``solved_again`` holds those counts (a
+        :class:`~lbc_core.binding.record.SolvedAgain`), its ``travel`` how far the cage moved since its last bind
+        from scratch.
 
     Raises
     ------
@@ -223,20 +224,11 @@ def _largest_move(previous, cage):
 def _warm_outcome(carry, solved, evaluated, points):
     """The :class:`BindOutcome` of a warm re-bind that solved ``solved`` cells again and evaluated ``evaluated`` of
     ``points`` points (its iterations and convergence are filled in with the binding)."""
-    counts = dict(zip(SOLVED_AGAIN, (int(solved), len(carry.mesh.cells), evaluated, points)))
-    done = (solved_again_text(counts) if carry.moved.any() or evaluated
+    counts = SolvedAgain(int(solved), len(carry.mesh.cells), evaluated, points)
+    done = (str(counts) if carry.moved.any() or evaluated
             else "it was made for the cage as it is now, so nothing was solved or evaluated again")
     return BindOutcome(start=WARM, solved_again=counts, report=f"bound again from the previous binding: {done}",
                        travel=carry.travel)
-
-
-def solved_again_text(counts):
-    """What a warm re-bind solved again, for the user: "s of c cells solved, e of p points evaluated".
-
-    ``counts`` is its ``Binding.outcome.solved_again``: {"cells solved", "cells", "points evaluated", "points"}.
-    """
-    return (f"{counts['cells solved']} of {counts['cells']} cells solved, "
-            f"{counts['points evaluated']} of {counts['points']} points evaluated")
 
 
 def _to_solve_again(carry):

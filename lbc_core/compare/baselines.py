@@ -17,8 +17,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..binding.options import BindOptions
 from ..binding.pipeline import check_cage_and_points
-from ..binding.record import Binding
+from ..binding.record import Binding, BindOutcome
 from ..evaluate.interpolation import interpolation_matrix
 from ..kernel.fem import stiffness_matrix
 from ..kernel.frame import UnitFrame
@@ -304,6 +305,7 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
         outside=outside,
         points=points,
         scheme=scheme,
-        options={"cells": len(domain.cells)},
+        options=BindOptions(cells=cells),
+        outcome=BindOutcome(cells=len(domain.cells)),
         timings=laps.seconds,
     )
