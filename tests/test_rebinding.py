@@ -17,7 +17,6 @@ from lbc_core.binding.rebinding import STALE, rebind
 from lbc_core.evaluate.smoothing import median_edge
 from lbc_core.solve.solver import solve_on_mesh
 
-pytestmark = pytest.mark.slow  # binds end to end: left out of the fast tier
 
 DATA = Path(__file__).parent / "data"
 GARGOYLE = DATA / "cages-3d" / "gargoyle"
@@ -78,6 +77,7 @@ def cold_on_carried_mesh(previous, cage_vertices, faces):
     return result, frame
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_warm_rebind_meets_every_guarantee_and_matches_a_cold_solve_on_its_mesh(gargoyle):
     cage, faces, points, first = gargoyle
     edited = moved(cage, [3, 11], 0.01)
@@ -97,6 +97,7 @@ def test_warm_rebind_meets_every_guarantee_and_matches_a_cold_solve_on_its_mesh(
     assert np.abs(warm.domain_weights - cold.weights).max() < 0.05
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_warm_rebind_runs_the_pipelines_stages_on_one_progress_bar_and_times_them(gargoyle):
     """The re-bind's stages are the pipeline's (one table of shares, STAGES): the bar runs from 0 to 1 without going
     back, and the timings name the pipeline's stages (the solve by the solver's own parts)."""
@@ -112,6 +113,7 @@ def test_a_warm_rebind_runs_the_pipelines_stages_on_one_progress_bar_and_times_t
     assert set(first.timings) - set(STAGES) == set(warm.timings) - set(STAGES)  # the solver's parts, named alike
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_warm_rebind_follows_a_cold_bind_of_the_edited_cage(gargoyle):
     cage, faces, points, first = gargoyle
     edited = moved(cage, [5], 0.02)
@@ -123,6 +125,7 @@ def test_warm_rebind_follows_a_cold_bind_of_the_edited_cage(gargoyle):
     assert gap < 5e-3 * warm.cage.bbox_diagonal
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_points_out_of_reach_of_the_edit_keep_their_weights_and_the_rest_match_a_full_evaluation(gargoyle_l10):
     cage, faces, points, first = gargoyle_l10
     edited = moved(cage, [4], 0.01)
@@ -145,6 +148,7 @@ def test_points_out_of_reach_of_the_edit_keep_their_weights_and_the_rest_match_a
     assert np.all(full.stale == 0) and warm.stale.max() <= STALE
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_staleness_adds_up_over_warm_rebinds_until_the_points_are_evaluated_again(gargoyle_l10):
     cage, faces, points, first = gargoyle_l10
     assert first.stale is None
@@ -161,6 +165,7 @@ def test_staleness_adds_up_over_warm_rebinds_until_the_points_are_evaluated_agai
     assert np.any(over & (once.stale > 0) & (change < STALE))  # over only with the first edit's change counted
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_second_warm_rebind_starts_from_the_first(gargoyle):
     cage, faces, points, first = gargoyle
     once = rebind(first, moved(cage, [3], 0.01), faces)
@@ -170,6 +175,7 @@ def test_a_second_warm_rebind_starts_from_the_first(gargoyle):
     assert twice.iterations <= first.iterations / 2
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_an_unmoved_cage_gives_the_previous_weights_back(gargoyle):
     cage, faces, points, first = gargoyle
     again = rebind(first, cage, faces)
@@ -181,6 +187,7 @@ def test_an_unmoved_cage_gives_the_previous_weights_back(gargoyle):
     assert abs(again.weights - first.weights).max() < 1e-9
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_an_edit_that_would_fold_the_mesh_falls_back_to_a_cold_bind(gargoyle):
     cage, faces, points, first = gargoyle
     # A vertex pushed deep inward drags the cells around it through their neighbours.
@@ -198,6 +205,7 @@ def test_an_edit_that_would_fold_the_mesh_falls_back_to_a_cold_bind(gargoyle):
     assert warm.solver_state is not None  # and the next re-bind can be warm again
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_an_edit_that_squashes_a_cell_rebinds_warm_once_its_free_corners_are_polished(gargoyle):
     """Cage vertex 6 moved by 8 % squashes a carried cell (the previous weights put it below a quarter of its shape);
     its free corners are moved as the mesher polishes, those vertices are solved again, and the re-bind stays warm:
@@ -233,6 +241,7 @@ def test_a_sliver_on_the_cage_turned_inside_out_is_mended_by_a_3_2_flip():
     assert np.array_equal(flipped_slivers(edited, crowded, np.array([e1, e2, a, b]), np.r_[folded, False]), crowded)
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_an_edit_that_turns_a_sliver_on_the_cage_inside_out_rebinds_warm():
     """The kind of edit a colleague made in Blender (cage L09, a vertex moved outward by 2 % of the diagonal; vertex 48
     on today's mesh) bound from scratch: it turns inside out a sliver on the cage. Mended by a 3-2 flip, the re-bind stays warm, meets every guarantee and
@@ -271,6 +280,7 @@ def test_a_squashed_cell_counts_only_with_a_corner_off_the_cage():
         assert _squashed(mesh, flattened).tolist() == squashed
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_another_topology_or_a_loaded_binding_falls_back_to_a_cold_bind(gargoyle, tmp_path):
     cage, faces, points, first = gargoyle
     path = tmp_path / "b.npz"
@@ -293,6 +303,7 @@ def test_another_topology_or_a_loaded_binding_falls_back_to_a_cold_bind(gargoyle
     assert reason == "bound from scratch: the cage's vertices, faces or welding changed"
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_quad_bent_out_of_its_plane_rebinds_warm_when_the_mesh_follows_its_diagonal():
     """An artist's edit at rest bends the quads around the moved vertex along their diagonals; the mesher made the
     well-shaped quads' diagonals features, so the carried mesh stays on the bent cage."""
@@ -348,6 +359,7 @@ def test_a_quad_bent_a_little_rebinds_warm_with_the_mesh_split_along_its_diagona
     assert_guarantees(again, points)
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_side_vertex_of_a_loop_cut_cylinder_moved_out_rebinds_warm_with_the_surface_on_the_cage():
     """Blender's Cylinder with two loop cuts: moving a side vertex out turns the loop's edges and the quads' diagonals
     around it into creases, which the previous mesh's faces crossed. Carried as they were, they left the cage by 7 %
@@ -367,6 +379,7 @@ def test_a_side_vertex_of_a_loop_cut_cylinder_moved_out_rebinds_warm_with_the_su
     assert_guarantees(again, points)
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_loop_cut_cylinder_rebinds_warm_after_a_loop_is_scaled_or_a_cap_vertex_lifted():
     """Blender's Cylinder with two loop cuts: scaling a loop keeps its quads planar trapezoids, lifting a cap vertex
     bends the 32-gon cap; neither moves the carried mesh's faces off the cage by more than CHORD_KEPT of a cell. (The
@@ -404,6 +417,7 @@ def test_chord_distances_measure_how_far_a_face_across_a_fold_leaves_the_cage():
     assert _chord_distances(within, np.array([[0, 0, 1]]), cage) == pytest.approx([0.0], abs=1e-12)
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_cold_bind_for_many_bent_faces_names_five_and_counts_the_others(monkeypatch):
     """A new user read a list of bent faces cut at five as if it were all of them."""
     import lbc_core.binding.carry as carry
@@ -416,6 +430,7 @@ def test_a_cold_bind_for_many_bent_faces_names_five_and_counts_the_others(monkey
         "bound from scratch: cage faces 0, 1, 2, 3, 4 and 2 more bent too far")
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm():
     """Widening a pyramid's rhombus base in its plane brings its diagonals within QUAD_SPLIT_TIE of each other, so it
     splits from its first vertex instead of along the shorter diagonal; the base stays flat, and the carried mesh
@@ -440,6 +455,7 @@ def test_an_edit_that_changes_only_how_faces_split_into_triangles_rebinds_warm()
     assert again.cage.fingerprint() == lbc_core.make_cage(edited, faces).fingerprint()
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_cancel_stops_a_warm_rebind_and_leaves_the_previous_binding_as_it_was(gargoyle):
     cage, faces, points, first = gargoyle
     state = [part.copy() for part in (first.solver_state.pair_state, first.solver_state.slot_state)]
@@ -469,6 +485,7 @@ def test_a_2d_polygon_rebinds_warm():
     assert warm.iterations < first.iterations
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_saved_binding_made_with_a_weighting_function_is_refused_and_told_what_to_do(tmp_path):
     """A reviewer's finding: the saved binding keeps the function's name only, which rebind fed back to BindOptions
     ("weighting '<function ...>' is not one of ..."), an option the user never typed."""
@@ -483,6 +500,7 @@ def test_a_saved_binding_made_with_a_weighting_function_is_refused_and_told_what
         rebind(lbc_core.load_binding(path), moved(polygon, [2], 0.02))
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_baseline_binding_is_refused(gargoyle):
     cage, faces, points, _ = gargoyle
     mvc = lbc_core.bind_mvc(cage, faces, points[:50])
@@ -490,6 +508,7 @@ def test_a_baseline_binding_is_refused(gargoyle):
         rebind(mvc, cage, faces)
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_3d_binding_without_the_cages_faces_is_told_to_pass_them(gargoyle):
     """A new user's find: rebind(binding, vertices) of a 3D binding said a 2D polygon must lie in a plane."""
     cage, _, _, binding = gargoyle
@@ -510,6 +529,7 @@ def test_a_simplex_cage_binds_again_from_scratch_and_says_why():
     np.testing.assert_allclose(again.weights.toarray(), expected, atol=1e-12)
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_a_cage_moved_far_in_all_since_its_last_cold_bind_binds_from_scratch(gargoyle):
     """A new user's finding: a side vertex of a subdivided cube moved out by 10 % and back, re-bound warm both ways,
     ended 2.6 times the remeshing noise from a fresh bind. The moves add up across warm re-binds."""
@@ -530,6 +550,7 @@ def test_a_cage_moved_far_in_all_since_its_last_cold_bind_binds_from_scratch(gar
     assert rebind(back, out, faces).outcome.start == "previous solution"  # counted again from the cold bind
 
 
+@pytest.mark.slow  # binds end to end: left out of the fast tier
 def test_an_n_gon_edited_out_of_its_poke_rebinds_from_scratch_and_says_so():
     """An octagon prism's caps are split from their middle; one vertex of each pushed far in makes them non-convex with
     the middle too near a side, so they are ear-clipped: other facets, which the carried mesh does not follow."""
