@@ -45,7 +45,8 @@ import traceback
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests"), str(ROOT / "tools")]
+import figures  # noqa: E402  (tools/figures.py: the figures the docs quote from the tables)
 
 DOC = ROOT / "docs" / "benchmarks.md"
 QUICK_OUT = ROOT / "out" / "bench-quick"
@@ -510,6 +511,8 @@ def main(argv=None):
             for part, (body, results) in bodies.items():
                 write(part, body, *results["load"], f", Blender {results['blender']}")
             print(f"{', '.join(blender)}: {time.perf_counter() - clock:.0f} s, written", flush=True)
+    if doc == DOC.resolve():  # the figures the README and the docs quote from these tables, rewritten
+        figures.main()
     if failed:
         print(f"\nfailed: {', '.join(failed)} (their blocks are unchanged)", file=sys.stderr)
         return 1
