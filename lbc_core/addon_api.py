@@ -10,17 +10,17 @@ from . import forecast, options
 from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
 from .forecast import format_size
-from .options import BindOptions
+from .options import DEFAULT_SMOOTHNESS, BindOptions
 from .pipeline import bind, too_small_warning
 from .planar import flatten, reframed
 from .rebinding import WARM, rebind, solved_again_text
-from .thinning import DEFAULT_FLOOR, thin_changed_rows, thin_weights
+from .thinning import DEFAULT_FLOOR, floor_for, thin_changed_rows, thin_weights
 from .version import __version__
 
 __all__ = [
-    "BindOptions", "CageError", "CageVertexError", "Cancelled", "DEFAULT_CELLS", "DEFAULT_FLOOR", "DEFAULT_TOLERANCE",
-    "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten", "format_size", "make_cage",
-    "rebind",
+    "BindOptions", "CageError", "CageVertexError", "Cancelled", "DEFAULT_CELLS", "DEFAULT_FLOOR", "DEFAULT_SMOOTHNESS",
+    "DEFAULT_TOLERANCE", "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten",
+    "floor_for", "format_size", "make_cage", "rebind",
     "rebind_report", "reframed", "solved_again", "some_indices", "thin_changed_rows", "thin_weights",
     "too_small_warning",
 ]

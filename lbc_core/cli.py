@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CageError, Cancelled
-from .options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
+from .options import DEFAULT_CELLS, DEFAULT_SMOOTHNESS, WEIGHTINGS, BindOptions
 from .version import __version__
 
 SCHEMES = ("lbc", "mvc", "harmonic", "bbw")
@@ -58,6 +58,21 @@ STATS_COLUMNS = """The columns (the paper's Section 5, n control points):
   Q(4), Q(8) the share of the domain where at least 4 (8) coordinates exceed 1e-3/n: near 0 is local"""
 
 
+def _solving_flags():
+    """The bind options' flags, shared by the commands that bind."""
+    solving = argparse.ArgumentParser(add_help=False)
+    solving.add_argument("--cells", type=int, help="about how many domain triangles / tetrahedra (default: "
+                         f"{DEFAULT_CELLS[2]} in 2D, {DEFAULT_CELLS[3]} in 3D)")
+    solving.add_argument("--weighting", choices=WEIGHTINGS, help=f"LBC's TV weighting (default {WEIGHTINGS[0]})")
+    solving.add_argument("--epsilon", type=float, help="LBC's C1 relaxation width (default 0: plain TV)")
+    solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default 1e-3/n)")
+    solving.add_argument("--tolerance", type=float, help="LBC's ADMM stopping tolerance (default: the solver's)")
+    solving.add_argument("--max-iterations", type=int, help="LBC's ADMM iteration limit (default 10000)")
+    solving.add_argument("--smoothness", type=float, help="smooth ↔ local in [0, 1]: 1 folds bent joints least, 0 "
+                         f"gives each point the fewest influences (default {DEFAULT_SMOOTHNESS:g})")
+    return solving
+
+
 def _parser():
     parser = argparse.ArgumentParser(prog="lbc", description="Local Barycentric Coordinates for cage deformation.")
     parser.add_argument("--version", action="version", version=f"lbc {__version__}")
@@ -68,14 +83,7 @@ def _parser():
                         "cage's warnings)")
     common.add_argument("--json", action="store_true", help="print the figures as JSON on stdout")
 
-    solving = argparse.ArgumentParser(add_help=False)
-    solving.add_argument("--cells", type=int, help="about how many domain triangles / tetrahedra (default: "
-                         f"{DEFAULT_CELLS[2]} in 2D, {DEFAULT_CELLS[3]} in 3D)")
-    solving.add_argument("--weighting", choices=WEIGHTINGS, help=f"LBC's TV weighting (default {WEIGHTINGS[0]})")
-    solving.add_argument("--epsilon", type=float, help="LBC's C1 relaxation width (default 0: plain TV)")
-    solving.add_argument("--threshold", type=float, help="LBC's reduction threshold (default 1e-3/n)")
-    solving.add_argument("--tolerance", type=float, help="LBC's ADMM stopping tolerance (default: the solver's)")
-    solving.add_argument("--max-iterations", type=int, help="LBC's ADMM iteration limit (default 10000)")
+    solving = _solving_flags()
 
     bind = commands.add_parser("bind", parents=[common, solving], help="bind a mesh to a cage, save the binding")
     bind.add_argument("cage", help="cage file (.obj/.off/.ply); a file without faces is a 2D polygon")
@@ -353,7 +361,7 @@ def _bind(scheme, cage_vertices, cage_faces, points, args, progress, domain=None
 def _options(args):
     """The bind options of the command's flags, checked (a bad value exits 2 before any file is read)."""
     return BindOptions(cells=args.cells, weighting=args.weighting, epsilon=args.epsilon, threshold=args.threshold,
-                       tolerance=args.tolerance, max_iterations=args.max_iterations)
+                       tolerance=args.tolerance, max_iterations=args.max_iterations, smoothness=args.smoothness)
 
 
 def _read_inputs(cage_path, mesh_path=None):

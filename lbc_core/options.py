@@ -28,6 +28,10 @@ DEFAULT_MAX_ITERATIONS = 10000
 METHODS = {2: ("auto", "triangle", "delaunay"), 3: ("auto", "delaunay")}
 # Weights below this fraction of 1/n are dropped from the stored coordinates by default.
 DEFAULT_THRESHOLD_SHARE = 1e-3
+# Smooth ↔ local, 0 to 1: how wide the smooth evaluation's fit reaches (lbc_core.smoothing.radius_for) and how much the
+# add-on's thinning keeps (lbc_core.thinning.floor_for). 0.5 folds the joints of a real character less than Mesh
+# Deform for 1.1-1.35 times the influences of 0 (bench/RESULTS.md, "Joints as smooth as Mesh Deform's").
+DEFAULT_SMOOTHNESS = 0.5
 
 
 @dataclass(frozen=True)
@@ -51,6 +55,9 @@ class BindOptions:
         At least 1.
     method : str
         Domain mesher, one of :data:`METHODS` for the cage's dimension.
+    smoothness : float or None
+        Smooth ↔ local, in [0, 1]: the smooth evaluation's reach (:func:`lbc_core.smoothing.radius_for`; 1 folds bent
+        joints least, 0 keeps each point's weights on the fewest cage vertices). None: :data:`DEFAULT_SMOOTHNESS`.
 
     Raises
     ------
@@ -65,10 +72,12 @@ class BindOptions:
     tolerance: float = None
     max_iterations: int = None
     method: str = None
+    smoothness: float = None
 
     def __post_init__(self):
         problems = []
-        for name in ("cells", "weighting", "epsilon", "threshold", "tolerance", "max_iterations", "method"):
+        for name in ("cells", "weighting", "epsilon", "threshold", "tolerance", "max_iterations", "method",
+                     "smoothness"):
             try:
                 value = _CHECKS[name](getattr(self, name))
             except _Bad as bad:
@@ -198,4 +207,7 @@ _CHECKS = {
     "max_iterations": _bounded(DEFAULT_MAX_ITERATIONS, True, lambda value: value >= 1,
                                f"must be at least 1, got {{value}} (left out, or None: {DEFAULT_MAX_ITERATIONS})"),
     "method": _method,
+    "smoothness": _bounded(DEFAULT_SMOOTHNESS, False, lambda value: 0 <= value <= 1,
+                           f"must be in [0, 1], got {{value:g}}: 0 the most local weights, 1 the smoothest joints "
+                           f"(left out, or None: {DEFAULT_SMOOTHNESS:g})"),
 }
