@@ -3,7 +3,7 @@
     PYTHONPATH=. .venv/bin/python bench/blender_deform.py [--frames 31] [--scenes suzanne,gargoyle]
         [--modes edit,playback] [--thin 0.002:0,0.005:12] [--sums chain,fma,fma-vector]
         [--shared 0,11,12] [--trees direct,pairs,points,displacement,compact-tail,
-        sorted,triplets] [--reference-cells 16000] [--handler-off]
+        sorted,triplets] [--reference-cells 16000] [--handler-off] [--smoothness 0,1]
 
 Headless, with the bpy module, everything in one process. Each variant is its own copy of the mesh (its own mesh
 data, so its own attributes) and is linked into the scene only while it is measured, so every timed update evaluates
@@ -26,7 +26,8 @@ and the default's tree changed by another lever (``--trees``; see :func:`rebuild
 for "triplets"). ``--reference-cells`` also
 prints how far the binding with every weight is from a finer one: the yardstick for the error thinning makes.
 ``--handler-off`` also measures the default binding with the add-on's depsgraph handler (its check of every binding
-after a cage edit) unregistered.
+after a cage edit) unregistered. ``--smoothness`` also binds copies at other Smoothness values (the add-on's other
+defaults).
 """
 
 import argparse
@@ -590,8 +591,24 @@ def animate(cage, rest, frames):
             key.keyframe_insert("value", frame=frame)
 
 
+def smoothness_variants(mesh, cage, values):
+    """Copies of the mesh bound with the add-on's defaults but Smoothness, one per value: {name: object}."""
+    variants = {}
+    for value in values:
+        obj = copy_object(mesh, f"smoothness {value:g}")
+        storage.remove(obj.data)
+        bpy.context.scene.collection.objects.link(obj)
+        start = time.perf_counter()
+        summary = api.bind(obj, cage, smoothness=value)
+        print(f"  LBC bound in {time.perf_counter() - start:.1f} s at Smoothness {value:g}: K = {summary['slots']}, "
+              f"{summary['mean_influences']:.1f} influences per vertex on average")
+        bpy.context.scene.collection.objects.unlink(obj)
+        variants[f"LBC smoothness {value:g} K={summary['slots']}"] = obj
+    return variants
+
+
 def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, handler_off=False, shared=(),
-              trees=(), modes=("edit", "playback")):
+              trees=(), modes=("edit", "playback"), smoothness=()):
     mesh, cage = SCENES[name]()
     rest = positions(cage.data)
     print(f"\n{name}: {len(mesh.data.vertices)} vertices, cage {len(rest)} vertices")
@@ -609,10 +626,12 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
     scale = float(np.linalg.norm(np.ptp(positions(mesh.data), axis=0)))
     for obj in (mesh, default):
         bpy.context.scene.collection.objects.unlink(obj)
+    others = smoothness_variants(mesh, cage, smoothness)
     variants = {"no deformer": copy_object(mesh, "plain")}
     variants["Mesh Deform"] = mesh_deform_variant(mesh, cage, "meshdeform", precision)
     variants[f"LBC every weight K={full}"] = mesh
     variants[f"LBC default K={summary['slots']}"] = default
+    variants.update(others)
 
     def compare(key, reference, what):
         error = deformation_error(variants[key], reference, cage, rest, scale)
@@ -695,6 +714,8 @@ def main(argv=None):
                         "copies of the default binding (0: every slot for every vertex), e.g. 0,11,12")
     parser.add_argument("--trees", default="",
                         help="comma-separated changes of the default's tree: direct,pairs,points,sorted,triplets")
+    parser.add_argument("--smoothness", default="",
+                        help="comma-separated Smoothness values to bind copies with besides the default, e.g. 0,1")
     parser.add_argument("--modes", default="edit,playback",
                         help="what a frame is: edit (the update after a cage edit, the add-on's handler included), "
                         "playback (frame_set, the cage animated)")
@@ -704,7 +725,8 @@ def main(argv=None):
     for name in args.scenes.split(","):
         run_scene(name, thinnings, [form for form in args.sums.split(",") if form], args.frames, args.precision,
                   args.reference_cells, args.handler_off, [int(value) for value in args.shared.split(",") if value],
-                  [form for form in args.trees.split(",") if form], args.modes.split(","))
+                  [form for form in args.trees.split(",") if form], args.modes.split(","),
+                  [float(value) for value in args.smoothness.split(",") if value])
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from dataclasses import replace
 import bpy
 
 from . import deformer, diagnosis, geometry, jobs, node_group, writing
-from .core import CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
+from .core import DEFAULT_SMOOTHNESS, CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
 from .properties import DEFAULT_INFLUENCES, is_bound
 
 # A bind's warnings go to this logger for pipelines; the NullHandler keeps Python's last-resort handler from printing
@@ -26,7 +26,8 @@ logger.addHandler(logging.NullHandler())
 
 
 def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, thinning=0.0,
-         influences=DEFAULT_INFLUENCES, mode="AUTO", from_scratch=False, progress=None, cancel=None):
+         influences=DEFAULT_INFLUENCES, mode="AUTO", smoothness=DEFAULT_SMOOTHNESS, from_scratch=False, progress=None,
+         cancel=None):
     """Bind ``mesh_obj`` to ``cage_obj`` (replacing an existing binding) and add the deformer.
 
     Parameters are those of the Bind operator; ``progress(fraction, message)`` and ``cancel() -> bool`` are passed
@@ -56,7 +57,7 @@ def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tol
     _require_enabled()
     request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), cells=cells,
                                 weighting=weighting, epsilon=epsilon, tolerance=tolerance, thinning=thinning,
-                                influences=influences, mode=mode)
+                                influences=influences, mode=mode, smoothness=smoothness)
     return _bind_request(replace(request, from_scratch=from_scratch), progress, cancel)
 
 

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 
 from . import storage
-from .core import MAX_CONTROL_POINTS, CageError, flatten, some_indices
+from .core import DEFAULT_SMOOTHNESS, MAX_CONTROL_POINTS, CageError, flatten, some_indices
 from .jobs import BindRequest, check_options, verb_for
 from .properties import DEFAULT_INFLUENCES, is_bound
 
@@ -281,13 +281,13 @@ def swapped_selection(cage_obj, mesh_objs):
 
 
 def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
-             thinning=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO"):
+             thinning=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO", smoothness=DEFAULT_SMOOTHNESS):
     """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
     options = {"cells": cells, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
-               "thinning": thinning, "influences": influences, "mode": mode}
+               "thinning": thinning, "influences": influences, "mode": mode, "smoothness": smoothness}
     check_options(options)
     # As Object.lbc stores them, so that a Rebind, which reads them back, asks for the same solve.
-    options.update({key: float(np.float32(options[key])) for key in ("epsilon", "tolerance", "thinning")})
+    options.update({key: float(np.float32(options[key])) for key in ("epsilon", "tolerance", "thinning", "smoothness")})
     _check_roles(mesh_obj, cage_obj)
     _check_bindable(mesh_obj, cage_obj)
     points = _mesh_points(mesh_obj)

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import storage
-from .core import (DEFAULT_FLOOR, BindOptions, CageError, CageVertexError, PointsOutside, bind, make_cage, rebind,
-                   rebind_report, reframed, solved_again, thin_changed_rows, thin_weights,
+from .core import (BindOptions, CageError, CageVertexError, PointsOutside, bind, make_cage, rebind,
+                   rebind_report, reframed, solved_again, thin_changed_rows, thin_weights, floor_for,
                    too_small_warning)
 
 
@@ -40,7 +40,7 @@ KEPT_BINDINGS = 4
 THINNING_SHARE = 0.1
 # The bind options that must match the previous binding's for a warm start (Thinning and Max Influences are applied
 # after the bind).
-_SOLVE_OPTIONS = ("cells", "weighting", "epsilon", "tolerance", "mode")
+_SOLVE_OPTIONS = ("cells", "weighting", "epsilon", "tolerance", "mode", "smoothness")
 
 
 @dataclass
@@ -141,7 +141,7 @@ def check_options(options):
     core_options(options)
     thinning, influences, mode = options["thinning"], options["influences"], options["mode"]
     if isinstance(thinning, bool) or not isinstance(thinning, numbers.Real) or not thinning >= 0:
-        raise CageError(f"thinning must be a number of at least 0 (0: the default, {DEFAULT_FLOOR}), not {thinning!r}")
+        raise CageError(f"thinning must be a number of at least 0 (0: from Smoothness), not {thinning!r}")
     if isinstance(influences, bool) or not isinstance(influences, numbers.Integral) or influences < 0:
         raise CageError(f"influences must be a whole number of at least 0 (0: no limit), not {influences!r}")
     if mode not in MODES:
@@ -163,6 +163,7 @@ def core_options(options):
         weighting=options["weighting"],
         epsilon=options["epsilon"],
         tolerance=options["tolerance"] or None,
+        smoothness=options["smoothness"],
         # Shewchuk's Triangle is not bundled (its licence is not GPL-compatible): use lbc_core's own mesher.
         method="delaunay",
     )
@@ -374,8 +375,9 @@ def _cage_modifiers_notes(request, error):
 
 
 def _thinning(options):
-    """(floor, Max Influences) the weights are thinned with, from the add-on's options (Thinning 0: the default)."""
-    return options["thinning"] or DEFAULT_FLOOR, options["influences"]
+    """(floor, Max Influences) the weights are thinned with, from the add-on's options (Thinning 0: Smoothness's
+    floor, lbc_core.evaluate.thinning.floor_for)."""
+    return options["thinning"] or floor_for(options["smoothness"]), options["influences"]
 
 
 def _not_converged(iterations):

@@ -8,7 +8,7 @@ from bpy.app.handlers import persistent
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from .core import DEFAULT_CELLS, DEFAULT_FLOOR, DEFAULT_TOLERANCE
+from .core import DEFAULT_CELLS, DEFAULT_SMOOTHNESS, DEFAULT_TOLERANCE, floor_for
 
 # Influences per mesh vertex by default, 0 for no cap (the Thinning floor alone): a cap creases where a vertex's weight
 # ranks swap (bench/RESULTS.md, "Second round: the smooth evaluation's weights thinned, continuously").
@@ -43,6 +43,17 @@ class BindOptionProperties:
     the Bind operator shows them."""
 
     mode: EnumProperty(name="Dimension", items=MODE_ITEMS, default="AUTO")
+    smoothness: FloatProperty(
+        name="Smoothness",
+        description="Smooth joints or local weights. Higher: bent joints (elbows, fingers, a twisted limb) fold and "
+        "crease less, each vertex follows more cage vertices (a slower deformer, and a cage vertex moves more of the "
+        "mesh around it). Lower: each vertex follows the fewest cage vertices, the most local. "
+        f"{DEFAULT_SMOOTHNESS:g} folds a character's joints less than Mesh Deform (docs/blender.md)",
+        default=DEFAULT_SMOOTHNESS,
+        min=0.0,
+        max=1.0,
+        subtype="FACTOR",
+    )
     cells: IntProperty(
         name="Cells",
         description=f"About how many cells (triangles in 2D, tetrahedra in 3D) fill the cage; 0 uses lbc's default "
@@ -76,8 +87,9 @@ class BindOptionProperties:
     thinning: FloatProperty(
         name="Thinning",
         description="Every weight is lowered by this and those that reach 0 are dropped; the others are then made "
-        f"to sum to 1 and reproduce the vertex again, so weights fade in and out without creases. 0 uses "
-        f"{DEFAULT_FLOOR:g} (1e-9 keeps every weight). Larger: fewer influences per vertex, a faster deformer, a "
+        f"to sum to 1 and reproduce the vertex again, so weights fade in and out without creases. 0 follows "
+        f"Smoothness ({floor_for(0.0):g} at 0, {floor_for(1.0):g} at 1; 1e-9 keeps every weight). Larger: fewer "
+        "influences per vertex, a faster deformer, a "
         "less smooth deformation. It never takes more than a tenth of a vertex's weight, so where weights spread over "
         "most of a small cage (Blender's Cylinder) it removes none: Max Influences does",
         default=0.0,

@@ -14,15 +14,16 @@ from .binding.record import Start
 from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
 from .cage.planar import flatten, reframed
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
-from .evaluate.thinning import DEFAULT_FLOOR, thin_changed_rows, thin_weights
+from .evaluate.smoothing import DEFAULT_SMOOTHNESS
+from .evaluate.thinning import DEFAULT_FLOOR, floor_for, thin_changed_rows, thin_weights
 from .solve import forecast
 from .solve.forecast import format_size
 from .version import __version__
 
 __all__ = [
-    "BindOptions", "CageError", "CageVertexError", "Cancelled", "DEFAULT_CELLS", "DEFAULT_FLOOR", "DEFAULT_TOLERANCE",
-    "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten", "format_size", "make_cage",
-    "rebind",
+    "BindOptions", "CageError", "CageVertexError", "Cancelled", "DEFAULT_CELLS", "DEFAULT_FLOOR", "DEFAULT_SMOOTHNESS",
+    "DEFAULT_TOLERANCE", "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten",
+    "floor_for", "format_size", "make_cage", "rebind",
     "rebind_report", "reframed", "solved_again", "some_indices", "thin_changed_rows", "thin_weights",
     "too_small_warning",
 ]

@@ -11,6 +11,7 @@ import pytest
 from lbc_addon import jobs
 from lbc_core import BindOptions, Cancelled
 from lbc_core.cage.planar import flatten
+from lbc_core.evaluate.thinning import floor_for
 
 pytestmark = pytest.mark.blender
 
@@ -18,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 BOX = np.array([[x, y, z] for x in (-1.2, 1.2) for y in (-1.1, 1.3) for z in (-1.0, 1.4)])
 BOX_FACES = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
 OPTIONS = {"cells": 1000, "weighting": "quadratic", "epsilon": 0.0, "tolerance": 0.0, "thinning": 0.0,
-           "influences": 0, "mode": "AUTO"}
+           "influences": 0, "mode": "AUTO", "smoothness": 0.5}
 
 
 def request(cage_points=BOX, cage_faces=BOX_FACES, points=None, flat=None, **options):
@@ -45,7 +46,7 @@ def test_jobs_imports_and_solves_without_bpy():
         "box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)\n"
         "faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]\n"
         "options = dict(cells=300, weighting='quadratic', epsilon=0.0, tolerance=0.0, thinning=0.0,\n"
-        "               influences=0, mode='AUTO')\n"
+        "               influences=0, mode='AUTO', smoothness=0.5)\n"
         "request = jobs.BindRequest(1, 2, 'Mesh', np.full((3, 3), 0.5), box, faces, None, options, '', '')\n"
         "print(jobs.solve(request).weight.shape[0])\n"
     )
@@ -318,3 +319,14 @@ def test_the_thinning_has_its_own_part_of_the_progress_bar_and_bound_comes_last(
     assert all(fraction <= 1 - jobs.THINNING_SHARE + 1e-12 for fraction, _ in before)
     fractions = [fraction for fraction, _ in told]
     assert all(later >= earlier - 1e-12 for earlier, later in zip(fractions, fractions[1:]))
+
+
+def test_smoothness_sets_the_fit_and_the_thinning():
+    """Smoothness is lbc_core's option (the fit's radius) and, with Thinning 0, the add-on's floor: higher keeps more
+    influences per vertex."""
+    assert jobs.core_options({**OPTIONS, "smoothness": 0.8}).smoothness == 0.8
+    assert jobs._thinning({**OPTIONS, "smoothness": 1.0}) == (floor_for(1.0), 0)
+    assert jobs._thinning({**OPTIONS, "smoothness": 1.0, "thinning": 0.01}) == (0.01, 0)
+    counts = [np.count_nonzero(jobs.solve(request(smoothness=smoothness)).weight, axis=1).mean()
+              for smoothness in (0.0, 1.0)]
+    assert counts[1] > counts[0]

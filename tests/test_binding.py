@@ -51,9 +51,10 @@ def test_a_warm_rebinds_outcome_is_saved_apart_from_its_options(tmp_path):
 
 def test_files_of_version_0_1_load_with_their_options_and_outcome_and_bind_again(tmp_path):
     """Files 0.1.0 wrote (tests/data/bindings-0.1.0, made by that release): their options record held the cells
-    reached, the cells asked as cells_asked and the threshold resolved; their solved-again counts had prose names."""
+    reached, the cells asked as cells_asked and the threshold resolved; their solved-again counts had prose names; they
+    predate the smoothness option, and were evaluated as at smoothness 0."""
     cold = lbc_core.load_binding(DATA / "bindings-0.1.0" / "square.npz")
-    assert cold.options == lbc_core.BindOptions(cells=200, epsilon=0.01, threshold=0.00025)
+    assert cold.options == lbc_core.BindOptions(cells=200, epsilon=0.01, threshold=0.00025, smoothness=0.0)
     assert (cold.outcome.start, cold.outcome.cells, cold.outcome.threshold) == (Start.COLD, 206, 0.00025)
     warm = lbc_core.load_binding(DATA / "bindings-0.1.0" / "square-warm.npz")
     assert warm.outcome.start is Start.WARM and warm.outcome.solved_again == SolvedAgain(203, 206, 5, 5)

@@ -12,6 +12,8 @@ from lbc_core.solve import forecast
 from lbc_core.errors import CageError
 from lbc_core import BindOptions
 from lbc_core.binding.options import WEIGHTINGS
+from lbc_core.binding.pipeline import request_of
+from lbc_core.evaluate.smoothing import DEFAULT_SMOOTHNESS
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -22,6 +24,7 @@ def test_defaults():
     assert options.max_iterations == 10000
     assert options.cells is None and options.threshold is None and options.tolerance is None
     assert options.threshold_for(4) == 1e-3 / 4
+    assert options.smoothness == DEFAULT_SMOOTHNESS == 0.5
     assert BindOptions(**{field.name: None for field in dataclasses.fields(options)}) == options
 
 
@@ -64,6 +67,9 @@ def test_numbers_are_normalised():
         ("max_iterations", -5, "max_iterations must be at least 1, got -5"),
         ("max_iterations", 0, "max_iterations must be at least 1, got 0"),
         ("method", "bogus", "method 'bogus' is not one of auto, delaunay, triangle"),
+        ("smoothness", -0.1, "smoothness must be in [0, 1], got -0.1"),
+        ("smoothness", 1.5, "smoothness must be in [0, 1], got 1.5"),
+        ("smoothness", "high", "smoothness must be a number, got the string 'high'"),
     ],
 )
 def test_bad_values_are_refused(field, value, message):
@@ -124,3 +130,9 @@ def test_bind_takes_an_options_object_and_records_it():
                             max_iterations=500)
     assert binding.options.epsilon == 0.01 and binding.options.max_iterations == 500
     assert binding.options.weighting == "quadratic" and binding.outcome.threshold == 1e-3 / 4
+
+
+def test_the_smoothness_is_recorded_and_asked_again():
+    binding = lbc_core.bind(SQUARE, None, [[0.5, 0.5]], cells=200, smoothness=0.8)
+    assert binding.options.smoothness == 0.8
+    assert request_of(binding).smoothness == 0.8

@@ -7,7 +7,9 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from lbc_core.kernel.constraints import constraint_residuals
-from lbc_core.evaluate.thinning import MOST_REMOVED, removing, thin_weights, thresholds, tilt
+from lbc_core.evaluate.smoothing import DEFAULT_SMOOTHNESS
+from lbc_core.evaluate.thinning import (DEFAULT_FLOOR, LOCAL_FLOOR, MOST_REMOVED, SMOOTH_FLOOR, floor_for, removing, thin_weights,
+                               thresholds, tilt)
 
 CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
 CHECKS = settings(max_examples=40, deadline=None)
@@ -243,3 +245,10 @@ def test_rows_with_negative_weights_are_kept_as_they_are():
     assert np.array_equal(thinned[1:3].toarray(), np.vstack([beyond, within]))
     expected = thin_weights(sp.csr_matrix(inside[None]), controls, positions[:1], floor=0.21)
     assert abs(thinned[0] - expected).max() < 1e-15 and abs(thinned[3] - expected).max() < 1e-15
+
+
+def test_the_floor_follows_the_smoothness_from_local_to_smooth():
+    assert floor_for(0.0) == LOCAL_FLOOR == 0.004 and floor_for(1.0) == pytest.approx(SMOOTH_FLOOR)
+    steps = [floor_for(s) for s in np.linspace(0.0, 1.0, 5)]
+    assert all(later < earlier for earlier, later in zip(steps, steps[1:]))
+    assert DEFAULT_FLOOR == floor_for(DEFAULT_SMOOTHNESS)

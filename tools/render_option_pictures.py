@@ -227,6 +227,10 @@ def main(argv=None):
     for epsilon in (0.01, 1.0):
         bind(tube_obj, cage, epsilon=epsilon)
         picture(f"relaxation-{epsilon:g}", posed=False, influence_of=SHOWN)
+    for smoothness in (0.0, 1.0):
+        bind(tube_obj, cage, smoothness=smoothness)
+        picture(f"smoothness-{smoothness:g}", posed=False, influence_of=SHOWN)
+        picture(f"smoothness-{smoothness:g}-bent", posed=True)
 
 
 if __name__ == "__main__":

@@ -390,6 +390,7 @@ def _options_and_outcome(arrays, damaged):
         record["cells"] = options.get("cells") or 0
         record["threshold"] = options.get("threshold")
         options["cells"] = options.pop("cells_asked", options.get("cells"))
+    options.setdefault("smoothness", 0.0)  # bindings saved before the option were evaluated as at 0
     _check_outcome(record, damaged)
     return _bind_options(options, damaged), _bind_outcome(record, arrays)
 

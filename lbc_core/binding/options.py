@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import CageError
+from ..evaluate.smoothing import DEFAULT_SMOOTHNESS
 from ..meshing import AUTO, DEFAULT_CELLS, mesher, method_names
 from ..solve.geodesics import WEIGHTINGS as _RHO
 
@@ -48,6 +49,9 @@ class BindOptions:
     method : str
         Domain mesher: "auto" (the default, the bundled mesher) or a name of :data:`lbc_core.meshing.MESHERS` for
         the cage's dimension.
+    smoothness : float or None
+        Smooth ↔ local, in [0, 1]: the smooth evaluation's reach (:func:`lbc_core.evaluate.smoothing.radius_for`; 1 folds bent
+        joints least, 0 keeps each point's weights on the fewest cage vertices). None: :data:`DEFAULT_SMOOTHNESS`.
 
     Raises
     ------
@@ -62,10 +66,12 @@ class BindOptions:
     tolerance: float = None
     max_iterations: int = None
     method: str = None
+    smoothness: float = None
 
     def __post_init__(self):
         problems = []
-        for name in ("cells", "weighting", "epsilon", "threshold", "tolerance", "max_iterations", "method"):
+        for name in ("cells", "weighting", "epsilon", "threshold", "tolerance", "max_iterations", "method",
+                     "smoothness"):
             try:
                 value = _CHECKS[name](getattr(self, name))
             except _Bad as bad:
@@ -206,4 +212,7 @@ _CHECKS = {
     "max_iterations": _bounded(DEFAULT_MAX_ITERATIONS, True, lambda value: value >= 1,
                                f"must be at least 1, got {{value}} (left out, or None: {DEFAULT_MAX_ITERATIONS})"),
     "method": _method,
+    "smoothness": _bounded(DEFAULT_SMOOTHNESS, False, lambda value: 0 <= value <= 1,
+                           f"must be in [0, 1], got {{value:g}}: 0 the most local weights, 1 the smoothest joints "
+                           f"(left out, or None: {DEFAULT_SMOOTHNESS:g})"),
 }

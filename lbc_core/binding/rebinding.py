@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 
 from ..cage import make_cage
 from ..errors import CageError
-from ..evaluate.smoothing import DEEP_RADIUS_EDGES, RADIUS_EDGES, median_edge
+from ..evaluate.smoothing import DEEP_RADIUS_EDGES, median_edge, radius_for
 from ..kernel.frame import UnitFrame
 from ..kernel.geometry import (
     row_keys,
@@ -128,11 +128,12 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     omega = geodesic_weights(clock, carry.mesh, request.weighting)
     result, solved = _solve_near(clock, carry, omega, request)
     unit_points = carry.frame.to_unit(points)
-    again, stale, reach = _to_evaluate(carry, points, unit_points, result.weights)
+    again, stale, reach = _to_evaluate(carry, points, unit_points, result.weights, radius_for(request.smoothness))
     # New points (e.g. another mesh in this cage) are refused as bind refuses them.
     located, outside_again = locate(clock, carry.mesh, unit_points[again], refuse_outside=len(again) == len(points))
     weights_again = evaluate(clock, carry.mesh, located, result.weights, carry.unit_cage,
-                             request.threshold_for(cage.n_control_points), reach, unit_points[again], outside_again)
+                             request.threshold_for(cage.n_control_points), reach, unit_points[again], outside_again,
+                             request.smoothness)
     if len(again) == len(points):
         weights, outside = weights_again, outside_again
     else:
@@ -283,9 +284,10 @@ def _solve_near(clock, carry, omega, request):
     return replace(result, objective=objective, state=state), int(cells.sum())
 
 
-def _to_evaluate(carry, points, unit_points, domain_weights):
+def _to_evaluate(carry, points, unit_points, domain_weights, radius_edges):
     """The points a warm re-bind evaluates again: those whose evaluation can see a vertex that changed by STALE
-    since they were last evaluated (the carried mesh's coordinates ``domain_weights``).
+    since they were last evaluated (the carried mesh's coordinates ``domain_weights``; the fit's radius
+    ``radius_edges``, in median cell edges).
 
     Returns
     -------
@@ -302,7 +304,8 @@ def _to_evaluate(carry, points, unit_points, domain_weights):
     old_edge, edge = (median_edge(at, carried.cells) for at in (old_vertices, carried.vertices))
     stale = _staleness(previous, carried, old_vertices, domain_weights, edge)
     changed = stale > STALE
-    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, carry.moved)
+    again = _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, carry.moved,
+                                radius_edges)
     stale[changed] = 0.0  # every point within reach of these is evaluated again
     if len(again) == len(points):
         stale[:] = 0.0
@@ -323,7 +326,8 @@ def _staleness(previous, carried, old_vertices, domain_weights, edge):
     return change if previous.stale is None else previous.stale + change
 
 
-def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, moved):
+def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, old_edge, changed, moved,
+                        radius_edges):
     """Indices of the points to evaluate again: all of them if the points changed, else those outside the cage (their
     closest domain point may have moved), with weight on a moved control point, or within reach of a changed vertex
     (the fit's widest radius, in the previous median edges ``old_edge``, or a cell's longest edge for the
@@ -338,7 +342,7 @@ def _points_to_evaluate(previous, points, unit_points, carried, old_vertices, ol
     corners = old_vertices[carried.cells]
     longest = max(float(np.linalg.norm(corners[:, a] - corners[:, b], axis=1).max())
                   for a in range(corners.shape[1]) for b in range(a))
-    reach = max(max(RADIUS_EDGES, DEEP_RADIUS_EDGES) * old_edge, longest)
+    reach = max(max(radius_edges, DEEP_RADIUS_EDGES) * old_edge, longest)
     distance, _ = cKDTree(old_vertices[changed]).query(unit_points, distance_upper_bound=reach)
     return np.flatnonzero(on_moved | np.isfinite(distance))
 

@@ -20,9 +20,16 @@ from scipy.spatial import cKDTree
 
 from ..kernel.progress import Progress
 from .interpolation import FacetSearch
+from .reachability import DomainPaths
 
-# The fit's radius in median cell edges: wider is smoother and costs more influences per point (bench/RESULTS.md).
+# Smooth ↔ local, 0 to 1: how wide the smooth evaluation's fit reaches (radius_for) and how much the
+# add-on's thinning keeps (lbc_core.evaluate.thinning.floor_for). 0.5 folds the joints of a real character less than Mesh
+# Deform for 1.1-1.35 times the influences of 0 (bench/RESULTS.md, "Joints as smooth as Mesh Deform's").
+DEFAULT_SMOOTHNESS = 0.5
+# The fit's radius in median cell edges at smoothness 0 and 1 (BindOptions.smoothness): wider is smoother and costs
+# more influences per point (bench/RESULTS.md, "Joints as smooth as Mesh Deform's").
 RADIUS_EDGES = 2.0
+SMOOTH_RADIUS_EDGES = 4.0
 # The radius where the cage is thick, and the local depths (median cell edges) over which the radius grows to it.
 # 3 creases bent limbs less but costs a fifth more influences and twice the warm re-bind, so it is not the default
 # (bench/RESULTS.md, "A wider fit where the cage is thick").
@@ -78,10 +85,14 @@ class SmoothInterpolation:
     outside : (m,) bool array, optional
         The points outside the cage (:func:`~lbc_core.evaluate.interpolation.interpolation_matrix`'s flags), whose rows
         extrapolate to the point; with ``points``.
+    through_domain : bool
+        Weigh the fitted vertices by their paths through the domain (:mod:`lbc_core.evaluate.reachability`), so that a fit
+        wider than a gap between parts of the cage does not reach across it; False: every vertex in the ball.
     """
 
     def __init__(self, vertices, cells, located, radius_edges=RADIUS_EDGES, fade_edges=FADE_EDGES, progress=None,
-                 points=None, outside=None, deep_radius_edges=DEEP_RADIUS_EDGES, depth_edges=DEPTH_EDGES, reach=1.0):
+                 points=None, outside=None, deep_radius_edges=DEEP_RADIUS_EDGES, depth_edges=DEPTH_EDGES, reach=1.0,
+                 through_domain=True):
         self.vertices = np.asarray(vertices, dtype=float)
         self.located = sp.csr_matrix(located)
         self.shape = self.located.shape
@@ -100,10 +111,12 @@ class SmoothInterpolation:
         # 1-Lipschitz), so only the points that bound leaves within the fade are searched. A widening fit needs every
         # vertex's (radius_at); else the corners' suffice (at most N searches).
         self.boundary = FacetSearch(self.vertices, np.asarray(cells))
-        needed = (np.arange(len(self.vertices)) if self.deep_radius > self.radius
+        needed = (np.arange(len(self.vertices)) if self.deep_radius > self.radius or through_domain
                   else np.unique(self.located.indices))
         self.vertex_depth = np.zeros(len(self.vertices))
         self.vertex_depth[needed] = np.sqrt(self.boundary.closest(self.vertices[needed], self.progress.check).squared)
+        self.paths = (DomainPaths(self.vertices, cells, self.deep_radius, self.vertex_depth,
+                                  np.unique(self.located.indices), self.progress) if through_domain else None)
 
     @property
     def linear(self):
@@ -125,7 +138,8 @@ class SmoothInterpolation:
         points = linear @ self.vertices
         blend = fade_in(self.distance_to_cage(linear, points) / self.fade)
         distances = neighbour_distances(self.tree, points, self.deep_radius)
-        (fitted,), fits = _fit_rows(self.vertices, distances, points, self.radius_at(distances), [0])
+        factors = None if self.paths is None else self.paths.factors_of(linear, distances)
+        (fitted,), fits = _fit_rows(self.vertices, distances, points, self.radius_at(distances), [0], factors)
         blend = np.where(fits, blend, 0.0)
         rows = linear.copy()
         rows.data *= np.repeat(1.0 - blend, np.diff(rows.indptr))
@@ -195,6 +209,12 @@ class SmoothInterpolation:
         return distance
 
 
+def radius_for(smoothness):
+    """The fit's radius in median cell edges for a smoothness in [0, 1] (:class:`lbc_core.binding.options.BindOptions`):
+    :data:`RADIUS_EDGES` at 0 to :data:`SMOOTH_RADIUS_EDGES` at 1, linearly."""
+    return RADIUS_EDGES + (SMOOTH_RADIUS_EDGES - RADIUS_EDGES) * float(smoothness)
+
+
 def moving_least_squares(vertices, tree, points, radius):
     """Moving least-squares rows: the value at each point of the kernel-weighted least-squares linear fit.
 
@@ -241,7 +261,7 @@ def fit_gradients(vertices, tree, points, radius):
     return rows
 
 
-def _fit_rows(vertices, distances, points, radius, terms):
+def _fit_rows(vertices, distances, points, radius, terms, factors=None):
     """Rows giving the fit's coefficients ``terms`` (0: the value at the point; 1 + a: the slope along axis a, per
     radius) at each point, from its :func:`neighbour_distances` within at least ``radius``: ([(k, N) CSR per term],
     fits (k,) bool)."""
@@ -249,6 +269,8 @@ def _fit_rows(vertices, distances, points, radius, terms):
     radius = np.broadcast_to(np.asarray(radius, dtype=float), (k,))
     weight = distances.copy()
     weight.data = kernel(weight.data / radius[_row_of_each(weight)])
+    if factors is not None:  # each pair's share of the kernel (lbc_core.evaluate.reachability)
+        weight.data *= factors
     weight.eliminate_zeros()
     owner = _row_of_each(weight)
     # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ, taken in

@@ -20,11 +20,15 @@ import scipy.sparse as sp
 from ..kernel.constraints import csr_from_padded, padded_rows, scatter_rows
 from ..kernel.parallel import map_row_chunks
 from ..kernel.progress import Progress
+from .smoothing import DEFAULT_SMOOTHNESS
 
-# Default floor: keeps the bent capsule (bench/capsule.py) less creased than Mesh Deform with a margin (0.005 did
-# once, and on today's meshes reached 3.48° against its 3.33°; 0.004 gives 2.53°, at 4 % more influences;
-# bench/RESULTS.md).
-DEFAULT_FLOOR = 0.004
+# The floor at smoothness 0 (BindOptions.smoothness): keeps the bent capsule (bench/capsule.py) less creased than
+# Mesh Deform with a margin (0.005 did once, and on today's meshes reached 3.48° against its 3.33°; 0.004 gives 2.53°,
+# at 4 % more influences; bench/RESULTS.md).
+LOCAL_FLOOR = 0.004
+# The floor at smoothness 1: the twisted capsule's creases are the floor's past a wide fit, and 0.001 meets Mesh
+# Deform's there (bench/RESULTS.md, "Joints as smooth as Mesh Deform's").
+SMOOTH_FLOOR = 0.001
 
 # The tilt's tolerance: rows sum to 1 within it and reproduce their point within it times the controls' extent.
 TOLERANCE = 1e-9
@@ -39,6 +43,16 @@ MOST_REMOVED = 0.1
 # Times a point's threshold is relaxed (floor / 4; a cap raised by 1, 2, 4, ...) before it keeps its whole row
 # (bench/RESULTS.md, "Constants' notes").
 RELAXATIONS = 12
+
+
+def floor_for(smoothness):
+    """The thinning's floor for a smoothness in [0, 1] (:class:`lbc_core.binding.options.BindOptions`): :data:`LOCAL_FLOOR`
+    at 0 to :data:`SMOOTH_FLOOR` at 1, geometrically (each step keeps about as many more influences)."""
+    return LOCAL_FLOOR * (SMOOTH_FLOOR / LOCAL_FLOOR) ** float(smoothness)
+
+
+# The floor at the default smoothness.
+DEFAULT_FLOOR = floor_for(DEFAULT_SMOOTHNESS)
 
 
 def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influences=0, progress=None, cancel=None):
