@@ -14,7 +14,8 @@ against cells, one line per cage, on log-log axes into PATH (default out/scaling
 ``--interleaved`` binds every cage of a set (``gargoyle``: L08..L16; ``corpus``: the cage corpus as Blender made it,
 1000 points over each cage's middle; ``data``: the hand, arm and clothing with their meshes; ``all``) with each tree
 in turn, each bind in its own process, the trees interleaved cage by cage and the whole round repeated; prints the
-median bind and solve seconds, iterations and objective per tree, and each tree's bind time over the first's.
+median bind and solve seconds (wall), the bind's CPU seconds (its process's, every thread: steadier than the wall
+time on a loaded machine), iterations and objective per tree, and each tree's over the first's.
 """
 
 import argparse
@@ -121,14 +122,18 @@ def bind_row(name, path, cells, tree=None):
 _BIND_SCRIPT = """
 import sys
 sys.path.insert(0, {tree!r})
-import json, time, numpy as np, lbc_core
+import json, resource, time, numpy as np, lbc_core
 assert lbc_core.__file__.startswith({tree!r}), lbc_core.__file__
+def cpu():
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
 scene = np.load({scene!r})
 faces = [f.tolist() for f in np.split(scene["faces"], np.cumsum(scene["sizes"])[:-1])]
-start = time.perf_counter()
+start, start_cpu = time.perf_counter(), cpu()
 b = lbc_core.bind(scene["vertices"], faces, scene["points"], cells={cells!r})
-total = time.perf_counter() - start
-print(json.dumps({{"n": b.cage.n_control_points, "cells": len(b.domain.cells), "total": total, "stages": b.timings,
+total, total_cpu = time.perf_counter() - start, cpu() - start_cpu
+print(json.dumps({{"n": b.cage.n_control_points, "cells": len(b.domain.cells), "total": total, "cpu": total_cpu,
+    "stages": b.timings,
     "iterations": b.iterations, "objective": float(b.objective)}}))
 """
 
@@ -185,9 +190,9 @@ def interleaved(trees, which, repeats, cells):
     """Bind every cage of the set with every tree, interleaved; print one row per cage (medians)."""
     labels = [tree_label(tree) for tree in trees]
     print(f"load average {os.getloadavg()[0]:.1f}; {cells} cells; median of {repeats}; trees {', '.join(labels)}")
-    print("| cage | control points | tetrahedra | " + " | ".join(f"{label}: bind s (solve s), iterations"
+    print("| cage | control points | tetrahedra | " + " | ".join(f"{label}: bind s (solve s), CPU s, iterations"
                                                             for label in labels)
-          + " | " + " | ".join(f"{label} / {labels[0]}" for label in labels[1:]) + " | objectives |")
+          + " | " + " | ".join(f"{label} / {labels[0]}: wall, CPU" for label in labels[1:]) + " | objectives |")
     print("| --- " * (3 + 2 * len(trees) - 1 + 1) + "|")
     with tempfile.TemporaryDirectory() as folder:
         for label, vertices, faces, points in interleaved_scenes(which):
@@ -198,12 +203,15 @@ def interleaved(trees, which, repeats, cells):
                 for k, tree in enumerate(trees):
                     runs[k].append(bind_in(tree, scene, cells))
             medians = [float(np.median([r["total"] for r in own])) for own in runs]
+            cpus = [float(np.median([r["cpu"] for r in own])) for own in runs]
             solves = [float(np.median([r["stages"].get("solve", 0.0) for r in own])) for own in runs]
             first = runs[0][0]
             cells_made = "/".join(dict.fromkeys(str(own[0]["cells"]) for own in runs))
             print(f"| {label} | {first['n']} | {cells_made} | "
-                  + " | ".join(f"{m:.2f} ({s:.2f}), {own[0]['iterations']}" for m, s, own in zip(medians, solves, runs))
-                  + " | " + " | ".join(f"{m / medians[0]:.2f}×" for m in medians[1:])
+                  + " | ".join(f"{m:.2f} ({s:.2f}), {c:.2f}, {own[0]['iterations']}"
+                               for m, s, c, own in zip(medians, solves, cpus, runs))
+                  + " | " + " | ".join(f"{m / medians[0]:.2f}×, {c / cpus[0]:.2f}×"
+                                       for m, c in zip(medians[1:], cpus[1:]))
                   + " | " + ", ".join(f"{own[0]['objective']:.6g}" for own in runs) + " |", flush=True)
     print(f"load average {os.getloadavg()[0]:.1f}")
 
