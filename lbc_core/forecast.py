@@ -91,10 +91,9 @@ SECONDS_PER_CELL_STEP, SECONDS_PER_PAIR_STEP = {2: 0.0, 3: 1.3e-6}, {2: 1.0e-7, 
 # The dense splitting's seconds per iteration (3D, same machine): per (cell, control point) pair, and per pair and
 # control point for its null-space basis's products (bench/RESULTS.md, "The splitting chosen by its cost").
 DENSE_SECONDS_PER_PAIR_STEP, DENSE_SECONDS_PER_BASIS_STEP = 2.0e-8, 9e-11
-# The dense splitting stops at these shares of the default tolerance: from DENSE_TIGHTER_FROM control points, and on a
-# convex cage whose coordinates spread wide (at the tolerance itself its objective was 0.10 % (limbs, 80 control
-# points) and 0.14-0.39 % (convex cages) above a tight solve's); its iterations grow about as the share to the power
-# -DENSE_ITERATIONS_POWER (bench/RESULTS.md, "The splitting chosen by its cost").
+# The dense splitting stops at these shares of the default tolerance from DENSE_TIGHTER_FROM control points and on
+# convex cages (at the default: up to 0.39 % above the optimum); its iterations grow as share^-DENSE_ITERATIONS_POWER
+# (bench/RESULTS.md, "The dense splitting's tolerance").
 DENSE_TIGHTER_FROM, DENSE_TIGHTER_SHARE, DENSE_WIDE_TOLERANCE_SHARE, DENSE_ITERATIONS_POWER = 40, 0.6, 0.4, 0.45
 # Iterations at the default tolerance: ITERATIONS_SCALE[d] · n^ITERATIONS_POWER[d] · (cells / 8000)^CELLS_POWER[d]
 # (same section).

@@ -247,9 +247,10 @@ def _dense_solve(mesh, problem, settings, penalty, progress):
     """The solve by the dense splitting (:mod:`lbc_core.dense_solver`), taken where its cost model says its iterations
     cost less (:func:`~lbc_core.forecast.takes_dense_splitting`): the same problem, options and guarantees, its final
     state carried onto working sets for a warm re-bind. ``problem``: solve_on_mesh's six arrays."""
-    vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights = problem
+    vertices, control_points, tv_weights = problem[0], problem[4], problem[5]
     result = dense_solver.solve_on_mesh(
-        *problem, penalty=penalty, epsilon=settings.epsilon, tolerance=settings.tolerance, max_iterations=settings.max_iterations,
+        *problem, penalty=penalty, epsilon=settings.epsilon, tolerance=settings.tolerance,
+        max_iterations=settings.max_iterations,
         relaxation=settings.relaxation, check_every=settings.check_every, anderson_memory=settings.anderson_memory,
         anderson_period=settings.anderson_period, single_precision=settings.dtype == np.float32, progress=progress)
     state = None
