@@ -1,4 +1,4 @@
-"""The least time the paper's dense splitting (helpers.dense_solver, the solver up to 5715f72) can take, one run.
+"""The least time the paper's dense splitting (lbc_core.solve.dense, the solver up to 5715f72) can take, one run.
 
     .venv/bin/python bench/floors.py [--baseline DIR] [--scene l08|gargoyle ...]
 
@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import lbc_core  # noqa: E402
-from helpers import dense_solver as solver  # noqa: E402  (the paper's dense splitting, as 5715f72 solved)
+from lbc_core.solve import dense as solver  # noqa: E402  (the paper's dense splitting, as 5715f72 solved)
 from lbc_core.solve.boundary import boundary_weights  # noqa: E402
 from lbc_core.kernel.frame import UnitFrame  # noqa: E402
 from lbc_core.solve.geodesics import geodesic_distances, tv_weights  # noqa: E402

@@ -1,6 +1,7 @@
 """How a bind's time and peak memory grow with the control points and with the cells, beside a baseline.
 
     .venv/bin/python bench/scaling.py [--baseline DIR] [--picture PATH] [--quick]
+    .venv/bin/python bench/scaling.py --interleaved DIR [DIR ...] [--cages SET] [--repeats 2] [--cells 8000]
 
 The gargoyle mesh (2674 points) bound to its cages L12 (27 control points), L10 (67), L08 (168), L09 with every
 triangle split in four at its edges' midpoints (418) and L10 split twice (1042), at 4000 to 64,000 cells asked;
@@ -9,10 +10,18 @@ each bind in a child process, so its peak resident memory is its own (`bench/run
 in the same run; a bind the memory check would refuse on this machine is skipped and said so. Prints a table and
 the exponents of a least-squares fit time ∝ cells^a · n^b (and the same for memory), and draws time and memory
 against cells, one line per cage, on log-log axes into PATH (default out/scaling.png).
+
+``--interleaved`` binds every cage of a set (``gargoyle``: L08..L16; ``corpus``: the cage corpus as Blender made it,
+1000 points over each cage's middle; ``data``: the hand, arm and clothing with their meshes; ``all``) with each tree
+in turn, each bind in its own process, the trees interleaved cage by cage and the whole round repeated; prints the
+median bind and solve seconds (wall), the bind's CPU seconds (its process's, every thread: steadier than the wall
+time on a loaded machine), iterations and objective per tree, and each tree's over the first's.
 """
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -109,12 +118,118 @@ def bind_row(name, path, cells, tree=None):
     return dict(bench_3d(name, cells=cells, cage_path=path, tree=tree), cage=name)
 
 
+# One bind of a cage written by ``write_scene`` (vertices, faces, points) with the lbc_core of a tree, timed.
+_BIND_SCRIPT = """
+import sys
+sys.path.insert(0, {tree!r})
+import json, resource, time, numpy as np, lbc_core
+assert lbc_core.__file__.startswith({tree!r}), lbc_core.__file__
+def cpu():
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+scene = np.load({scene!r})
+faces = [f.tolist() for f in np.split(scene["faces"], np.cumsum(scene["sizes"])[:-1])]
+start, start_cpu = time.perf_counter(), cpu()
+b = lbc_core.bind(scene["vertices"], faces, scene["points"], cells={cells!r})
+total, total_cpu = time.perf_counter() - start, cpu() - start_cpu
+print(json.dumps({{"n": b.cage.n_control_points, "cells": len(b.domain.cells), "total": total, "cpu": total_cpu,
+    "stages": b.timings,
+    "iterations": b.iterations, "objective": float(b.objective)}}))
+"""
+
+
+def interleaved_scenes(which):
+    """[(label, vertices, faces, points)] of a cage set (see the module's docstring)."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from helpers import cage_corpus
+    from lbc_core.io import read_mesh
+
+    scenes = []
+    if which in ("gargoyle", "all"):
+        points = read_mesh(GARGOYLE / "mesh.off")[0]
+        scenes += [(f"gargoyle {level}", *read_cage(GARGOYLE / f"cage_{level}.obj"), points)
+                   for level in ("L08", "L09", "L10", "L11", "L12", "L13", "L14", "L15", "L16")]
+    if which in ("data", "all"):
+        data = ROOT / "tests" / "data" / "cages-3d"
+        scenes += [(name, *read_cage(data / name / "cage.obj"), read_mesh(data / name / "mesh.obj")[0])
+                   for name in ("hand", "arm", "clothing")]
+    if which in ("corpus", "all"):
+        for name in cage_corpus.names():
+            vertices, faces = cage_corpus.load(name)
+            low, high = vertices.min(axis=0), vertices.max(axis=0)
+            middle = np.random.default_rng(0).uniform(-1.0, 1.0, (1000, 3))
+            scenes.append((name, vertices, faces, 0.5 * (low + high) + 0.25 * (high - low) * middle))
+    return scenes
+
+
+def write_scene(path, vertices, faces, points):
+    np.savez(path, vertices=np.asarray(vertices, dtype=float), faces=np.concatenate([np.asarray(f) for f in faces]),
+             sizes=np.array([len(f) for f in faces]), points=np.asarray(points, dtype=float))
+
+
+def bind_in(tree, scene, cells):
+    """One bind of the scene file ``scene`` by ``tree``'s lbc_core in a child process: its record."""
+    script = _BIND_SCRIPT.format(tree=str(tree), scene=str(scene), cells=cells)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def tree_label(tree):
+    """The short commit of a worktree (its directory's name if git cannot tell), with '+' if it has changes."""
+    try:
+        head = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(tree), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, check=True).stdout.strip()
+        return head + ("+" if dirty else "")
+    except (subprocess.CalledProcessError, FileNotFoundError):
+        return Path(tree).name
+
+
+def interleaved(trees, which, repeats, cells):
+    """Bind every cage of the set with every tree, interleaved; print one row per cage (medians)."""
+    labels = [tree_label(tree) for tree in trees]
+    print(f"load average {os.getloadavg()[0]:.1f}; {cells} cells; median of {repeats}; trees {', '.join(labels)}")
+    print("| cage | control points | tetrahedra | " + " | ".join(f"{label}: bind s (solve s), CPU s, iterations"
+                                                            for label in labels)
+          + " | " + " | ".join(f"{label} / {labels[0]}: wall, CPU" for label in labels[1:]) + " | objectives |")
+    print("| --- " * (3 + 2 * len(trees) - 1 + 1) + "|")
+    with tempfile.TemporaryDirectory() as folder:
+        for label, vertices, faces, points in interleaved_scenes(which):
+            scene = Path(folder) / "scene.npz"
+            write_scene(scene, vertices, faces, points)
+            runs = [[] for _ in trees]
+            for _ in range(repeats):
+                for k, tree in enumerate(trees):
+                    runs[k].append(bind_in(tree, scene, cells))
+            medians = [float(np.median([r["total"] for r in own])) for own in runs]
+            cpus = [float(np.median([r["cpu"] for r in own])) for own in runs]
+            solves = [float(np.median([r["stages"].get("solve", 0.0) for r in own])) for own in runs]
+            first = runs[0][0]
+            cells_made = "/".join(dict.fromkeys(str(own[0]["cells"]) for own in runs))
+            print(f"| {label} | {first['n']} | {cells_made} | "
+                  + " | ".join(f"{m:.2f} ({s:.2f}), {c:.2f}, {own[0]['iterations']}"
+                               for m, s, c, own in zip(medians, solves, cpus, runs))
+                  + " | " + " | ".join(f"{m / medians[0]:.2f}×, {c / cpus[0]:.2f}×"
+                                       for m, c in zip(medians[1:], cpus[1:]))
+                  + " | " + ", ".join(f"{own[0]['objective']:.6g}" for own in runs) + " |", flush=True)
+    print(f"load average {os.getloadavg()[0]:.1f}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--interleaved", type=Path, nargs="+", metavar="DIR",
+                        help="trees to bind every cage of --cages with, interleaved (the first is the reference)")
+    parser.add_argument("--cages", choices=("gargoyle", "corpus", "data", "all"), default="all")
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--cells", type=int, default=8000)
     parser.add_argument("--baseline", type=Path, help="a tree of an earlier version to bind beside this one")
     parser.add_argument("--picture", type=Path, default=ROOT / "out" / "scaling.png")
     parser.add_argument("--quick", action="store_true", help="two small cages at two resolutions (a smoke run)")
     args = parser.parse_args(argv)
+    if args.interleaved:
+        interleaved(args.interleaved, args.cages, args.repeats, args.cells)
+        return
     print(f"load average {os.getloadavg()[0]:.1f}")
     print("| cage | control points | tetrahedra | bind s | solve s | iterations | peak memory | baseline bind s "
           "| baseline peak | faster | memory |")

@@ -24,6 +24,9 @@ CONVEX_SHARE, WIDE_PAIRS, WIDE_ITERATIONS, WIDE_SECONDS_PER_PAIR_STEP = 0.95, 2.
 # Peak bytes per pair (bench/RESULTS.md, "The locality solver, third round"), and per entry of the (cells, n) TV
 # weights the caller holds.
 BYTES_PER_PAIR = 620
+# The dense splitting's peak bytes per (cell, control point): its state's entries, (d + 0.23) per pair in 3D, at 120
+# bytes each (the last release's measured figure).
+DENSE_BYTES_PER_PAIR = 390
 BYTES_PER_WEIGHT = 8
 
 
@@ -67,6 +70,8 @@ def estimate_memory(n_control_points, n_cells, dim, convexity=0.0):
     -------
     int, bytes
     """
+    if takes_dense_splitting(n_control_points, n_cells, dim, convexity):
+        return int((DENSE_BYTES_PER_PAIR + BYTES_PER_WEIGHT) * n_control_points * n_cells)
     pairs = estimate_pairs(n_control_points, n_cells, dim, convexity)
     return int(BYTES_PER_PAIR * pairs + BYTES_PER_WEIGHT * n_control_points * n_cells)
 
@@ -83,6 +88,13 @@ def estimate_pairs(n_control_points, n_cells, dim, convexity=0.0):
 # (bench/RESULTS.md, "The forecast recalibrated for small cages"); rough by design: the running solve tells its own
 # time left.
 SECONDS_PER_CELL_STEP, SECONDS_PER_PAIR_STEP = {2: 0.0, 3: 1.3e-6}, {2: 1.0e-7, 3: 4.25e-8}
+# The dense splitting's seconds per iteration (3D, same machine): per (cell, control point) pair, and per pair and
+# control point for its null-space basis's products (bench/RESULTS.md, "The splitting chosen by its cost").
+DENSE_SECONDS_PER_PAIR_STEP, DENSE_SECONDS_PER_BASIS_STEP = 2.0e-8, 9e-11
+# The dense splitting stops at these shares of the default tolerance from DENSE_TIGHTER_FROM control points and on
+# convex cages (at the default: up to 0.39 % above the optimum); its iterations grow as share^-DENSE_ITERATIONS_POWER
+# (bench/RESULTS.md, "The dense splitting's tolerance").
+DENSE_TIGHTER_FROM, DENSE_TIGHTER_SHARE, DENSE_WIDE_TOLERANCE_SHARE, DENSE_ITERATIONS_POWER = 40, 0.6, 0.4, 0.45
 # Iterations at the default tolerance: ITERATIONS_SCALE[d] · n^ITERATIONS_POWER[d] · (cells / 8000)^CELLS_POWER[d]
 # (same section).
 ITERATIONS_SCALE, ITERATIONS_POWER, CELLS_POWER = {2: 113, 3: 66}, {2: 0.3, 3: 0.18}, {2: 0.25, 3: 0.17}
@@ -123,14 +135,57 @@ def bind_seconds(n_control_points, n_cells, dim, stretched=False, aspect=1.0, bu
     >>> round(told.solve), round(told.points, 1)
     (2, 1.3)
     """
-    iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells, convexity)
-    if spreads_wide(n_control_points, dim, convexity):  # every pair held, no reshapes
-        step = WIDE_SECONDS_PER_PAIR_STEP * n_control_points * n_cells
+    if takes_dense_splitting(n_control_points, n_cells, dim, convexity):
+        iterations = (forecast_iterations(n_control_points, dim, stretched, aspect, n_cells)
+                      * dense_tolerance_share(n_control_points, dim, convexity) ** -DENSE_ITERATIONS_POWER)
+        step = dense_step_seconds(n_control_points, n_cells)
     else:
-        step = (SECONDS_PER_CELL_STEP[dim] * n_cells
-                + SECONDS_PER_PAIR_STEP[dim] * estimate_pairs(n_control_points, n_cells, dim, convexity))
+        iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells, convexity)
+        step = working_sets_step_seconds(n_control_points, n_cells, dim, convexity)
     solve = step * iterations * busy * (STRETCHED_STEP_COST if stretched else 1.0)
     return BindSeconds(MESHING_SECONDS_PER_CELL * n_cells * busy, solve, SECONDS_PER_POINT * n_points * busy)
+
+
+def working_sets_step_seconds(n_control_points, n_cells, dim, convexity=0.0):
+    """About the seconds of one iteration of the splitting on working sets, its reshapes included."""
+    if spreads_wide(n_control_points, dim, convexity):  # every pair held, no reshapes
+        return WIDE_SECONDS_PER_PAIR_STEP * n_control_points * n_cells
+    return (SECONDS_PER_CELL_STEP[dim] * n_cells
+            + SECONDS_PER_PAIR_STEP[dim] * estimate_pairs(n_control_points, n_cells, dim, convexity))
+
+
+def dense_step_seconds(n_control_points, n_cells):
+    """About the seconds of one iteration of the dense splitting (3D): every (cell, control point) pair, and the
+    null-space basis's products, which grow with the control points squared."""
+    return n_control_points * n_cells * (DENSE_SECONDS_PER_PAIR_STEP
+                                         + DENSE_SECONDS_PER_BASIS_STEP * n_control_points)
+
+
+def takes_dense_splitting(n_control_points, n_cells, dim, convexity=0.0):
+    """Whether a cold 3D solve takes the dense splitting, whose iterations its cost model tells cheaper than the working
+    sets' where every coordinate spreads over much of the cage (few control points, or a convex cage): counts only, so
+    that the same input takes the same splitting under any load (bench/RESULTS.md, "The splitting chosen by its
+    cost").
+
+    Example
+    -------
+    >>> takes_dense_splitting(27, 8000, 3), takes_dense_splitting(168, 8000, 3)
+    (True, False)
+    """
+    if dim != 3:
+        return False
+    working_sets = working_sets_step_seconds(n_control_points, n_cells, dim, convexity)
+    if spreads_wide(n_control_points, dim, convexity):
+        working_sets *= WIDE_ITERATIONS  # the whole sets' tighter stop
+    return dense_step_seconds(n_control_points, n_cells) < working_sets
+
+
+def dense_tolerance_share(n_control_points, dim, convexity=0.0):
+    """The share of the default tolerance the dense splitting stops at (DENSE_TIGHTER_SHARE, DENSE_WIDE_TOLERANCE_SHARE;
+    1 below DENSE_TIGHTER_FROM control points on a cage that is not convex)."""
+    if spreads_wide(n_control_points, dim, convexity):
+        return DENSE_WIDE_TOLERANCE_SHARE
+    return DENSE_TIGHTER_SHARE if n_control_points >= DENSE_TIGHTER_FROM else 1.0
 
 
 def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0,

@@ -28,12 +28,22 @@ from ..kernel.factor import Factor
 from ..kernel.frame import UnitFrame, principal_aspect
 from ..kernel.geometry import hull_share, signed_measures
 from ..kernel.progress import Laps, Progress
+from . import dense
 from .anderson import Anderson
-from .forecast import SMALL_CAGE, default_tolerance, forecast_iterations, format_remaining, seconds_left
+from .forecast import (
+    SMALL_CAGE,
+    default_tolerance,
+    dense_tolerance_share,
+    forecast_iterations,
+    format_remaining,
+    seconds_left,
+    takes_dense_splitting,
+)
 from .objective import tv_objective
+from .settings import SolveSettings, balancing_factor, check_problem
 from .splitting import DouglasRachford
 from .stretch import Stretch
-from .working_sets import MeshData, PairOperators, WorkingSets, feasible_working_sets, first_working_sets
+from .working_sets import MeshData, PairOperators, WorkingSets, cell_pairs, feasible_working_sets, first_working_sets
 
 # β: the weight of the W = Z block against the gradient block, on the unit-diagonal cage.
 BETA = {2: 1280.0, 3: 1280.0}
@@ -48,7 +58,7 @@ RELAXATION = {2: 1.6, 3: 1.9}
 # residual exceeds BALANCE_HIGH times the dual, halve it below BALANCE_LOW times (bench/RESULTS.md, "The penalty
 # balanced against the residuals in the first iterations").
 BALANCE_UNTIL, BALANCE_SPACING = 300, 30
-BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
+BALANCE_HIGH = {2: 2.0, 3: 0.6}  # BALANCE_LOW: settings.py
 # The working sets are reshaped to one ring of vertices around the weights above GROWTH_FLOOR at iterations
 # GROWTH_FIRST_CHECK, then each time GROWTH_SPACING times as many (bench/RESULTS.md, "Working sets: start, growth,
 # pruning").
@@ -90,6 +100,8 @@ class SolveResult:
     state : SolverState or None
         The solver's final state, to warm-start a solve on the same mesh carried onto an edited cage (None when
         there was nothing to iterate).
+    splitting : str
+        "working sets", or "dense" where the cost model took the dense splitting (:func:`_dense_solve`).
     """
 
     weights: np.ndarray
@@ -100,6 +112,7 @@ class SolveResult:
     history: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     state: "SolverState" = None
+    splitting: str = "working sets"
 
 
 def solve_on_mesh(
@@ -120,6 +133,7 @@ def solve_on_mesh(
     anderson_period=None,
     single_precision=True,
     start=None,
+    splitting=None,
     progress=None,
     cancel=None,
 ):
@@ -162,6 +176,10 @@ def solve_on_mesh(
     start : SolverState, optional
         A previous solve's final state (``SolveResult.state``) on the same cells and interior vertices, whose
         vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.binding.rebinding`).
+    splitting : {None, "working sets", "dense"}
+        None: a cold 3D solve without a ``penalty`` takes the dense splitting where the cost model says its iterations
+        cost less (:func:`~lbc_core.solve.forecast.takes_dense_splitting`: few control points, or a convex cage), the
+        splitting on working sets otherwise; the others force one (a warm start always takes the working sets').
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
         Polled between the steps of every stage; when it returns True the solve raises :class:`lbc_core.Cancelled`.
@@ -170,6 +188,8 @@ def solve_on_mesh(
     -------
     SolveResult
     """
+    if splitting not in (None, "working sets", "dense"):
+        raise CageError(f"splitting must be None, 'working sets' or 'dense', not {splitting!r}")
     clock = Laps()
     progress = Progress.of(progress, cancel)
     vertices = np.asarray(vertices, dtype=float)
@@ -202,12 +222,20 @@ def solve_on_mesh(
     progress.check()
     mesh = MeshData.of(solve_vertices, cells, boundary_vertices, boundary_weights, BETA[d], unit_controls,
                        unit_vertices)
+    convexity = _convexity(unit_vertices, cells)
+    dense = splitting == "dense" or (splitting is None and penalty is None and
+                                      takes_dense_splitting(n, len(cells), d, convexity))
+    if len(mesh.interior) and start is None and dense:
+        if tolerance == default_tolerance(d, n):
+            settings.tolerance *= dense_tolerance_share(n, d, convexity)
+        return _dense_solve(mesh, (vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights),
+                            settings, penalty, progress)
     if len(mesh.interior):
         progress(0.0, "finding where each control point may act (preparing the solver)")
         sets, first, duals, carried = _starting_point(mesh, start, progress)
         clock.lap("factorisation")
         expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls), len(cells),
-                                        _convexity(unit_vertices, cells))
+                                        convexity)
                     if start is None and tolerance == default_tolerance(d, n) else None)
         run = _Run(mesh, tv_weights, settings, stretch, _starting_penalty(penalty, start, d, n), progress, expected)
         solution = run.solve(sets, first, duals, carried)
@@ -222,18 +250,23 @@ def solve_on_mesh(
     return SolveResult(weights, iterations, converged, objective, tv_weights, history, clock.seconds, state)
 
 
-@dataclass
-class SolveSettings:
-    """solve_on_mesh's options, the defaults of the dimension filled in (the dense reference takes them too)."""
-
-    epsilon: float
-    tolerance: float
-    max_iterations: int
-    relaxation: float
-    check_every: int
-    anderson_memory: int
-    anderson_period: int
-    dtype: type
+def _dense_solve(mesh, problem, settings, penalty, progress):
+    """The solve by the dense splitting (:mod:`lbc_core.solve.dense`), taken where its cost model says its iterations
+    cost less (:func:`~lbc_core.forecast.takes_dense_splitting`): the same problem, options and guarantees, its final
+    state carried onto working sets for a warm re-bind. ``problem``: solve_on_mesh's six arrays."""
+    vertices, control_points, tv_weights = problem[0], problem[4], problem[5]
+    result = dense.solve_on_mesh(
+        *problem, penalty=penalty, epsilon=settings.epsilon, tolerance=settings.tolerance,
+        max_iterations=settings.max_iterations,
+        relaxation=settings.relaxation, check_every=settings.check_every, anderson_memory=settings.anderson_memory,
+        anderson_period=settings.anderson_period, single_precision=settings.dtype == np.float32, progress=progress)
+    state = None
+    if result.state is not None:
+        d, n = vertices.shape[1], len(control_points)
+        state = SolverState.from_dense(result.state, result.weights[mesh.interior], mesh,
+                                       _starting_penalty(None, None, d, n))
+    return SolveResult(result.weights, result.iterations, result.converged, result.objective, tv_weights,
+                       result.history, result.seconds, state, splitting="dense")
 
 
 @dataclass
@@ -534,13 +567,6 @@ def _residuals(step, out, previous, primal_scale, objective=True):
     return record
 
 
-def balancing_factor(residuals, high):
-    """2 when the primal residual lags (beyond ``high`` times the dual), 1/2 when the dual one does (below
-    BALANCE_LOW times), else 1."""
-    ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
-    return 2.0 if ratio > high else 0.5 if ratio < BALANCE_LOW else 1.0
-
-
 def _convexity(vertices, cells):
     """The domain's area or volume over its convex hull's: the cage's :attr:`~lbc_core.cage.make.Cage.convexity`."""
     return hull_share(vertices, np.abs(signed_measures(vertices, cells)).sum())
@@ -553,24 +579,6 @@ def _starting_penalty(penalty, start, d, n):
     if start is not None and start.penalty is not None:
         return start.penalty
     return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
-
-
-def check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights):
-    """Refuse arrays whose shapes or indices do not make one solve's problem (:class:`CageError`)."""
-    n_vertices, d = vertices.shape
-    if d not in (2, 3) or cells.ndim != 2 or cells.shape[1] != d + 1:
-        raise CageError(f"cells must be (F, {d + 1}) for {d}D vertices, got shape {cells.shape}")
-    if cells.min() < 0 or cells.max() >= n_vertices:
-        raise CageError("cells refer to vertices that do not exist")
-    n = len(control_points)
-    if boundary_weights.shape != (len(boundary_vertices), n):
-        raise CageError(
-            f"boundary_weights must be (B, n) = ({len(boundary_vertices)}, {n}), got {boundary_weights.shape}"
-        )
-    if n < d + 1:
-        raise CageError(f"a {d}D cage needs at least {d + 1} control points, got {n}")
-    if np.shape(tv_weights) != (len(cells), n):
-        raise CageError(f"tv_weights must be (F, n) = ({len(cells)}, {n}), got {np.shape(tv_weights)}")
 
 
 def _check_affine(controls):
@@ -634,6 +642,25 @@ class SolverState:
         return cls(ops.sets, v_w.copy(), step.duals.copy(), indptr, ops.pair_control.copy(), v_x.T.copy(),
                    step.thresholds.copy(), mesh.sqrt_cell.copy(), mesh.sqrt_mass.copy(), mesh.interior.copy(),
                    step.penalty)
+
+    @classmethod
+    def from_dense(cls, dense, weights, mesh, penalty):
+        """The state of a dense solve (:class:`lbc_core.solve.dense.SolverState`) on working sets: one ring around
+        the support of its output ``weights`` (N_in, n), as a solve on working sets ends. The split weights are the
+        output with zero duals (the projection's duals 0: the output is feasible), the split gradients and their duals
+        the dense state's on the pairs (its thresholds kept, so that a warm start rescales those duals to its own
+        ``penalty``)."""
+        support = WorkingSets.from_matrix(sp.csr_matrix(weights > 0))
+        sets = WorkingSets.from_matrix(mesh.margins(support, np.ones(support.n_slots))[0]).widened()
+        pair_cell, pair_control = cell_pairs(mesh, sets)
+        v_x, _ = dense.parts()
+        slot_vertex = sets.vertex_of_slot
+        slot_state = mesh.sqrt_mass[slot_vertex] * weights[slot_vertex, sets.controls]
+        indptr = np.searchsorted(pair_cell, np.arange(len(mesh.cells) + 1))
+        return cls(sets, slot_state, np.zeros((len(mesh.interior), mesh.vertices.shape[1] + 1)), indptr, pair_control,
+                   np.ascontiguousarray(v_x[:, pair_cell, pair_control].T, dtype=float),
+                   dense.thresholds[pair_cell, pair_control].astype(float), mesh.sqrt_cell.copy(),
+                   mesh.sqrt_mass.copy(), mesh.interior.copy(), penalty)
 
     @property
     def n_cells(self):

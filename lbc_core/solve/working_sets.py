@@ -361,6 +361,12 @@ def _groups(controls, counts, size):
         yield group
 
 
+def cell_pairs(mesh, sets):
+    """The (cell, control point) pairs of ``sets`` on ``mesh``, sorted by cell: (P,) cells and (P,) control points,
+    as :class:`PairOperators` holds them."""
+    return PairOperators.pairs(mesh, sets, mesh.interior[sets.vertex_of_slot])
+
+
 class PaddedRows:
     """The slots as rows padded to a common width, for the per-vertex projection."""
 
@@ -420,7 +426,7 @@ class PairOperators:
         self.sets = sets
         slot_vertex = mesh.interior[sets.vertex_of_slot]
         n = sets.n_controls
-        self.pair_cell, self.pair_control = self._pairs(mesh, sets, slot_vertex)
+        self.pair_cell, self.pair_control = self.pairs(mesh, sets, slot_vertex)
         check()
         d = mesh.vertices.shape[1]
         corner_vertex = mesh.cells[self.pair_cell].astype(np.int32)  # (P, d+1)
@@ -468,7 +474,7 @@ class PairOperators:
         self.d = d
 
     @staticmethod
-    def _pairs(mesh, sets, slot_vertex):
+    def pairs(mesh, sets, slot_vertex):
         """The (cell, control point) pairs touching a slot or a non-zero boundary value, sorted by cell; on whole
         sets every pair (the few more on cells wholly on the cage stay zero)."""
         n_cells, k = mesh.cells.shape

@@ -5,12 +5,13 @@ import time
 
 import lbc_core
 
-# Each stage of a bind, told by the first progress message it sends. A cancel must stop the stage it comes in (how
-# long that takes is measured by bench/cancel_latency.py).
+# Each stage of a bind, told by the first progress message it sends (a prefix, or a tuple of them). A cancel must stop
+# the stage it comes in (how long that takes is measured by bench/cancel_latency.py).
 STAGE_MESSAGES = {
     "meshing": "",  # the first message of a bind is the mesher's
     "geodesics": "geodesic distances",
-    "factorisation": "finding where each control point may act",
+    # The working sets' start, or the dense splitting's factorisation where the solve takes it (small cages).
+    "factorisation": ("finding where each control point may act", "factorising the solver's matrix"),
     "ADMM": "ADMM iteration",
     "projection": "projecting onto the constraints",
     "interpolation": "interpolation:",

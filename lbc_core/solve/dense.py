@@ -34,23 +34,19 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from lbc_core.errors import CageError
-from lbc_core.kernel import fem
-from lbc_core.kernel.constraints import project_onto_constraints
-from lbc_core.kernel.factor import Factor
-from lbc_core.kernel.frame import UnitFrame, principal_aspect
-from lbc_core.kernel.parallel import thread_map, worker_count
-from lbc_core.kernel.progress import Laps, Progress
-from lbc_core.solve.anderson import Anderson
-from lbc_core.solve.forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
-from lbc_core.solve.objective import tv_objective
-from lbc_core.solve.shrink import scaled_tv, shrink_factor, weighted_shrink_factors
-from lbc_core.solve.solver import (  # the same options, checks and balancing
-    SolveSettings,
-    balancing_factor,
-    check_problem,
-)
-from lbc_core.solve.stretch import Stretch
+from ..errors import CageError
+from ..kernel import fem
+from ..kernel.constraints import project_onto_constraints
+from ..kernel.factor import Factor
+from ..kernel.frame import UnitFrame, principal_aspect
+from ..kernel.parallel import thread_map, worker_count
+from ..kernel.progress import Laps, Progress
+from .anderson import Anderson
+from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
+from .objective import tv_objective
+from .settings import SolveSettings, balancing_factor, check_problem  # the same as the solver's
+from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
+from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
@@ -142,17 +138,17 @@ class SolverState:
     def restricted(self, cells, interior):
         """The state of a sub-problem: the cells where ``cells`` (F,) is true and the interior vertices
         ``interior`` (a subset of this state's, sorted), the others held fixed."""
-        v_x, v_w = self._parts()
+        v_x, v_w = self.parts()
         rows = np.searchsorted(self.interior, interior)
         return SolverState(np.concatenate([v_x[:, cells].ravel(), v_w[rows].ravel()]), self.thresholds[cells],
                            self.sqrt_cell[cells], self.sqrt_mass[rows], interior, self.penalty)
 
     def updated(self, sub, cells):
         """This state with a sub-problem's final state (:meth:`restricted` with the same ``cells``) written in."""
-        v_x, v_w = self._parts()
+        v_x, v_w = self.parts()
         rows = np.searchsorted(self.interior, sub.interior)
         v_x, v_w = v_x.copy(), v_w.copy()
-        v_x[:, cells], v_w[rows] = sub._parts()
+        v_x[:, cells], v_w[rows] = sub.parts()
         thresholds, sqrt_cell, sqrt_mass = self.thresholds.copy(), self.sqrt_cell.copy(), self.sqrt_mass.copy()
         thresholds[cells], sqrt_cell[cells], sqrt_mass[rows] = sub.thresholds, sub.sqrt_cell, sub.sqrt_mass
         return SolverState(np.concatenate([v_x.ravel(), v_w.ravel()]), thresholds, sqrt_cell, sqrt_mass,
@@ -161,11 +157,11 @@ class SolverState:
     def for_cells(self, source):
         """This state on another list of cells, cell i taking cell ``source[i]``'s part (a warm start's guess where
         a re-bind replaced cells)."""
-        v_x, v_w = self._parts()
+        v_x, v_w = self.parts()
         return SolverState(np.concatenate([v_x[:, source].ravel(), v_w.ravel()]), self.thresholds[source],
                            self.sqrt_cell[source], self.sqrt_mass, self.interior, self.penalty)
 
-    def _parts(self):
+    def parts(self):
         """Views of the state as v_X (d, F, n) and v_W (N_in, n)."""
         F, n = self.thresholds.shape
         size_w = len(self.interior) * n

@@ -1,0 +1,54 @@
+"""What both splittings of the solve share: their options record, the problem's checks, the penalty's balancing.
+
+:mod:`lbc_core.solve.solver` takes the dense splitting (:mod:`lbc_core.solve.dense`) where its cost model says it is the
+cheaper one, and the dense splitting takes these from here, so that neither imports the other both ways.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CageError
+
+# Penalty balancing halves the penalty where the primal residual is below BALANCE_LOW times the dual (bench/RESULTS.md,
+# "The penalty balanced against the residuals in the first iterations").
+BALANCE_LOW = 0.05
+
+
+@dataclass
+class SolveSettings:
+    """solve_on_mesh's options, the defaults of the dimension filled in (both splittings take them)."""
+
+    epsilon: float
+    tolerance: float
+    max_iterations: int
+    relaxation: float
+    check_every: int
+    anderson_memory: int
+    anderson_period: int
+    dtype: type
+
+
+def balancing_factor(residuals, high):
+    """2 when the primal residual lags (beyond ``high`` times the dual), 1/2 when the dual one does (below
+    BALANCE_LOW times), else 1."""
+    ratio = residuals["primal"] / max(residuals["dual"], 1e-300)
+    return 2.0 if ratio > high else 0.5 if ratio < BALANCE_LOW else 1.0
+
+
+def check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights):
+    """Refuse arrays whose shapes or indices do not make one solve's problem (:class:`CageError`)."""
+    n_vertices, d = vertices.shape
+    if d not in (2, 3) or cells.ndim != 2 or cells.shape[1] != d + 1:
+        raise CageError(f"cells must be (F, {d + 1}) for {d}D vertices, got shape {cells.shape}")
+    if cells.min() < 0 or cells.max() >= n_vertices:
+        raise CageError("cells refer to vertices that do not exist")
+    n = len(control_points)
+    if boundary_weights.shape != (len(boundary_vertices), n):
+        raise CageError(
+            f"boundary_weights must be (B, n) = ({len(boundary_vertices)}, {n}), got {boundary_weights.shape}"
+        )
+    if n < d + 1:
+        raise CageError(f"a {d}D cage needs at least {d + 1} control points, got {n}")
+    if np.shape(tv_weights) != (len(cells), n):
+        raise CageError(f"tv_weights must be (F, n) = ({len(cells)}, {n}), got {np.shape(tv_weights)}")
