@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/floors.py [--baseline DIR] [--scene l08|gargoyle ...]
 
-The dense splitting's ADMM (``dense_solver._DouglasRachford``): every iteration solves the Y-step (one factorised solve with
+The dense splitting's ADMM (``lbc_core.solve.nullspace.DenseSplitting``): every iteration solves the Y-step (one factorised solve with
 n − d − 1 right-hand sides) and sweeps the (d, F, n) X block of split gradients, which holds every (cell,
 coordinate) pair. However it were compiled, an iteration cannot take less than its Y-step plus one read-and-write
 pass over that block. Printed per scene: the default bind (lbc_core.bind on the gargoyle's 2674-point mesh) with its
@@ -28,6 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import lbc_core  # noqa: E402
+from lbc_core.solve import nullspace  # noqa: E402
 from lbc_core.solve import dense as solver  # noqa: E402  (the paper's dense splitting, as 5715f72 solved)
 from lbc_core.solve.boundary import boundary_weights  # noqa: E402
 from lbc_core.kernel.frame import UnitFrame  # noqa: E402
@@ -63,9 +64,9 @@ def per_iteration(binding):
     interior = np.setdiff1d(np.arange(len(vertices)), domain.boundary_vertices)
     n, d = controls.shape
     progress = Progress.of(None, None)
-    problem = solver._Problem(vertices, domain.cells, domain.boundary_vertices, fixed, controls, interior,
+    problem = nullspace.DenseProblem(vertices, domain.cells, domain.boundary_vertices, fixed, controls, interior,
                               solver.BETA[d], np.float32, progress)
-    step = solver._DouglasRachford(problem, omega, 0.0, solver.RELAXATION[d], solver._default_penalty(d, n),
+    step = nullspace.DenseSplitting(problem, omega, 0.0, solver.RELAXATION[d], solver._default_penalty(d, n),
                                     progress.check)
     state = step.initial_state()
     rhs = np.random.default_rng(0).random((len(interior), n)).astype(np.float32) @ problem.MT
