@@ -555,7 +555,7 @@ def test_a_cage_whose_coordinates_spread_wide_takes_the_dense_splitting_and_warm
     sets' (bench/RESULTS.md, "The splitting chosen by its cost"): a cold solve takes it, decided by counts, and meets
     every guarantee; its final state, carried onto working sets, warm-starts a solve at the same optimum in fewer
     iterations. Forced onto working sets, the same problem reaches the same optimum."""
-    from lbc_core.forecast import takes_dense_splitting
+    from lbc_core.solve.forecast import takes_dense_splitting
 
     problem = _corpus_problem("cylinder-8-ngon", cells=2000)
     result = solve_on_mesh(*problem)

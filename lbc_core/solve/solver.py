@@ -252,7 +252,7 @@ def solve_on_mesh(
 
 def _dense_solve(mesh, problem, settings, penalty, progress):
     """The solve by the dense splitting (:mod:`lbc_core.solve.dense`), taken where its cost model says its iterations
-    cost less (:func:`~lbc_core.forecast.takes_dense_splitting`): the same problem, options and guarantees, its final
+    cost less (:func:`~lbc_core.solve.forecast.takes_dense_splitting`): the same problem, options and guarantees, its final
     state carried onto working sets for a warm re-bind. ``problem``: solve_on_mesh's six arrays."""
     vertices, control_points, tv_weights = problem[0], problem[4], problem[5]
     result = dense.solve_on_mesh(
