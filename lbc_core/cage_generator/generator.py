@@ -35,6 +35,8 @@ COUNT_SLACK = 0.15
 FEWEST_VERTICES, MOST_VERTICES = 8, 2000
 # The attempts, in order: (margin factor, closing factor, start factor).
 ATTEMPTS = ((1.0, 1.0, 1.0), (1.0, 2.0, 1.5), (1.5, 3.0, 2.0), (2.5, 5.0, 2.5))
+# Each attempt's part of the progress bar: the first most of it, since it most often makes the cage.
+ATTEMPT_SHARES = ((0.0, 0.7), (0.7, 0.8), (0.8, 0.9), (0.9, 1.0))
 
 
 class CageGenerationFailed(CageError):
@@ -123,7 +125,7 @@ def generate_cage(vertices, faces, *, n_vertices=None, margin=None, progress=Non
     target = None if n_vertices is None else _checked_count(n_vertices)
     failures = []
     for number, (margin_factor, closing_factor, start_factor) in enumerate(ATTEMPTS, start=1):
-        part = steps.part((number - 1) / len(ATTEMPTS), number / len(ATTEMPTS))
+        part = steps.part(*ATTEMPT_SHARES[number - 1])
         attempt = _attempt(mesh, margin_share * margin_factor, closing_factor, start_factor, target)
         made, why = _try(mesh, attempt, part)
         if made is not None:
@@ -183,7 +185,7 @@ def _try(mesh, attempt, steps):
     surface = iso_surface(solid)
     steps(0.35, "simplifying the surface")
     witnesses = witness_points(mesh.vertices, attempt.spacing)
-    start = quadric_simplified(*surface, attempt.start, witnesses, zero)
+    start = quadric_simplified(*surface, attempt.start, witnesses, 0.25 * attempt.margin, zero)
     if start is None:
         return None, "the simplified surface did not enclose the mesh"
     hull = ProgressiveHull(*start, zero, witnesses)
