@@ -6,6 +6,7 @@
     lbc stats binding.npz [--plot pq.png] [--coordinate INDEX coordinate.png]
     lbc compare CAGE [MESH] --schemes lbc,mvc,harmonic [--plot pq.png]
     lbc table1 [DATA ...] [--pair CAGE MESH] [--min-control N] [--max-control N]
+    lbc cage MESH -o CAGE.obj [--vertices N] [--margin M]
 
 Every command takes --quiet (no progress or warnings on stderr) and --json (figures as JSON on stdout). Bad input
 (unreadable files, invalid cages, points that do not fit the cage) exits with code 2 and one line on stderr; a
@@ -129,6 +130,19 @@ def _parser():
     table1.add_argument("--min-control", type=int, default=0, help="skip cages with fewer control points")
     table1.add_argument("--max-control", type=int, default=None, help="skip cages with more control points")
     table1.set_defaults(command=_run_table1)
+    return _add_cage_command(parser, commands, common)
+
+
+def _add_cage_command(parser, commands, common):
+    cage = commands.add_parser("cage", parents=[common], help="make a cage around a mesh (closed, enclosing, "
+                               "checked by lbc)")
+    cage.add_argument("mesh", help="mesh file (.obj/.off/.ply): open, multi-part and non-manifold meshes are fine")
+    cage.add_argument("-o", "--output", required=True, help="cage file to write (.obj/.off/.ply)")
+    cage.add_argument("--vertices", type=int, help="the cage's vertex count, met within 15 %% (default: chosen "
+                      "for the mesh)")
+    cage.add_argument("--margin", type=float, help="space between mesh and cage, a share of the mesh's "
+                      "bounding-box diagonal (default 0.01)")
+    cage.set_defaults(command=_run_cage)
     return parser
 
 
@@ -198,6 +212,31 @@ def _run_bind(args):
             f"{nonzeros:.2f} stored weights per point, {outside} points outside the cage"
             f"{' (extrapolated from the closest points inside)' if outside else ''}, {total:.2f} s; wrote {args.output}"
         )
+    return 0
+
+
+def _run_cage(args):
+    from .cage_generator import generate_cage
+    from .io import FORMATS, check_output, read_mesh, write_mesh
+
+    check_output(args.output, FORMATS, (args.mesh,))
+    vertices, faces = read_mesh(args.mesh)
+    with _Progress("cage", args.quiet) as progress:
+        started = time.perf_counter()
+        made = generate_cage(vertices, faces, n_vertices=args.vertices, margin=args.margin, progress=progress)
+        seconds = time.perf_counter() - started
+    write_mesh(args.output, made.vertices, made.faces)
+    figures = {"output": str(args.output), "vertices": made.vertex_count, "asked_vertices": made.asked_vertices,
+               "faces": int(len(made.faces)), "volume": made.volume, "clearance": made.clearance,
+               "mean_distance": made.mean_distance, "margin": made.margin, "attempts": made.attempts,
+               "seconds": seconds, "warnings": list(made.warnings)}
+    _warn(made.warnings, args.quiet)
+    if args.json:
+        _print_json(figures)
+    else:
+        print(f"made a cage of {made.vertex_count} vertices and {len(made.faces)} faces around {len(vertices)} "
+              f"vertices, about {made.clearance:.4g} to {made.mean_distance:.4g} from the mesh, in {seconds:.2f} s; "
+              f"wrote {args.output}")
     return 0
 
 

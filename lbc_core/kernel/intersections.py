@@ -32,14 +32,20 @@ def intersecting_triangles(vertices, triangles, zero):
     """
     corners = vertices[triangles]
     pairs = overlapping_boxes(corners.min(axis=1) - zero, corners.max(axis=1) + zero)
-    first, second = triangles[pairs[:, 0]], triangles[pairs[:, 1]]
+    return pairs[triangles_meet(vertices, triangles[pairs[:, 0]], triangles[pairs[:, 1]], zero)]
+
+
+def triangles_meet(vertices, first, second, zero):
+    """(P,) bool: whether triangles ``first[p]`` and ``second[p]`` (P, 3) meet anywhere besides the edge or vertex
+    they share (touching within ``zero`` counts); the pairs test of :func:`intersecting_triangles`."""
     equal = first[:, :, None] == second[:, None, :]  # (P, 3, 3): corner k of the first is corner l of the second
     shared = np.count_nonzero(equal, axis=(1, 2))
-    hit = np.zeros(len(pairs), dtype=bool)
+    hit = np.zeros(len(first), dtype=bool)
     for count, test in ((0, _disjoint_meet), (1, _vertex_neighbours_meet), (2, _edge_neighbours_fold)):
         chosen = shared == count
-        hit[chosen] = test(vertices, first[chosen], second[chosen], equal[chosen], zero)
-    return pairs[hit]
+        if np.any(chosen):
+            hit[chosen] = test(vertices, first[chosen], second[chosen], equal[chosen], zero)
+    return hit
 
 
 def overlapping_boxes(low, high, chunk=2_000_000):
