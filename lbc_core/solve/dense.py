@@ -41,7 +41,8 @@ from .anderson import Anderson
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
 from .nullspace import NORM_SLICE, DenseProblem, DenseSplitting
 from .objective import tv_objective
-from .settings import SolveSettings, balancing_factor, check_problem  # the same as the solver's
+from .settings import (SolveSettings, balancing_factor, check_problem, relative_residuals, residual_scale,
+                       starting_penalty)  # the same as the solver's
 from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
@@ -119,9 +120,9 @@ class SolveResult:
 class SolverState:
     """A solve's final Douglas-Rachford state and what gives its parts their meaning, for a warm start.
 
-    The state is in measure-scaled variables (see :class:`DenseProblem`): v_X = X̃ + Ũ per cell, v_W = W̃ + Ṽ per interior
-    vertex. A solve on the same cells and interior vertices, moved, rescales each part by its own measure: the split
-    gradient X̃ = shrink(v_X) by √|c|, the dual Ũ = v_X - X̃ by the cell's shrink threshold, v_W by √(β m_v).
+    The state is in measure-scaled variables (see :class:`DenseProblem`): v_X = X̃ + Ũ per cell, v_W = W̃ + Ṽ per
+    interior vertex. A solve on the same cells and interior vertices, moved, rescales each part by its own measure: the
+    split gradient X̃ = shrink(v_X) by √|c|, the dual Ũ = v_X - X̃ by the cell's shrink threshold, v_W by √(β m_v).
 
     Attributes
     ----------
@@ -246,8 +247,8 @@ def solve_on_mesh(
         to round-off either way.
     start : SolverState, optional
         A previous solve's final state (``SolveResult.state``) on the same cells and interior vertices, whose
-        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.binding.rebinding`): the iterations
-        start there instead of from the harmonic coordinates.
+        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.binding.rebinding`): the
+        iterations start there instead of from the harmonic coordinates.
     progress : callable(fraction, message) or Progress, optional
     cancel : callable() -> bool, optional
         Polled between the steps of every stage (factorisation, each ADMM iteration, projection); when it
@@ -280,10 +281,10 @@ def solve_on_mesh(
     scale = frame.scale
     unit_vertices, unit_controls = frame.to_unit(vertices), frame.to_unit(control_points)
 
-    # A very thin 3D cage is meshed stretched (lbc_core.kernel.frame.MeshingFrame), so its cells are flat, and a splitting
-    # that treats their steep and flat directions alike takes thousands of iterations. Past STRETCHED_SOLVE_FROM the
-    # iterations run in the stretched frame, where the cells are round, the total variation's norm weighted per axis
-    # so that the problem stays the cage's own.
+    # A very thin 3D cage is meshed stretched (lbc_core.kernel.frame.MeshingFrame), so its cells are flat, and a
+    # splitting that treats their steep and flat directions alike takes thousands of iterations. Past
+    # STRETCHED_SOLVE_FROM the iterations run in the stretched frame, where the cells are round, the total variation's
+    # norm weighted per axis so that the problem stays the cage's own.
     stretch = Stretch.of(unit_controls, epsilon)
     solve_vertices, solve_controls = (unit_vertices, unit_controls) if stretch is None else (
         stretch.apply(unit_vertices), stretch.apply(unit_controls))
@@ -334,7 +335,7 @@ def _iterate(problem, tv_weights, settings, penalty, start, stretch, unit_contro
     # tells early on, while its residual still falls slowly.
     expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls))
                 if start is None and settings.tolerance == default_tolerance(d, n) else None)
-    admm = _Admm(problem, tv_weights, settings, _starting_penalty(penalty, start, d, n),
+    admm = _Admm(problem, tv_weights, settings, starting_penalty(penalty, start, _default_penalty(d, n)),
                  progress.part(_FACTORISATION_END, _ADMM_END), expected)
     return admm.solve(start)
 
@@ -343,13 +344,6 @@ def _iterate(problem, tv_weights, settings, penalty, start, stretch, unit_contro
 _FACTORISATION_END, _ADMM_END = 0.06, 0.98
 
 
-def _starting_penalty(penalty, start, d, n):
-    """The penalty asked for, else the one a warm start's solve ended with, else the default for d and n."""
-    if penalty is not None:
-        return penalty
-    if start is not None and start.penalty is not None:
-        return start.penalty
-    return _default_penalty(d, n)
 
 
 def _default_penalty(d, n):
@@ -395,7 +389,7 @@ class _Admm:
             # A step's residual is α times its primal residual: the primal test costs one norm. The full check (dual
             # residual, objective) runs only once it passes, at most once between two scheduled checks.
             if scheduled:
-                primal_scale = _primal_scale(self.step, self.out)
+                primal_scale = residual_scale(self.out, self.step.p.sqrt_mass * self.out.Z)
             if primal_scale is None:
                 continue
             passed, distance = self._check(previous, last_norm / (self.alpha * primal_scale), primal_scale, scheduled)
@@ -471,7 +465,8 @@ class _Admm:
         and the distance to the tolerance (the residuals over their tolerances, the larger)."""
         tolerance = self.tolerance
         if primal <= tolerance:
-            record = dict(iteration=self.iteration, **_residuals(self.step, self.out, previous, primal_scale))
+            record = dict(iteration=self.iteration, **relative_residuals(
+                self.out, previous, self.step.p.sqrt_mass * self.out.Z, primal_scale, self.step.objective))
             self.history.append(record)
             if record["primal"] <= tolerance and record["dual"] <= DUAL_TOLERANCE_FACTOR * tolerance:
                 self.converged = True
@@ -504,7 +499,8 @@ class _Admm:
         if self.iteration < self.next_balance or self.iteration > BALANCE_UNTIL:
             return
         self.next_balance = self.iteration + BALANCE_SPACING
-        factor = balancing_factor(_residuals(self.step, self.out, previous, primal_scale, objective=False),
+        massed = self.step.p.sqrt_mass * self.out.Z
+        factor = balancing_factor(relative_residuals(self.out, previous, massed, primal_scale),
                                   BALANCE_HIGH[self.problem.d])
         if factor == 1.0:
             return
@@ -529,26 +525,4 @@ def _difference(a, b, check, keep=True):
     return difference, np.sqrt(squares)
 
 
-def _primal_scale(step, out):
-    """The primal residual's scale (Boyd et al. 2011, §3.3.1): max(|(g̃, √(βm) Z)|, |(X̃, W̃)|) of one step."""
-    Z_scaled = step.p.sqrt_mass * out.Z
-    return float(max(np.hypot(np.linalg.norm(out.gradient), np.linalg.norm(Z_scaled)),
-                     np.hypot(np.linalg.norm(out.X), np.linalg.norm(out.W)), 1e-300))
 
-
-def _residuals(step, out, previous, primal_scale, objective=True):
-    """Relative primal and dual residuals (Boyd et al. 2011, §3.3.1) and the objective of the current iterate.
-
-    ``out`` and ``previous`` are the :class:`Step` of this iteration and the one before. The dual residual is
-    measured in the (X, W) space against the scaled duals: the Y-block has no objective term, so Aᵀy is itself the
-    dual residual and cannot serve as its scale.
-    """
-    p = step.p
-    X, W = out.X, out.W
-    primal = np.hypot(np.linalg.norm(out.gradient - X), np.linalg.norm(p.sqrt_mass * out.Z - W))
-    dual = np.hypot(np.linalg.norm(X - previous.X), np.linalg.norm(W - previous.W))
-    scale_dual = np.hypot(np.linalg.norm(out.v_x - X), np.linalg.norm(out.v_w - W))
-    record = {"primal": float(primal / primal_scale), "dual": float(dual / max(scale_dual, 1e-300))}
-    if objective:
-        record["objective"] = step.objective(out.gradient)
-    return record

@@ -23,8 +23,9 @@ def _constant(d):
     return d
 
 
-# ρ of each weighting, by name; the paper's first (lbc_core.binding.options.WEIGHTINGS lists these names for the options).
-# They work in place on the (F, n) array tv_weights made for them: a fresh one costs as much as the arithmetic.
+# ρ of each weighting, by name; the paper's first (lbc_core.binding.options.WEIGHTINGS lists these names for the
+# options). They work in place on the (F, n) array tv_weights made for them: a fresh one costs as much as the
+# arithmetic.
 WEIGHTINGS = {
     "quadratic": lambda d: np.multiply(d, d, out=d),
     "linear": lambda d: d,

@@ -52,3 +52,34 @@ def check_problem(vertices, cells, boundary_vertices, boundary_weights, control_
         raise CageError(f"a {d}D cage needs at least {d + 1} control points, got {n}")
     if np.shape(tv_weights) != (len(cells), n):
         raise CageError(f"tv_weights must be (F, n) = ({len(cells)}, {n}), got {np.shape(tv_weights)}")
+
+
+def starting_penalty(penalty, start, default):
+    """The penalty asked for, else the one a warm start's solve ended with, else ``default``."""
+    if penalty is not None:
+        return penalty
+    if start is not None and start.penalty is not None:
+        return start.penalty
+    return default
+
+
+def residual_scale(out, massed):
+    """The primal residual's scale (Boyd et al. 2011, §3.3.1): max(|(g̃, √(βm) z)|, |(X̃, W̃)|) of one step ``out``;
+    ``massed`` is its z times √(βm) (the splitting's own layout of it)."""
+    return float(max(np.hypot(np.linalg.norm(out.gradient), np.linalg.norm(massed)),
+                     np.hypot(np.linalg.norm(out.X), np.linalg.norm(out.W)), 1e-300))
+
+
+def relative_residuals(out, previous, massed, scale, objective=None):
+    """Relative primal and dual residuals (Boyd et al. 2011, §3.3.1) of the step ``out`` after ``previous``, and the
+    ``objective`` of its gradient (a function; None: not computed). The dual residual is measured in the (X, W) space
+    against the scaled duals: the Y-block has no objective term, so Aᵀy is itself the dual residual and cannot serve
+    as its scale."""
+    X, W = out.X, out.W
+    primal = np.hypot(np.linalg.norm(out.gradient - X), np.linalg.norm(massed - W))
+    dual = np.hypot(np.linalg.norm(X - previous.X), np.linalg.norm(W - previous.W))
+    scale_dual = np.hypot(np.linalg.norm(out.v_x - X), np.linalg.norm(out.v_w - W))
+    record = {"primal": float(primal / scale), "dual": float(dual / max(scale_dual, 1e-300))}
+    if objective is not None:
+        record["objective"] = objective(out.gradient)
+    return record

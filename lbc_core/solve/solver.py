@@ -10,9 +10,9 @@ The constraints are a per-vertex block: the split variable W = Z is projected, v
 vertex holds only the coordinates of its working set (:mod:`lbc_core.solve.working_sets`): they start from the harmonic
 coordinates' largest and grow where a coordinate turns positive next to a vertex that cannot hold it, so a
 step's cost follows the (cell, coordinate) pairs near the supports, not the number of control points. The step
-itself is :mod:`lbc_core.solve.splitting`; Anderson extrapolation (:mod:`lbc_core.solve.anderson`) with the safeguard of Zhang,
-Peng, Deng et al. (ACM TOG 2019) accelerates it; the penalty is balanced against the residuals early on (Boyd et al.
-2011, §3.4.1); the stopping rule is relative (§3.3.1). A very thin 3D cage with few control points iterates in the
+itself is :mod:`lbc_core.solve.splitting`; Anderson extrapolation (:mod:`lbc_core.solve.anderson`) with the safeguard of
+Zhang, Peng, Deng et al. (ACM TOG 2019) accelerates it; the penalty is balanced against the residuals early on (Boyd et
+al. 2011, §3.4.1); the stopping rule is relative (§3.3.1). A very thin 3D cage with few control points iterates in the
 stretched frame it was meshed in (:mod:`lbc_core.solve.stretch`). Measurements: bench/RESULTS.md, "The locality solver".
 """
 
@@ -40,37 +40,61 @@ from .forecast import (
     takes_dense_splitting,
 )
 from .objective import tv_objective
-from .settings import SolveSettings, balancing_factor, check_problem
+from .settings import (SolveSettings, balancing_factor, check_problem, relative_residuals, residual_scale,
+                       starting_penalty)
 from .splitting import DouglasRachford
+from .state import SolverState
 from .stretch import Stretch
-from .working_sets import MeshData, PairOperators, WorkingSets, cell_pairs, feasible_working_sets, first_working_sets
+from .working_sets import MeshData, PairOperators, WorkingSets, feasible_working_sets, first_working_sets
 
 # β: the weight of the W = Z block against the gradient block, on the unit-diagonal cage.
 BETA = {2: 1280.0, 3: 1280.0}
+
+
 # The starting penalty c_d / n^(1/(d-1)) for n control points: c_d.
 PENALTY_SCALE = {2: 1.3, 3: 0.3}
+
+
 # The dual residual's tolerance as a multiple of the primal one (it lags; the objective settles first).
 DUAL_TOLERANCE_FACTOR = 10.0
+
+
 # Steps per Anderson extrapolation, and the over-relaxation α of each step.
 ANDERSON_PERIOD = {2: 3, 3: 5}
+
+
 RELAXATION = {2: 1.6, 3: 1.9}
+
+
 # Penalty balancing: up to BALANCE_UNTIL iterations, every BALANCE_SPACING, double the penalty when the primal
 # residual exceeds BALANCE_HIGH times the dual, halve it below BALANCE_LOW times (bench/RESULTS.md, "The penalty
 # balanced against the residuals in the first iterations").
 BALANCE_UNTIL, BALANCE_SPACING = 300, 30
+
+
 BALANCE_HIGH = {2: 2.0, 3: 0.6}  # BALANCE_LOW: settings.py
+
+
 # The working sets are reshaped to one ring of vertices around the weights above GROWTH_FLOOR at iterations
 # GROWTH_FIRST_CHECK, then each time GROWTH_SPACING times as many (bench/RESULTS.md, "Working sets: start, growth,
 # pruning").
 GROWTH_FIRST_CHECK, GROWTH_SPACING, GROWTH_FLOOR = 20, 3, 1e-3
+
+
 # A solve that meets its tolerance stops unless growing would add more than END_GROWTH_SHARE of its slots; it then
 # grows around the weights above END_GROWTH_FLOOR, a margin for the next check (same section).
 END_GROWTH_SHARE, END_GROWTH_FLOOR = 0.005, 1e-4
+
+
 # Whole working sets of cages above SMALL_CAGE control points (supports spread wide: a slow tail) stop at this
 # share of the tolerance (bench/RESULTS.md, "Whole working sets stop at a fifth of the tolerance").
 WHOLE_TOLERANCE_SHARE = 0.2
+
+
 # Where each part of the solve ends on its progress range.
 _SETUP_END, _ADMM_END = 0.06, 0.98
+
+
 # The iterations' progress until the tolerance is first met stops at this share: where the forecast's iterations
 # are too few, the rest and the end game's growth still move it (bench/RESULTS.md, "The time left in the end game").
 BEFORE_END_GAME_SHARE = 0.9
@@ -210,7 +234,6 @@ def solve_on_mesh(
 
     # Work on the mesh scaled to unit diagonal, so that penalty and tolerances are scale-free.
     frame = UnitFrame.exact(vertices)
-    scale = frame.scale
     unit_vertices, unit_controls = frame.to_unit(vertices), frame.to_unit(control_points)
     _check_affine(unit_controls)
     stretch = Stretch.of(unit_controls, epsilon)
@@ -237,12 +260,13 @@ def solve_on_mesh(
         expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls), len(cells),
                                         convexity)
                     if start is None and tolerance == default_tolerance(d, n) else None)
-        run = _Run(mesh, tv_weights, settings, stretch, _starting_penalty(penalty, start, d, n), progress, expected)
+        run = _Run(mesh, tv_weights, settings, stretch, starting_penalty(penalty, start, _default_penalty(d, n)),
+                   progress, expected)
         solution = run.solve(sets, first, duals, carried)
         iterations, converged, history, state = run.iteration, run.converged, run.history, solution.state
         for record in history:  # objectives in the input's units
             if "objective" in record:
-                record["objective"] *= scale ** (d - 1)
+                record["objective"] *= frame.scale ** (d - 1)
         weights[mesh.interior] = solution.sets.matrix(solution.weights).toarray()
         clock.lap("solve")
     objective = tv_objective(vertices, cells, weights, tv_weights)
@@ -252,8 +276,8 @@ def solve_on_mesh(
 
 def _dense_solve(mesh, problem, settings, penalty, progress):
     """The solve by the dense splitting (:mod:`lbc_core.solve.dense`), taken where its cost model says its iterations
-    cost less (:func:`~lbc_core.solve.forecast.takes_dense_splitting`): the same problem, options and guarantees, its final
-    state carried onto working sets for a warm re-bind. ``problem``: solve_on_mesh's six arrays."""
+    cost less (:func:`~lbc_core.solve.forecast.takes_dense_splitting`): the same problem, options and guarantees, its
+    final state carried onto working sets for a warm re-bind. ``problem``: solve_on_mesh's six arrays."""
     vertices, control_points, tv_weights = problem[0], problem[4], problem[5]
     result = dense.solve_on_mesh(
         *problem, penalty=penalty, epsilon=settings.epsilon, tolerance=settings.tolerance,
@@ -264,7 +288,7 @@ def _dense_solve(mesh, problem, settings, penalty, progress):
     if result.state is not None:
         d, n = vertices.shape[1], len(control_points)
         state = SolverState.from_dense(result.state, result.weights[mesh.interior], mesh,
-                                       _starting_penalty(None, None, d, n))
+                                       _default_penalty(d, n))
     return SolveResult(result.weights, result.iterations, result.converged, result.objective, tv_weights,
                        result.history, result.seconds, state, splitting="dense")
 
@@ -375,7 +399,7 @@ class _Run:
             if self.iteration < next_check and self.iteration < settings.max_iterations:
                 continue
             next_check = self.iteration + settings.check_every
-            primal_scale = _primal_scale(step, out)
+            primal_scale = residual_scale(out, step.ops.slot_mass * out.z)
             verdict = self._check(step, value, out, previous, last_norm / (alpha * primal_scale), primal_scale)
             if verdict == "converged":
                 self.converged = True
@@ -422,7 +446,9 @@ class _Run:
         tolerance = settings.tolerance * (WHOLE_TOLERANCE_SHARE if self.wide else 1.0)
         self.pending_growth = None
         if primal <= tolerance and previous is not None:
-            record = dict(iteration=self.iteration, **_residuals(step, out, previous, primal_scale))
+            massed = step.ops.slot_mass * out.z
+            record = dict(iteration=self.iteration,
+                          **relative_residuals(out, previous, massed, primal_scale, step.objective))
             self.history.append(record)
             distance = max(record["primal"] / tolerance, record["dual"] / (DUAL_TOLERANCE_FACTOR * tolerance))
             if distance <= 1:
@@ -444,7 +470,7 @@ class _Run:
             return "reshaped"
         if self.iteration <= BALANCE_UNTIL and previous is not None and \
                 self.iteration % BALANCE_SPACING < settings.check_every:
-            factor = balancing_factor(_residuals(step, out, previous, primal_scale, objective=False),
+            factor = balancing_factor(relative_residuals(out, previous, step.ops.slot_mass * out.z, primal_scale),
                                        BALANCE_HIGH[step.ops.d])
             if factor != 1.0:
                 step.rescale_penalty(value, factor)
@@ -547,24 +573,8 @@ def _moved(values, positions, size):
     return out
 
 
-def _primal_scale(step, out):
-    """The primal residual's scale (Boyd et al. 2011, §3.3.1): max(|(g̃, √(βm) z)|, |(X̃, W̃)|) of one step."""
-    z_scaled = step.ops.slot_mass * out.z
-    return float(max(np.hypot(np.linalg.norm(out.gradient), np.linalg.norm(z_scaled)),
-                     np.hypot(np.linalg.norm(out.X), np.linalg.norm(out.W)), 1e-300))
 
 
-def _residuals(step, out, previous, primal_scale, objective=True):
-    """Relative primal and dual residuals (Boyd et al. 2011, §3.3.1) and the objective of the current iterate; the
-    dual residual measured in the (X, W) space against the scaled duals."""
-    X, W = out.X, out.W
-    primal = np.hypot(np.linalg.norm(out.gradient - X), np.linalg.norm(step.ops.slot_mass * out.z - W))
-    dual = np.hypot(np.linalg.norm(X - previous.X), np.linalg.norm(W - previous.W))
-    scale_dual = np.hypot(np.linalg.norm(out.v_x - X), np.linalg.norm(out.v_w - W))
-    record = {"primal": float(primal / primal_scale), "dual": float(dual / max(scale_dual, 1e-300))}
-    if objective:
-        record["objective"] = step.objective(out.gradient)
-    return record
 
 
 def _convexity(vertices, cells):
@@ -572,12 +582,10 @@ def _convexity(vertices, cells):
     return hull_share(vertices, np.abs(signed_measures(vertices, cells)).sum())
 
 
-def _starting_penalty(penalty, start, d, n):
-    """The penalty asked for, else the one a warm start's solve ended with, else c_d / n^(1/(d-1))."""
-    if penalty is not None:
-        return penalty
-    if start is not None and start.penalty is not None:
-        return start.penalty
+
+
+def _default_penalty(d, n):
+    """The starting penalty c_d / n^(1/(d-1)) (bench/RESULTS.md, "The starting penalty c_d / √n (3D)")."""
     return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
 
 
@@ -594,175 +602,3 @@ def _check_start(start, cells, n, n_interior):
         raise CageError(f"the start state is for {start.n_cells} cells, {start.sets.n_controls} control points and "
                         f"{len(start.interior)} interior vertices, not {len(cells)}, {n} and {n_interior}: start "
                         "from a solve on this mesh")
-
-
-@dataclass
-class SolverState:
-    """A solve's final state on its working sets, for a warm start on the same mesh carried onto an edited cage.
-
-    Measure-scaled as in :mod:`lbc_core.solve.splitting`: per slot v_W = W̃ + Ṽ, per (cell, control point) pair
-    v_X = X̃ + Ũ; a solve on the same cells and vertices, moved, rescales each by its own measure.
-
-    Attributes
-    ----------
-    sets : WorkingSets
-        Over ``interior``.
-    slot_state : (S,) float array
-    duals : (N_in, d+1) float array
-        The projection's duals.
-    pair_indptr : (F + 1,) int array
-        The pairs of cell c: ``pair_indptr[c]:pair_indptr[c + 1]``.
-    pair_control : (P,) int array
-    pair_state : (P, d) float array
-    pair_threshold : (P,) float array
-        The shrink thresholds √|c| ω / ρ the state was computed with.
-    sqrt_cell : (F,) float array
-    sqrt_mass : (N_in,) float array
-    interior : (N_in,) int array
-    penalty : float
-    """
-
-    sets: WorkingSets
-    slot_state: np.ndarray
-    duals: np.ndarray
-    pair_indptr: np.ndarray
-    pair_control: np.ndarray
-    pair_state: np.ndarray
-    pair_threshold: np.ndarray
-    sqrt_cell: np.ndarray
-    sqrt_mass: np.ndarray
-    interior: np.ndarray
-    penalty: float = None
-
-    @classmethod
-    def of(cls, step, state, mesh):
-        ops = step.ops
-        v_x, v_w = step.split(state)
-        indptr = np.searchsorted(ops.pair_cell, np.arange(len(mesh.cells) + 1))
-        return cls(ops.sets, v_w.copy(), step.duals.copy(), indptr, ops.pair_control.copy(), v_x.T.copy(),
-                   step.thresholds.copy(), mesh.sqrt_cell.copy(), mesh.sqrt_mass.copy(), mesh.interior.copy(),
-                   step.penalty)
-
-    @classmethod
-    def from_dense(cls, dense, weights, mesh, penalty):
-        """The state of a dense solve (:class:`lbc_core.solve.dense.SolverState`) on working sets: one ring around
-        the support of its output ``weights`` (N_in, n), as a solve on working sets ends. The split weights are the
-        output with zero duals (the projection's duals 0: the output is feasible), the split gradients and their duals
-        the dense state's on the pairs (its thresholds kept, so that a warm start rescales those duals to its own
-        ``penalty``)."""
-        support = WorkingSets.from_matrix(sp.csr_matrix(weights > 0))
-        sets = WorkingSets.from_matrix(mesh.margins(support, np.ones(support.n_slots))[0]).widened()
-        pair_cell, pair_control = cell_pairs(mesh, sets)
-        v_x, _ = dense.parts()
-        slot_vertex = sets.vertex_of_slot
-        slot_state = mesh.sqrt_mass[slot_vertex] * weights[slot_vertex, sets.controls]
-        indptr = np.searchsorted(pair_cell, np.arange(len(mesh.cells) + 1))
-        return cls(sets, slot_state, np.zeros((len(mesh.interior), mesh.vertices.shape[1] + 1)), indptr, pair_control,
-                   np.ascontiguousarray(v_x[:, pair_cell, pair_control].T, dtype=float),
-                   dense.thresholds[pair_cell, pair_control].astype(float), mesh.sqrt_cell.copy(),
-                   mesh.sqrt_mass.copy(), mesh.interior.copy(), penalty)
-
-    @property
-    def n_cells(self):
-        return len(self.pair_indptr) - 1
-
-    @property
-    def nbytes(self):
-        return sum(part.nbytes for part in (self.sets.indptr, self.sets.controls, self.slot_state, self.duals,
-                                            self.pair_indptr, self.pair_control, self.pair_state,
-                                            self.pair_threshold, self.sqrt_cell, self.sqrt_mass, self.interior))
-
-    def state_for(self, step, sets):
-        """The flat state of ``step`` (on ``sets``, grown from this state's) from this one, rescaled to the step's
-        measures: X̃ by the ratio of √|c|, Ũ by the ratio of the thresholds, v_W by the ratio of √(β m_v)."""
-        ops = step.ops
-        n = sets.n_controls
-        cells = np.repeat(np.arange(self.n_cells), np.diff(self.pair_indptr))
-        positions = np.searchsorted(ops.pair_cell * n + ops.pair_control, cells * n + self.pair_control)
-        found = positions < ops.n_pairs
-        found[found] = (ops.pair_cell[positions[found]] == cells[found]) & \
-            (ops.pair_control[positions[found]] == self.pair_control[found])
-        state = np.zeros(step.size_x + sets.n_slots, dtype=step.dtype)
-        v_x, v_w = step.split(state)
-        old = self.pair_state[found].T
-        thresholds = self.pair_threshold[found]
-        kept = step.shrink_factors(old, thresholds)
-        new_positions = positions[found]
-        cell_ratio = ops.pair_sqrt_cell[new_positions] / self.sqrt_cell[cells[found]]
-        threshold_ratio = np.divide(step.thresholds[new_positions], thresholds, out=np.ones_like(thresholds),
-                                    where=thresholds > 0)
-        v_x[:, new_positions] = old * (kept * cell_ratio + (1.0 - kept) * threshold_ratio)
-        mass_ratio = ops.slot_mass / self.sqrt_mass[sets.vertex_of_slot]
-        v_w[self.sets.slot_positions(sets)] = self.slot_state  # ``sets`` holds every slot of this state's
-        v_w *= mass_ratio
-        return state
-
-    def restricted(self, cells, interior):
-        """The state of a sub-problem: the cells where ``cells`` (F,) is true and the interior vertices
-        ``interior`` (a subset of this state's, sorted), the others held fixed."""
-        rows = np.searchsorted(self.interior, interior)
-        sets, slots = _take_rows(self.sets, rows)
-        pair_rows = np.flatnonzero(cells)
-        pair_indptr, pairs = _row_ranges(self.pair_indptr, pair_rows)
-        return SolverState(sets, self.slot_state[slots], self.duals[rows], pair_indptr, self.pair_control[pairs],
-                           self.pair_state[pairs], self.pair_threshold[pairs], self.sqrt_cell[pair_rows],
-                           self.sqrt_mass[rows], np.asarray(interior), self.penalty)
-
-    def updated(self, sub, cells):
-        """This state with a sub-problem's final state (:meth:`restricted` with the same ``cells``) written in."""
-        rows = np.searchsorted(self.interior, sub.interior)
-        vertex_parts = _replace_rows(self.sets.indptr, [self.sets.controls, self.slot_state], rows, sub.sets.indptr,
-                                     [sub.sets.controls, sub.slot_state])
-        sets = WorkingSets(vertex_parts[0], vertex_parts[1], self.sets.n_controls)
-        duals, sqrt_mass = self.duals.copy(), self.sqrt_mass.copy()
-        duals[rows], sqrt_mass[rows] = sub.duals, sub.sqrt_mass
-        cell_rows = np.flatnonzero(cells)
-        pair_parts = _replace_rows(self.pair_indptr, [self.pair_control, self.pair_state, self.pair_threshold],
-                                   cell_rows, sub.pair_indptr, [sub.pair_control, sub.pair_state,
-                                                                sub.pair_threshold])
-        sqrt_cell = self.sqrt_cell.copy()
-        sqrt_cell[cell_rows] = sub.sqrt_cell
-        return SolverState(sets, vertex_parts[2], duals, pair_parts[0], pair_parts[1], pair_parts[2],
-                           pair_parts[3], sqrt_cell, sqrt_mass, self.interior, sub.penalty)
-
-    def for_cells(self, source):
-        """This state on another list of cells, cell i taking cell ``source[i]``'s part (a warm start's guess where
-        a re-bind replaced cells)."""
-        pair_indptr, pairs = _row_ranges(self.pair_indptr, np.asarray(source))
-        return SolverState(self.sets, self.slot_state, self.duals, pair_indptr, self.pair_control[pairs],
-                           self.pair_state[pairs], self.pair_threshold[pairs], self.sqrt_cell[source],
-                           self.sqrt_mass, self.interior, self.penalty)
-
-
-def _row_ranges(indptr, rows):
-    """The CSR rows ``rows`` of a layout: their new indptr and the entries they take, in order."""
-    counts = indptr[rows + 1] - indptr[rows]
-    new_indptr = np.r_[0, np.cumsum(counts)]
-    entries = np.repeat(indptr[rows] - new_indptr[:-1], counts) + np.arange(new_indptr[-1])
-    return new_indptr, entries
-
-
-def _take_rows(sets, rows):
-    """The working sets of the vertices ``rows``, and which slots they take."""
-    indptr, slots = _row_ranges(sets.indptr, rows)
-    return WorkingSets(indptr, sets.controls[slots], sets.n_controls), slots
-
-
-def _replace_rows(indptr, arrays, rows, sub_indptr, sub_arrays):
-    """A CSR layout with the rows ``rows`` replaced by those of a sub-layout: [indptr, *arrays]."""
-    counts = np.diff(indptr)
-    counts[rows] = np.diff(sub_indptr)
-    new_indptr = np.r_[0, np.cumsum(counts)]
-    replaced = np.zeros(len(counts), dtype=bool)
-    replaced[rows] = True
-    kept_rows = np.flatnonzero(~replaced)
-    _, old_entries = _row_ranges(indptr, kept_rows)
-    _, new_kept = _row_ranges(new_indptr, kept_rows)
-    _, new_sub = _row_ranges(new_indptr, rows)
-    results = [new_indptr]
-    for array, sub_array in zip(arrays, sub_arrays):
-        out = np.empty((new_indptr[-1],) + array.shape[1:], dtype=array.dtype)
-        out[new_kept] = array[old_entries]
-        out[new_sub] = sub_array
-        results.append(out)
-    return results
