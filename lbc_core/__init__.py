@@ -21,9 +21,8 @@ from .solve.solver import SolveResult, solve_on_mesh
 from .version import __version__
 
 __all__ = [
-    "BindOptions", "Binding", "Cage", "CageError", "Cancelled", "GeneratedCage", "SolveResult", "bind", "bind_bbw", "bind_harmonic", "bind_mvc",
-    "generate_cage", "load_binding", "make_cage", "mean_value_coordinates", "PointsOutside", "read_cage", "read_mesh", "rebind",
-    "solve_on_mesh",
-    "write_mesh",
+    "BindOptions", "Binding", "Cage", "CageError", "Cancelled", "GeneratedCage", "SolveResult", "bind",
+    "bind_bbw", "bind_harmonic", "bind_mvc", "generate_cage", "load_binding", "make_cage",
+    "mean_value_coordinates", "PointsOutside", "read_cage", "read_mesh", "rebind", "solve_on_mesh", "write_mesh",
     "__version__",
 ]

@@ -50,8 +50,9 @@ class BindOptions:
         Domain mesher: "auto" (the default, the bundled mesher) or a name of :data:`lbc_core.meshing.MESHERS` for
         the cage's dimension.
     smoothness : float or None
-        Smooth ↔ local, in [0, 1]: the smooth evaluation's reach (:func:`lbc_core.evaluate.smoothing.radius_for`; 1 folds bent
-        joints least, 0 keeps each point's weights on the fewest cage vertices). None: :data:`DEFAULT_SMOOTHNESS`.
+        Smooth ↔ local, in [0, 1]: the smooth evaluation's reach (:func:`lbc_core.evaluate.smoothing.radius_for`; 1
+        folds bent joints least, 0 keeps each point's weights on the fewest cage vertices). None:
+        :data:`DEFAULT_SMOOTHNESS`.
 
     Raises
     ------

@@ -1,4 +1,5 @@
-"""The bind pipeline: a cage and points in, a :class:`~lbc_core.binding.record.Binding` out, every stage called here in order.
+"""The bind pipeline: a cage and points in, a :class:`~lbc_core.binding.record.Binding` out, every stage called here
+in order.
 
     check the request → unit frame → domain mesh → boundary values → interpolation to the points (refused when
     every point lies outside) → geodesic TV weights → solve (ADMM) → smooth evaluation and reduction → back to the
@@ -74,9 +75,9 @@ class StageClock:
         self._parts[name] = (self._parts[name][0], 1.0)
 
     def weigh(self, told):
-        """Share the bar by the time told before the bind (:class:`~lbc_core.solve.forecast.BindSeconds`, or None to keep
-        the shares): the meshing, the solve and the reduction in proportion to their seconds, within what the other
-        stages' shares leave (the reduction of 64k points is a quarter of the demo's bind)."""
+        """Share the bar by the time told before the bind (:class:`~lbc_core.solve.forecast.BindSeconds`, or None to
+        keep the shares): the meshing, the solve and the reduction in proportion to their seconds, within what the
+        other stages' shares leave (the reduction of 64k points is a quarter of the demo's bind)."""
         timed = {} if told is None else {"meshing": told.meshing, "solve": told.solve, "reduction": told.points}
         shares = {name: end - start for name, (start, end) in self._parts.items()}
         seconds = sum(timed.get(name, 0.0) for name in shares)

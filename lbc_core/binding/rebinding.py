@@ -25,9 +25,9 @@ before, the cage's topology or welding
 changed, or the previous binding has no solver state (one loaded from a file), the re-bind is a cold bind with the
 previous options, and ``Binding.outcome.report`` says why.
 
-The stages are :mod:`lbc_core.binding.pipeline`'s, with its one table of progress shares and timings: this module carries
-the previous mesh (in place of meshing), chooses the vertices to solve again and the points to evaluate again, and
-merges the rows it kept; the geodesics, the solve, the interpolation, the evaluation and the binding record are the
+The stages are :mod:`lbc_core.binding.pipeline`'s, with its one table of progress shares and timings: this module
+carries the previous mesh (in place of meshing), chooses the vertices to solve again and the points to evaluate again,
+and merges the rows it kept; the geodesics, the solve, the interpolation, the evaluation and the binding record are the
 pipeline's stage functions.
 """
 

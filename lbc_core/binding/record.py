@@ -166,7 +166,8 @@ class Binding:
     stale : (N,) float array or None
         Per domain vertex, how much its coordinates (the largest change of one) and position (in median cell edges)
         have changed since the points near it were last evaluated (None: not at all); kept in memory for a warm
-        re-bind, which evaluates the points near a vertex again once this passes :data:`lbc_core.binding.rebinding.STALE`.
+        re-bind, which evaluates the points near a vertex again once this passes
+        :data:`lbc_core.binding.rebinding.STALE`.
     """
 
     cage: Cage

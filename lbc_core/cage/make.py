@@ -13,8 +13,8 @@ keeps the Lagrange and linearity properties on every edge of the input:
   n-gon, a star). The centre is no control point: it is a surface vertex whose boundary values are 1/k for each of
   the face's k control points, so values linear on the poke's triangles and the surface are one linear construction
   (partition of unity and reproduction hold on the face), and no vertex of the face is favoured (a convex n-gon
-  takes its outline's smooth mean value coordinates instead, :mod:`lbc_core.solve.boundary`). The cage's surface vertices
-  (``surface_vertices``) are its control points followed by these centres;
+  takes its outline's smooth mean value coordinates instead, :mod:`lbc_core.solve.boundary`). The cage's surface
+  vertices (``surface_vertices``) are its control points followed by these centres;
 * any other n-gon is ear-clipped in the plane of its Newell normal, always cutting the first ear in the face's vertex
   order.
 
@@ -124,7 +124,8 @@ def check_coordinates(vertices):
     if not finite.all():
         bad = np.flatnonzero(~finite)
         raise CageVertexError(
-            f"NaN or infinite coordinates at {count_of(len(bad), 'cage vertex', 'cage vertices')} ({some_indices(bad)}): "
+            f"NaN or infinite coordinates at {count_of(len(bad), 'cage vertex', 'cage vertices')} "
+            f"({some_indices(bad)}): "
             "fix or delete them"
         )
     distances = np.linalg.norm(vertices - np.median(vertices, axis=0), axis=1)
@@ -272,7 +273,8 @@ def _check_polygon_simple(vertices, zero, names):
     crossing = segments_touch(start[i], end[i], start[j], end[j], zero)
     if np.any(crossing):
         i, j = i[crossing], j[crossing]
-        pairs = some_items([f"{names[a]}-{names[(a + 1) % n]} with {names[b]}-{names[(b + 1) % n]}" for a, b in zip(i, j)])
+        pairs = some_items([f"{names[a]}-{names[(a + 1) % n]} with {names[b]}-{names[(b + 1) % n]}"
+                            for a, b in zip(i, j)])
         defects.append(NamesVertices(
             f"the polygon cage intersects itself at {count_of(len(i), 'pair')} of crossing or touching edges (between "
             f"input vertices {pairs}); move its vertices so that the outline does not cross itself"

@@ -142,8 +142,8 @@ def flatten(cage_vertices, cage_faces, points, edges=None):
     Raises
     ------
     CageError
-        When the cage has NaN, infinite or far-off coordinates (:func:`~lbc_core.cage.make.check_coordinates`), or is flat
-        but its outline is not one closed loop.
+        When the cage has NaN, infinite or far-off coordinates (:func:`~lbc_core.cage.make.check_coordinates`), or is
+        flat but its outline is not one closed loop.
     """
     cage_vertices = np.asarray(cage_vertices, dtype=float)
     points = np.asarray(points, dtype=float)

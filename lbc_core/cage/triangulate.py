@@ -293,7 +293,8 @@ def report_degenerate(vertices, triangles, triangle_face, zero, defects):
     if np.any(bad):
         faces = np.unique(triangle_face[bad])
         defects.append(
-            f"the cage has {count_of(len(faces), 'face')} of zero area (face {some_indices(faces)}): delete or dissolve "
+            f"the cage has {count_of(len(faces), 'face')} of zero area (face {some_indices(faces)}): delete or "
+            "dissolve "
             "them (in Blender: Mesh > Clean Up > Degenerate Dissolve)"
         )
     return bad

@@ -1,7 +1,7 @@
 """Baseline coordinates to compare LBC with: mean value, harmonic and (optionally) bounded biharmonic.
 
-Each ``bind_*`` function returns the same :class:`~lbc_core.binding.record.Binding` as :func:`lbc_core.bind`, so that every
-statistic and plot works on each scheme. The harmonic and bounded biharmonic baselines are solved on the same
+Each ``bind_*`` function returns the same :class:`~lbc_core.binding.record.Binding` as :func:`lbc_core.bind`, so that
+every statistic and plot works on each scheme. The harmonic and bounded biharmonic baselines are solved on the same
 :class:`~lbc_core.meshing.DomainMesh` with the same Dirichlet boundary values as LBC (pass ``domain=binding.domain``
 to share an LBC binding's mesh); mean value coordinates have a closed form, evaluated at the points themselves and
 at the domain mesh's vertices (so that the locality statistics see them on the same mesh as the others).

@@ -1,10 +1,10 @@
 """Which domain vertices a point's smooth fit may use: those it reaches through the domain, not across a gap.
 
-The moving least-squares fit (:mod:`lbc_core.evaluate.smoothing`) weighs the domain vertices within a ball around the point.
-Where two parts of the cage face each other across a gap narrower than the ball (fingers side by side, an arm along
-the body, the legs), the ball holds the other part's vertices too, whose coordinates belong to other control points:
-the fit mixes them in, and a wide fit folds such parts when they move apart (bench/RESULTS.md, "Joints as smooth as
-Mesh Deform's"). Here a vertex is weighed by its *detour*: how much longer the shortest path along the domain's edges
+The moving least-squares fit (:mod:`lbc_core.evaluate.smoothing`) weighs the domain vertices within a ball around the
+point. Where two parts of the cage face each other across a gap narrower than the ball (fingers side by side, an arm
+along the body, the legs), the ball holds the other part's vertices too, whose coordinates belong to other control
+points: the fit mixes them in, and a wide fit folds such parts when they move apart (bench/RESULTS.md, "Joints as smooth
+as Mesh Deform's"). Here a vertex is weighed by its *detour*: how much longer the shortest path along the domain's edges
 from a cell corner to it is than the straight line. A pair (corner c, vertex j) whose detour is more than :data:`NEAR`
 fit radii is *blocked*, by 1 - smootherstep of the detour between :data:`NEAR` and :data:`FAR` radii (0 beyond, and
 where no path that short exists). A point's factor for vertex j is the barycentric mean of its cell corners' factors,

@@ -31,8 +31,8 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     ----------
     located : (m, N) scipy.sparse.csr_matrix, or any object with ``shape`` whose row slices are one
         Interpolation from the domain's N vertices to the points (barycentric, or
-        :class:`lbc_core.evaluate.smoothing.SmoothInterpolation`, whose ``linear`` barycentric rows are the fallback of a
-        point its fit leaves with no non-negative weights that meet the constraints, and whose ``outside`` rows, if
+        :class:`lbc_core.evaluate.smoothing.SmoothInterpolation`, whose ``linear`` barycentric rows are the fallback of
+        a point its fit leaves with no non-negative weights that meet the constraints, and whose ``outside`` rows, if
         any, extrapolate to points outside the cage: those are reduced without the sign constraint, which no
         weights reproducing such a point can meet).
     domain_weights : (N, n) float array
@@ -149,7 +149,8 @@ def _reduce_signed(full, controls, positions, threshold, tolerance):
 
 def _by_chunks(m, n, reduce_chunk, progress):
     """``reduce_chunk(rows)`` over consecutive equal row slices of at most ROWS_PER_CHUNK, one per thread at a time
-    (:func:`~lbc_core.kernel.parallel.map_row_chunks`), stacked into an (m, n) CSR; ``progress`` is told before each round."""
+    (:func:`~lbc_core.kernel.parallel.map_row_chunks`), stacked into an (m, n) CSR; ``progress`` is told before each
+    round."""
     chunks = map_row_chunks(reduce_chunk, m, ROWS_PER_CHUNK,
                             lambda start: progress(start / m, f"reducing the weights: {start} of {m} points done"))
     progress(1.0, "reducing the weights: done")

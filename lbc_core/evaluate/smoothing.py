@@ -23,8 +23,8 @@ from .interpolation import FacetSearch
 from .reachability import DomainPaths
 
 # Smooth ↔ local, 0 to 1: how wide the smooth evaluation's fit reaches (radius_for) and how much the
-# add-on's thinning keeps (lbc_core.evaluate.thinning.floor_for). 0.5 folds the joints of a real character less than Mesh
-# Deform for 1.1-1.35 times the influences of 0 (bench/RESULTS.md, "Joints as smooth as Mesh Deform's").
+# add-on's thinning keeps (lbc_core.evaluate.thinning.floor_for). 0.5 folds the joints of a real character less than
+# Mesh Deform for 1.1-1.35 times the influences of 0 (bench/RESULTS.md, "Joints as smooth as Mesh Deform's").
 DEFAULT_SMOOTHNESS = 0.5
 # The fit's radius in median cell edges at smoothness 0 and 1 (BindOptions.smoothness): wider is smoother and costs
 # more influences per point (bench/RESULTS.md, "Joints as smooth as Mesh Deform's").
@@ -36,7 +36,8 @@ SMOOTH_RADIUS_EDGES = 4.0
 DEEP_RADIUS_EDGES = RADIUS_EDGES
 DEPTH_EDGES = (0.2, 0.8)
 # Distance from the cage (median cell edges, each point's own) over which the fit fades into the P1
-# interpolation (bench/RESULTS.md, "The smooth evaluation's fade into P1: over a quarter of a cell edge instead of one").
+# interpolation (bench/RESULTS.md, "The smooth evaluation's fade into P1: over a quarter of a cell edge instead of
+# one").
 FADE_EDGES = 0.25
 # A fit whose moment matrix is this ill-conditioned (too few or coplanar vertices in reach) is not used.
 MAX_CONDITION = 1e8
@@ -86,8 +87,8 @@ class SmoothInterpolation:
         The points outside the cage (:func:`~lbc_core.evaluate.interpolation.interpolation_matrix`'s flags), whose rows
         extrapolate to the point; with ``points``.
     through_domain : bool
-        Weigh the fitted vertices by their paths through the domain (:mod:`lbc_core.evaluate.reachability`), so that a fit
-        wider than a gap between parts of the cage does not reach across it; False: every vertex in the ball.
+        Weigh the fitted vertices by their paths through the domain (:mod:`lbc_core.evaluate.reachability`), so that a
+        fit wider than a gap between parts of the cage does not reach across it; False: every vertex in the ball.
     """
 
     def __init__(self, vertices, cells, located, radius_edges=RADIUS_EDGES, fade_edges=FADE_EDGES, progress=None,

@@ -2,8 +2,8 @@
 cage facets (triangles that cross or touch: :mod:`.intersections`).
 
 One implementation of each, used by the cage checks (cage/), the domain meshers (meshing/), point location
-(evaluate/interpolation.py), the boundary values and the warm re-bind. Every function works on numpy arrays, vectorised over
-the leading axis; lengths are in the caller's units.
+(evaluate/interpolation.py), the boundary values and the warm re-bind. Every function works on numpy arrays, vectorised
+over the leading axis; lengths are in the caller's units.
 """
 
 import numpy as np

@@ -24,8 +24,9 @@ Delaunay triangulation. ``tetrahedra``: 3D. ``"delaunay"`` (also ``"auto"``): a 
 tetrahedralisation of the surface samples and a body-centred cubic lattice (see :mod:`.tetrahedra`).
 
 Every backend works on the cage moved to its centre and scaled to unit diagonal (3D: also stretched along its
-principal axes when it is very thin, see :class:`lbc_core.kernel.frame.MeshingFrame`); the result is mapped back, its boundary
-vertices recomputed from their barycentric coordinates on the original cage, so the guarantees above hold in the user's units.
+principal axes when it is very thin, see :class:`lbc_core.kernel.frame.MeshingFrame`); the result is mapped back, its
+boundary vertices recomputed from their barycentric coordinates on the original cage, so the guarantees above hold in
+the user's units.
 
 fTetWild (pytetwild) was measured and not used: its tetrahedra do not contain the cage vertices (misses up to 0.35 %
 of the cage diagonal on the gargoyle cage_L08), its boundary lies only within an envelope of the cage and does not
