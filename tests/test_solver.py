@@ -349,7 +349,8 @@ def test_a_penalty_far_off_is_balanced_against_the_residuals_early_on(monkeypatc
 def test_a_change_of_penalty_keeps_the_split_variables_and_rescales_the_duals():
     from lbc_core.solve import solver
     from lbc_core.solve.splitting import DouglasRachford
-    from lbc_core.solve.working_sets import MeshData, PairOperators
+    from lbc_core.solve.pairs import PairOperators
+    from lbc_core.solve.working_sets import MeshData
 
     vertices, cells, boundary, fixed, controls, omega = _corpus_problem("cube", cells=500)
     mesh = MeshData.of(vertices, cells, boundary, fixed, solver.BETA[3], controls, vertices)
@@ -453,10 +454,10 @@ def test_cancel_is_heard_inside_a_layouts_long_parts(function_name, monkeypatch)
     them: a cancel turning true there stops the solve from inside that function, not after it."""
     import sys
 
-    import lbc_core.solve.working_sets as working_sets
+    import lbc_core.solve.pairs as pairs
 
-    monkeypatch.setattr(working_sets, "GRADIENT_CHUNK_PAIRS", 500)
-    monkeypatch.setattr(working_sets, "FACTOR_GROUP_SLOTS", 500)
+    monkeypatch.setattr(pairs, "GRADIENT_CHUNK_PAIRS", 500)
+    monkeypatch.setattr(pairs, "FACTOR_GROUP_SLOTS", 500)
     polled_from = []
 
     def cancel():
@@ -472,17 +473,17 @@ def test_cancel_is_heard_inside_a_layouts_long_parts(function_name, monkeypatch)
 def test_wide_working_sets_are_made_whole_and_share_one_factor(monkeypatch):
     """Blender's Cylinder (n-gon caps) spreads its coordinates over nearly every control point: its working sets are
     made whole, and one factorisation then solves every control point's block."""
-    import lbc_core.solve.working_sets as working_sets
+    import lbc_core.solve.pairs as pairs
 
     shared = []
-    group_factors = working_sets._group_factors
+    group_factors = pairs._group_factors
 
     def spy(*args):
         factors = group_factors(*args)
         shared.append(max(positions.shape[0] for positions, _ in factors))
         return factors
 
-    monkeypatch.setattr(working_sets, "_group_factors", spy)
+    monkeypatch.setattr(pairs, "_group_factors", spy)
     problem = _corpus_problem("cylinder-32-ngon", cells=2000)
     result = solve_on_mesh(*problem, splitting="working sets")
     assert result.converged and shared[-1] == len(problem[4]) == 64
@@ -524,7 +525,8 @@ def test_whole_working_sets_reach_the_dense_optimum():
 def test_whole_sets_take_the_products_on_blocks(monkeypatch):
     """On whole working sets the gradient products act on the (vertices, control points) block through the cells'
     operator, and give what the pairs' matrix gives; the projection's rows are the slots reshaped."""
-    from lbc_core.solve.working_sets import MeshData, PairOperators, WorkingSets
+    from lbc_core.solve.pairs import PairOperators
+    from lbc_core.solve.working_sets import MeshData, WorkingSets
 
     vertices, cells, boundary, fixed, controls, _ = _corpus_problem("cylinder-8-ngon", cells=500)
     mesh = MeshData.of(vertices, cells, boundary, fixed, 1280.0, controls, vertices)

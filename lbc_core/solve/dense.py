@@ -41,8 +41,9 @@ from .anderson import Anderson
 from .forecast import default_tolerance, forecast_iterations, format_remaining, seconds_left
 from .nullspace import NORM_SLICE, DenseProblem, DenseSplitting
 from .objective import tv_objective
+# The options record, checks, residuals and penalty are the working sets' solver's own (settings.py).
 from .settings import (SolveSettings, balancing_factor, check_problem, relative_residuals, residual_scale,
-                       starting_penalty)  # the same as the solver's
+                       starting_penalty)
 from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the

@@ -83,3 +83,11 @@ def relative_residuals(out, previous, massed, scale, objective=None):
     if objective is not None:
         record["objective"] = objective(out.gradient)
     return record
+
+
+def check_affine(controls):
+    """Refuse control points that are affinely dependent (all on a line or plane): no weights reproduce there."""
+    K = np.c_[controls, np.ones(len(controls))]
+    singular = np.linalg.svd(K, compute_uv=False)
+    if np.sum(singular > 1e-12 * singular[0]) < controls.shape[1] + 1:
+        raise CageError("the control points are affinely dependent (all on a line or plane): the cage is flat")

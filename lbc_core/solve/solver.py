@@ -40,12 +40,20 @@ from .forecast import (
     takes_dense_splitting,
 )
 from .objective import tv_objective
-from .settings import (SolveSettings, balancing_factor, check_problem, relative_residuals, residual_scale,
-                       starting_penalty)
+from .settings import (
+    SolveSettings,
+    balancing_factor,
+    check_affine,
+    check_problem,
+    relative_residuals,
+    residual_scale,
+    starting_penalty,
+)
 from .splitting import DouglasRachford
 from .state import SolverState
 from .stretch import Stretch
-from .working_sets import MeshData, PairOperators, WorkingSets, feasible_working_sets, first_working_sets
+from .pairs import PairOperators
+from .working_sets import MeshData, WorkingSets, feasible_working_sets, first_working_sets
 
 # β: the weight of the W = Z block against the gradient block, on the unit-diagonal cage.
 BETA = {2: 1280.0, 3: 1280.0}
@@ -235,7 +243,7 @@ def solve_on_mesh(
     # Work on the mesh scaled to unit diagonal, so that penalty and tolerances are scale-free.
     frame = UnitFrame.exact(vertices)
     unit_vertices, unit_controls = frame.to_unit(vertices), frame.to_unit(control_points)
-    _check_affine(unit_controls)
+    check_affine(unit_controls)
     stretch = Stretch.of(unit_controls, epsilon)
     solve_vertices = unit_vertices if stretch is None else stretch.apply(unit_vertices)
 
@@ -573,15 +581,9 @@ def _moved(values, positions, size):
     return out
 
 
-
-
-
-
 def _convexity(vertices, cells):
     """The domain's area or volume over its convex hull's: the cage's :attr:`~lbc_core.cage.make.Cage.convexity`."""
     return hull_share(vertices, np.abs(signed_measures(vertices, cells)).sum())
-
-
 
 
 def _default_penalty(d, n):
@@ -589,12 +591,6 @@ def _default_penalty(d, n):
     return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
 
 
-def _check_affine(controls):
-    """Refuse control points that are affinely dependent (all on a line or plane): no weights reproduce there."""
-    K = np.c_[controls, np.ones(len(controls))]
-    singular = np.linalg.svd(K, compute_uv=False)
-    if np.sum(singular > 1e-12 * singular[0]) < controls.shape[1] + 1:
-        raise CageError("the control points are affinely dependent (all on a line or plane): the cage is flat")
 
 
 def _check_start(start, cells, n, n_interior):

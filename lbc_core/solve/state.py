@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .working_sets import WorkingSets, cell_pairs
+from .pairs import cell_pairs
+from .working_sets import WorkingSets
 
 
 @dataclass
