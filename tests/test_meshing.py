@@ -15,7 +15,7 @@ from lbc_core import meshing
 from lbc_core.cage import Cage, make_cage
 from lbc_core.geometry import closest_on_triangles, orient_positive, radius_ratios, signed_measures
 from lbc_core.geometry import signed_radius_ratios_by_coordinate
-from lbc_core.meshing import polygon, tetrahedra
+from lbc_core.meshing import lattice, polygon, tetrahedra
 from lbc_core.progress import Progress
 from lbc_core.errors import CageError, Cancelled
 from lbc_core.fem import boundary_facets
@@ -336,7 +336,7 @@ def test_depth_in_convex_cage_is_the_distance_to_its_surface():
     outside; a cage dented by 1e-3 is not convex, one dented by up to 1e-4 of its size still counts as convex."""
     cage = cube_cage()
     points = np.random.default_rng(0).uniform(-0.5, 1.5, (500, 3))
-    depth = tetrahedra._depth_in_convex(cage, points)
+    depth = lattice._depth_in_convex(cage, points)
     corners = cage.surface_vertices[cage.facets]
     squared = np.min([closest_on_triangles(points, *np.broadcast_to(c[:, None], (3, len(points), 3)))[0]
                       for c in corners], axis=0)
@@ -346,7 +346,7 @@ def test_depth_in_convex_cage_is_the_distance_to_its_surface():
     for dent, convex in ((1e-3, False), (1e-5, True), (1e-9, True)):
         vertices = CUBE_VERTICES.copy()
         vertices[7] -= dent  # the corner (1, 1, 1) moved towards the centre
-        assert (tetrahedra._depth_in_convex(make_cage(vertices, CUBE_QUADS), points) is not None) == convex
+        assert (lattice._depth_in_convex(make_cage(vertices, CUBE_QUADS), points) is not None) == convex
 
 
 @pytest.mark.parametrize("cage", [cube_cage(), make_cage(CUBE_VERTICES[[0, 1, 2, 4]], [[0, 2, 1], [0, 1, 3],
@@ -356,7 +356,7 @@ def test_convex_cages_lattice_as_the_general_band_test(cage, monkeypatch):
     """The plane-distance shortcut for convex cages keeps exactly the lattice points the general band and inside
     tests keep: the same mesh, bit for bit."""
     fast = meshing.mesh_domain(cage, cells=2000)
-    monkeypatch.setattr(tetrahedra, "_depth_in_convex", lambda cage, points: None)
+    monkeypatch.setattr(lattice, "_depth_in_convex", lambda cage, points: None)
     general = meshing.mesh_domain(cage, cells=2000)
     assert np.array_equal(fast.vertices, general.vertices) and np.array_equal(fast.cells, general.cells)
 
@@ -367,9 +367,9 @@ def test_small_cages_lattice_as_the_general_band_test(monkeypatch):
     vertices = CUBE_VERTICES.copy()
     vertices[7] -= 0.1
     cage = make_cage(vertices, CUBE_QUADS)
-    assert tetrahedra._depth_in_convex(cage, vertices) is None and len(cage.facets) <= tetrahedra._FEW_FACETS
+    assert lattice._depth_in_convex(cage, vertices) is None and len(cage.facets) <= lattice._FEW_FACETS
     few = meshing.mesh_domain(cage, cells=2000)
-    monkeypatch.setattr(tetrahedra, "_FEW_FACETS", 0)
+    monkeypatch.setattr(lattice, "_FEW_FACETS", 0)
     general = meshing.mesh_domain(cage, cells=2000)
     assert np.array_equal(few.vertices, general.vertices) and np.array_equal(few.cells, general.cells)
 
