@@ -4,6 +4,8 @@ The checks here are independent of lbc_core.meshing's internals: which cage face
 found geometrically, and coverage is checked by summing areas per cage facet.
 """
 
+import itertools
+import time
 import types
 from pathlib import Path
 
@@ -15,7 +17,7 @@ from lbc_core import meshing
 from lbc_core.cage import Cage, make_cage
 from lbc_core.geometry import closest_on_triangles, orient_positive, radius_ratios, signed_measures
 from lbc_core.geometry import signed_radius_ratios_by_coordinate
-from lbc_core.meshing import lattice, polygon, tetrahedra
+from lbc_core.meshing import lattice, polygon, sizing, tetrahedra
 from lbc_core.progress import Progress
 from lbc_core.errors import CageError, Cancelled
 from lbc_core.fem import boundary_facets
@@ -483,6 +485,30 @@ def test_3d_fingers_close_together_mesh_in_few_rounds(monkeypatch):
     assert ratios.mean() > 0.5 and np.mean(ratios < 0.1) < 0.03
 
 
+def test_3d_meshing_reads_no_clock(monkeypatch):
+    """Meshing's budgets are counts of work: a clock that runs a thousand seconds between two readings (a machine
+    under heavy load) gives the same mesh, bit for bit. A deadline used to end the refinement along the hand's slots,
+    so a bind under load got other cells (11,549 against 8830 on a user's hand)."""
+    cage = load_cage(HAND_CAGE)
+    expected = meshing.mesh_domain(cage)
+    ticks = itertools.count(0.0, 1000.0)
+    monkeypatch.setattr(time, "perf_counter", lambda: next(ticks))
+    monkeypatch.setattr(time, "monotonic", lambda: next(ticks))
+    mesh = meshing.mesh_domain(cage)
+    assert np.array_equal(mesh.vertices, expected.vertices) and np.array_equal(mesh.cells, expected.cells)
+
+
+def test_3d_refinement_stops_when_its_work_budget_is_spent(monkeypatch):
+    """The last guard is a count: the points handed to the tetrahedraliser in all. The hand's slots need a few
+    rounds of refinement; a budget of two rounds' points refuses the cage, naming faces, as the deadline did."""
+    calls = count_tetrahedralisations(monkeypatch)
+    monkeypatch.setattr(sizing, "WORK_PER_CELL", 0)
+    monkeypatch.setattr(sizing, "WORK_BASE", 12_000)
+    with pytest.raises(CageError, match="could not make the tetrahedra follow the cage surface near its faces"):
+        meshing.mesh_domain(load_cage(HAND_CAGE))
+    assert sum(calls) <= 12_000
+
+
 def test_3d_progress_is_reported_between_any_two_tetrahedralisations(monkeypatch):
     """Each refinement round tells how many surface triangles are left: the hand's rounds ran with the bar standing
     still (9 reports for 28 tetrahedralisations, up to 2.5 s apart)."""
@@ -504,7 +530,7 @@ def test_3d_only_walls_facing_across_a_narrow_gap_are_sampled_finer():
     from test_meshing_corpus import slotted_prism
 
     def surface(cage, band):
-        return Surface(cage, 0.05, np.random.default_rng(0), 10**6, np.inf, band=band)
+        return Surface(cage, 0.05, np.random.default_rng(0), 10**6, band=band)
 
     slotted = surface(slotted_prism(1e-3), 0.035)
     walls = np.unique(slotted.region[np.isin(slotted.cage.facet_face, [4, 6])])  # the faces at y = 0.5 ± gap / 2

@@ -16,7 +16,6 @@ the moved vertex along those lines, and a mesh that follows them keeps every bou
 warm re-bind (:mod:`lbc_core.rebinding`) can carry it instead of meshing again.
 """
 
-import time
 from collections import namedtuple
 
 import numpy as np
@@ -132,7 +131,6 @@ class Surface:
     spacing : float, the sample spacing
     rng : numpy.random.Generator
     budget : int, the most samples refinement may make
-    deadline : float, the time.perf_counter() after which refinement gives up
     split : (E,) bool array, optional
         The facets that are regions of their own (:func:`split_facets`; chosen once per mesh, so that a retry at
         another spacing keeps the same regions); None: every facet merges with its coplanar neighbours.
@@ -141,8 +139,8 @@ class Surface:
         narrower than the spacing are sampled finer (:data:`GAP_SPACING`).
     """
 
-    def __init__(self, cage, spacing, rng, budget, deadline, split=None, band=None):
-        self.cage, self.rng, self.spacing, self.budget, self.deadline = cage, rng, spacing, budget, deadline
+    def __init__(self, cage, spacing, rng, budget, split=None, band=None):
+        self.cage, self.rng, self.spacing, self.budget = cage, rng, spacing, budget
         facets = cage.facets
         corners = cage.vertices[facets]
         normals = triangle_normals(corners)
@@ -387,8 +385,6 @@ class Surface:
             missing = []
             for r in range(self.n_regions):
                 steps.check()
-                if time.perf_counter() > self.deadline:
-                    raise OutOfBudget("out of time")
                 if self.triangulations[r] is None:
                     self.triangulations[r], lost = self._triangulate(r)
                     missing += lost
@@ -499,8 +495,6 @@ class Surface:
         inserted = {}
         for i, (s, pieces) in enumerate(zip(missing, triangle_pieces)):
             steps.check()
-            if time.perf_counter() > self.deadline:
-                raise OutOfBudget("out of time")
             if split & pieces:
                 continue
             r = self.triangle_region[s]

@@ -12,8 +12,9 @@ kept, where that raises the least radius ratio around them (:func:`polish`): one
 smoothing and sliver perturbation by new tetrahedralisations took four. When the cell count misses the target by
 more than 15 % (thin or small cages), everything is done once more with a corrected size.
 
-Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells,
-the last guard), and a cancel check in each round. Refinement whose missing triangles keep growing, on course to
+Every loop is bounded by counts, never by the clock, so the same cage takes the same path on any machine under any
+load: recovery rounds, a surface-sample budget, a work budget (the points handed to the tetrahedraliser in all, the
+last guard), and a cancel check in each round. Refinement whose missing triangles keep growing, on course to
 pass the sample budget (parts of the cage nearly touching, far closer than the sampling), is refused at once,
 naming the faces. When recovery runs out of its budget (feature edges meeting at very small angles can make
 Ruppert-style refinement cascade), the mesh is made again with fresh jitter and a coarser surface, and only then is
@@ -21,7 +22,6 @@ the cage refused, naming the faces where it failed.
 """
 
 import itertools
-import time
 
 import numpy as np
 import scipy.sparse as sp
@@ -33,6 +33,7 @@ from ..geometry import circumspheres, orient_positive, radius_ratios, row_keys, 
 from ..geometry import signed_radius_ratios_by_coordinate, triangle_normals, winding_numbers
 from .common import far_points, on_common, raw_mesh, rows_in
 from .lattice import bcc_lattice, check_winding
+from .sizing import WorkBudget
 from .surface import OutOfBudget, Surface, split_facets
 
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
@@ -59,10 +60,6 @@ _SAMPLE_BUDGET = 6
 # a 1e-4 slot passes it after 2 (measured at 2000 and 8000 cells).
 _GROWING_ROUNDS = 2
 _ATTEMPTS = 3  # fresh jitter and a coarser surface (× 1.5 spacing each time) before a cage is refused
-# Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells): the last guard,
-# after the runaway test (bench/RESULTS.md, "Constants' notes").
-_SECONDS = 10.0
-_SECONDS_PER_1000 = 2.0
 
 
 class _NotConforming(Exception):
@@ -85,15 +82,15 @@ class _RunsAway(_NotConforming):
 def mesh(cage, cells, steps):
     """Tetrahedra filling the cage (in the meshing frame): a DomainMesh before the final check."""
     side = (_TETS_PER_CUBE * cage.measure / cells) ** (1.0 / 3.0)
-    deadline = time.perf_counter() + _SECONDS + _SECONDS_PER_1000 * cells / 1000.0
+    work = WorkBudget(cells)
     # Chosen at the first spacing and kept: regions that changed with a retry's spacing would undo its correction.
     split = split_facets(cage, _SURFACE_SPACING * side)
-    surface, vertices, tets = _attempts(cage, side, split, deadline, steps.part(0.0, 0.6))
+    surface, vertices, tets = _attempts(cage, side, split, work, steps.part(0.0, 0.6))
     ratio = len(tets) / cells
     if abs(ratio - 1.0) > _COUNT_TOLERANCE:  # thin or small cages: mostly surface band, fewer tetrahedra per volume
         try:
             again = f"meshing again, {len(tets)} cells made for about {cells}: "  # said: progress steps back
-            surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), split, deadline,
+            surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), split, work,
                                                 steps.part(0.6, 0.95, again))
         except CageError:
             pass  # the first mesh conforms: keep it, with its cell count off target
@@ -102,24 +99,24 @@ def mesh(cage, cells, steps):
     return raw_mesh(vertices, tets, np.arange(len(samples.points)), samples.facet, samples.bary)
 
 
-def _attempts(cage, side, split, deadline, steps):
+def _attempts(cage, side, split, work, steps):
     """The smoothed conforming tetrahedralisation at lattice side ``side`` (``split``: see :class:`Surface`), retried
-    with fresh jitter and a coarser surface when refinement runs out of budget; CageError after the last attempt or
-    past the deadline."""
+    with fresh jitter and a coarser surface when refinement runs out of samples; CageError after the last attempt or
+    once the ``work`` budget (a :class:`WorkBudget`) is spent."""
     for attempt in range(_ATTEMPTS):
         try:
-            return _tetrahedralise(cage, side, split, 1.5**attempt, attempt, deadline,
+            return _tetrahedralise(cage, side, split, 1.5**attempt, attempt, work,
                                    steps.part(attempt / _ATTEMPTS, (attempt + 1) / _ATTEMPTS))
         except _RunsAway as failure:
             raise GapTooNarrow(_diagnose_gap(cage, failure.facets, failure.spacing)) from None
         except _NotConforming as failure:
             facets = failure.facets
-        if time.perf_counter() > deadline:
+        if work.exhausted:
             break
     raise CageError(_diagnose(cage, facets))
 
 
-def _tetrahedralise(cage, side, split, coarsening, seed, deadline, steps):
+def _tetrahedralise(cage, side, split, coarsening, seed, work, steps):
     """The conforming Delaunay tetrahedralisation for a lattice of cube side ``side``, smoothed (``split``: the
     facets that are surface regions of their own, see :class:`Surface`).
 
@@ -134,9 +131,9 @@ def _tetrahedralise(cage, side, split, coarsening, seed, deadline, steps):
     spacing = _SURFACE_SPACING * side * coarsening
     budget = int(_SAMPLE_BUDGET * (_initial_count(cage, spacing)) + 5000)
     try:
-        surface = Surface(cage, spacing, rng, budget, deadline, split, band=_BAND * spacing)
+        surface = Surface(cage, spacing, rng, budget, split, band=_BAND * spacing)
     except OutOfBudget:  # gaps too narrow to sample finely from the start: leave them to refinement
-        surface = Surface(cage, spacing, rng, budget, deadline, split)
+        surface = Surface(cage, spacing, rng, budget, split)
     try:
         samples = surface.samples(steps)
     except OutOfBudget:
@@ -144,7 +141,7 @@ def _tetrahedralise(cage, side, split, coarsening, seed, deadline, steps):
     lattice = bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
     steps(0.5, "filling the cage with tetrahedra")
     far = far_points(cage.vertices)
-    samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
+    samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, work, steps)
     n_surface = len(samples.points)
     vertices = np.concatenate([samples.points, lattice, far])
     vertex_side = np.repeat([-1, 1, 0], [n_surface, len(lattice), len(far)])
@@ -170,8 +167,9 @@ def _initial_count(cage, spacing):
     return area / (np.sqrt(3.0) / 2.0 * spacing**2) + cage.n_control_points
 
 
-def _conforming_delaunay(surface, lattice, far, deadline, steps):
-    """Refine the surface samples until every surface triangle is a face of the Delaunay tetrahedralisation.
+def _conforming_delaunay(surface, lattice, far, work, steps):
+    """Refine the surface samples until every surface triangle is a face of the Delaunay tetrahedralisation, or the
+    rounds or the ``work`` budget (a :class:`WorkBudget`) run out.
 
     Returns
     -------
@@ -182,12 +180,13 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
     missing = []  # missing triangles per round
     try:
         for _ in range(_RECOVERY_ROUNDS):
-            if time.perf_counter() > deadline:
-                break
             samples = surface.samples(steps)
             lattice = _outside_protecting_spheres(lattice, samples.points, samples.triangles)
             steps.check()
-            delaunay = Delaunay(np.concatenate([samples.points, lattice, far]), qhull_options=_QHULL_OPTIONS)
+            points = np.concatenate([samples.points, lattice, far])
+            if not work.spend(len(points)):
+                break
+            delaunay = Delaunay(points, qhull_options=_QHULL_OPTIONS)
             # Only the tetrahedra with three corners or more on the surface have faces with all three there.
             touching = delaunay.simplices[np.count_nonzero(delaunay.simplices < len(samples.points), axis=1) >= 3]
             faces = _cell_faces(touching)
