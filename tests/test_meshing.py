@@ -485,6 +485,34 @@ def test_3d_fingers_close_together_mesh_in_few_rounds(monkeypatch):
     assert ratios.mean() > 0.5 and np.mean(ratios < 0.1) < 0.03
 
 
+def test_3d_fingers_two_cube_sides_across_mesh_in_one_pass(monkeypatch):
+    """The hand's fingers are about two lattice cube sides across and face each other across slots: its samples
+    along the slots, and the band that leaves little lattice inside the fingers, made 44 % more cells than the
+    volume asked for, and a second conforming tetrahedralisation corrected it. The side is now counted before: one
+    pass, on target."""
+    passes = []
+    conforming = tetrahedra._conforming_delaunay
+    monkeypatch.setattr(tetrahedra, "_conforming_delaunay", lambda *args: passes.append(1) or conforming(*args))
+    cage = load_cage(HAND_CAGE)
+    mesh = meshing.mesh_domain(cage)
+    check_contract(cage, mesh)
+    assert len(passes) == 1
+    assert len(mesh.cells) == pytest.approx(meshing.DEFAULT_CELLS_3D, rel=0.1)
+
+
+def test_3d_sizing_counts_towards_the_target_within_its_bounds():
+    """The side counted next follows the count's power of the side, and stays within MOST_SIDE_CHANGE of the
+    volume's side: a count that hardly falls (the samples of a narrow gap) does not send it far off."""
+    target = sizing.Sizing(8000, 0.04)
+    first = target.candidate(0.04, 800, 2500)  # 12,188 predicted, mostly surface samples
+    second_side = target.next_side([first])
+    assert 0.04 < second_side <= 0.04 * sizing.MOST_SIDE_CHANGE
+    assert second_side == pytest.approx(0.04 * (first.predicted / 8000) ** (1 / 2.25), rel=0.05)
+    floor = target.candidate(0.04 * sizing.MOST_SIDE_CHANGE, 10, 3000)  # at the bound, still 14 % over
+    assert target.next_side([first, floor]) is None
+    assert target.near(target.candidate(0.04, 0, 8000 / sizing.CELLS_PER_SAMPLE))
+
+
 def test_3d_meshing_reads_no_clock(monkeypatch):
     """Meshing's budgets are counts of work: a clock that runs a thousand seconds between two readings (a machine
     under heavy load) gives the same mesh, bit for bit. A deadline used to end the refinement along the hand's slots,

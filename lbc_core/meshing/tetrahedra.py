@@ -9,8 +9,9 @@ refined (circumcentre insertion, or the split of the feature-edge piece it encro
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
 the cage's winding number around it is 1. The lattice corners of poor tetrahedra are then moved, the tetrahedra
 kept, where that raises the least radius ratio around them (:func:`polish`): one tetrahedralisation in all, where
-smoothing and sliver perturbation by new tetrahedralisations took four. When the cell count misses the target by
-more than 15 % (thin or small cages), everything is done once more with a corrected size.
+smoothing and sliver perturbation by new tetrahedralisations took four. The lattice side is chosen before the
+tetrahedralisation, by counting the samples and lattice points it makes (:mod:`.sizing`); when the cell count still
+misses the target by more than 15 %, everything is done once more with the count model corrected.
 
 Every loop is bounded by counts, never by the clock, so the same cage takes the same path on any machine under any
 load: recovery rounds, a surface-sample budget, a work budget (the points handed to the tetrahedraliser in all, the
@@ -22,6 +23,8 @@ the cage refused, naming the faces where it failed.
 """
 
 import itertools
+from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -33,7 +36,7 @@ from ..geometry import circumspheres, orient_positive, radius_ratios, row_keys, 
 from ..geometry import signed_radius_ratios_by_coordinate, triangle_normals, winding_numbers
 from .common import far_points, on_common, raw_mesh, rows_in
 from .lattice import bcc_lattice, check_winding
-from .sizing import WorkBudget
+from .sizing import Sizing, WorkBudget
 from .surface import OutOfBudget, Surface, split_facets
 
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
@@ -62,12 +65,26 @@ _GROWING_ROUNDS = 2
 _ATTEMPTS = 3  # fresh jitter and a coarser surface (× 1.5 spacing each time) before a cage is refused
 
 
+class _Made(NamedTuple):
+    """One conforming tetrahedralisation: its Surface (whose ``last`` samples are its first vertices), vertices (N, 3),
+    positively oriented tetrahedra (T, 4), the lattice side, the cell count predicted for it and whether that
+    prediction came near the target."""
+
+    surface: Surface
+    vertices: np.ndarray
+    tets: np.ndarray
+    side: float
+    predicted: float
+    sized: bool
+
+
 class _NotConforming(Exception):
-    """The tetrahedralisation could not be made to follow the surface; carries the cage facets where it failed."""
+    """The tetrahedralisation could not be made to follow the surface; carries the cage facets where it failed (and
+    the lattice side it tried, once known)."""
 
     def __init__(self, facets):
         super().__init__(facets)
-        self.facets = facets
+        self.facets, self.side = facets, None
 
 
 class _RunsAway(_NotConforming):
@@ -85,63 +102,64 @@ def mesh(cage, cells, steps):
     work = WorkBudget(cells)
     # Chosen at the first spacing and kept: regions that changed with a retry's spacing would undo its correction.
     split = split_facets(cage, _SURFACE_SPACING * side)
-    surface, vertices, tets = _attempts(cage, side, split, work, steps.part(0.0, 0.6))
-    ratio = len(tets) / cells
-    if abs(ratio - 1.0) > _COUNT_TOLERANCE:  # thin or small cages: mostly surface band, fewer tetrahedra per volume
+    made = _attempts(cage, side, split, Sizing(cells, side), work, steps.part(0.0, 0.8))
+    # The count model missed (thin or small cages): once more with the model corrected, unless the sizing could not
+    # reach the target anyway (the samples along narrow gaps alone make more cells than asked for).
+    if abs(len(made.tets) / cells - 1.0) > _COUNT_TOLERANCE and made.sized:
         try:
-            again = f"meshing again, {len(tets)} cells made for about {cells}: "  # said: progress steps back
-            surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), split, work,
-                                                steps.part(0.6, 0.95, again))
+            again = f"meshing again, {len(made.tets)} cells made for about {cells}: "
+            sizing = Sizing(cells, side, scale=len(made.tets) / made.predicted)
+            made = _attempts(cage, made.side, split, sizing, work, steps.part(0.8, 0.95, again))
         except CageError:
             pass  # the first mesh conforms: keep it, with its cell count off target
     steps(0.95, "checking the tetrahedralisation")
-    samples = surface.last
-    return raw_mesh(vertices, tets, np.arange(len(samples.points)), samples.facet, samples.bary)
+    samples = made.surface.last
+    return raw_mesh(made.vertices, made.tets, np.arange(len(samples.points)), samples.facet, samples.bary)
 
 
-def _attempts(cage, side, split, work, steps):
-    """The smoothed conforming tetrahedralisation at lattice side ``side`` (``split``: see :class:`Surface`), retried
-    with fresh jitter and a coarser surface when refinement runs out of samples; CageError after the last attempt or
-    once the ``work`` budget (a :class:`WorkBudget`) is spent."""
-    for attempt in range(_ATTEMPTS):
+def _attempts(cage, side, split, sizing, work, steps):
+    """The smoothed conforming tetrahedralisation sized for ``sizing`` from lattice side ``side`` on (``split``: see
+    :class:`Surface`), retried with fresh jitter and a coarser surface when refinement runs out of samples; CageError
+    after the last attempt or once the work budget is spent.
+
+    A sized attempt that fails at another side is tried again at ``side`` itself first: the sample budget and the
+    run-away test were measured there (a 1e-4 slot at 2000 cells, counted to a coarser side, ran out of samples
+    before the test saw the refinement grow).
+    """
+    plans = [(sizing, 1.0, 0)] + [(replace(sizing, rounds=1), 1.5**attempt, attempt) for attempt in range(_ATTEMPTS)]
+    for number, (plan, coarsening, seed) in enumerate(plans):
+        if number == 1 and tried_side == side:
+            continue  # the sized attempt failed at this side already
         try:
-            return _tetrahedralise(cage, side, split, 1.5**attempt, attempt, work,
-                                   steps.part(attempt / _ATTEMPTS, (attempt + 1) / _ATTEMPTS))
+            return _tetrahedralise(cage, side, split, coarsening, seed, plan, work,
+                                   steps.part(number / len(plans), (number + 1) / len(plans)))
         except _RunsAway as failure:
             raise GapTooNarrow(_diagnose_gap(cage, failure.facets, failure.spacing)) from None
         except _NotConforming as failure:
-            facets = failure.facets
+            facets, tried_side = failure.facets, failure.side
         if work.exhausted:
             break
     raise CageError(_diagnose(cage, facets))
 
 
-def _tetrahedralise(cage, side, split, coarsening, seed, work, steps):
-    """The conforming Delaunay tetrahedralisation for a lattice of cube side ``side``, smoothed (``split``: the
-    facets that are surface regions of their own, see :class:`Surface`).
+def _tetrahedralise(cage, side, split, coarsening, seed, sizing, work, steps):
+    """The conforming Delaunay tetrahedralisation sized for ``sizing`` (from lattice side ``side`` on), smoothed
+    (``split``: the facets that are surface regions of their own, see :class:`Surface`).
 
     Returns
     -------
-    surface : Surface, its ``last`` samples being the mesh's first vertices
-    vertices : (N, 3) float array
-    tets : (T, 4) int array, positively oriented
+    _Made: its surface's ``last`` samples are the mesh's first vertices
     """
     rng = np.random.default_rng(seed)  # fixed: the same cage always gives the same mesh
-    steps(0.0, "sampling the cage surface")
-    spacing = _SURFACE_SPACING * side * coarsening
-    budget = int(_SAMPLE_BUDGET * (_initial_count(cage, spacing)) + 5000)
+    chosen = None
     try:
-        surface = Surface(cage, spacing, rng, budget, split, band=_BAND * spacing)
-    except OutOfBudget:  # gaps too narrow to sample finely from the start: leave them to refinement
-        surface = Surface(cage, spacing, rng, budget, split)
-    try:
-        samples = surface.samples(steps)
-    except OutOfBudget:
-        raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
-    lattice = bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
-    steps(0.5, "filling the cage with tetrahedra")
-    far = far_points(cage.vertices)
-    samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, work, steps)
+        surface, samples, lattice, chosen = _sized_start(cage, side, split, coarsening, sizing, rng, steps)
+        steps(0.5, "filling the cage with tetrahedra")
+        far = far_points(cage.vertices)
+        samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, work, steps)
+    except _NotConforming as failure:
+        failure.side = side if chosen is None else chosen.side
+        raise
     n_surface = len(samples.points)
     vertices = np.concatenate([samples.points, lattice, far])
     vertex_side = np.repeat([-1, 1, 0], [n_surface, len(lattice), len(far)])
@@ -157,7 +175,52 @@ def _tetrahedralise(cage, side, split, coarsening, seed, work, steps):
     vertices, tets = vertices[used], orient_positive(vertices[used], renumber[tets])
     tets = _flip_flat(vertices, tets, n_surface)
     steps(0.9, "improving the tetrahedra")
-    return surface, polish(vertices, tets, np.arange(len(vertices)) >= n_surface, side, rng, steps), tets
+    vertices = polish(vertices, tets, np.arange(len(vertices)) >= n_surface, chosen.side, rng, steps)
+    return _Made(surface, vertices, tets, chosen.side, chosen.predicted, sizing.near(chosen))
+
+
+def _sized_start(cage, side, split, coarsening, sizing, rng, steps):
+    """The surface samples and the lattice at the side whose predicted cell count comes nearest ``sizing``'s target,
+    of at most ``sizing.rounds`` sides counted from ``side`` on (see :mod:`.sizing`).
+
+    Returns
+    -------
+    surface : Surface
+    samples : surface.Samples, its first
+    lattice : (I, 3) float array
+    chosen : sizing.Candidate
+    """
+    best = None
+    tried = []
+    for _ in range(sizing.rounds):
+        steps(0.05 * len(tried), "sampling the cage surface" + (" again, at a size counted for about "
+                                                                 f"{sizing.target} cells" if tried else ""))
+        spacing = _SURFACE_SPACING * side * coarsening
+        # The sample budget at the volume's side whatever the side counted: a coarser one must not stop refinement
+        # before the run-away test has seen its rounds (a 1e-4 slot, refused as a gap).
+        budget = int(_SAMPLE_BUDGET * _initial_count(cage, _SURFACE_SPACING * sizing.volume_side * coarsening) + 5000)
+        surface, samples = _sampled_surface(cage, spacing, split, budget, rng, steps)
+        lattice = bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
+        tried.append(sizing.candidate(side, len(lattice), len(samples.points)))
+        if best is None or sizing.miss(tried[-1]) < sizing.miss(best[3]):
+            best = surface, samples, lattice, tried[-1]
+        side = None if sizing.near(tried[-1]) else sizing.next_side(tried)
+        if side is None:
+            break
+    return best
+
+
+def _sampled_surface(cage, spacing, split, budget, rng, steps):
+    """The Surface at ``spacing`` (regions facing a narrow gap sampled finer, unless that passes the sample
+    ``budget``) and its first samples; _NotConforming when its region boundaries cannot be recovered within it."""
+    try:
+        surface = Surface(cage, spacing, rng, budget, split, band=_BAND * spacing)
+    except OutOfBudget:  # gaps too narrow to sample finely from the start: leave them to refinement
+        surface = Surface(cage, spacing, rng, budget, split)
+    try:
+        return surface, surface.samples(steps)
+    except OutOfBudget:
+        raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
 
 
 def _initial_count(cage, spacing):
