@@ -570,6 +570,24 @@ def test_3d_only_walls_facing_across_a_narrow_gap_are_sampled_finer():
     assert np.array_equal(plain.samples(Progress()).points, again.samples(Progress()).points)
 
 
+def test_3d_walls_facing_across_a_wedge_that_meets_at_their_edge_are_sampled_finer():
+    """Two fingers of one cage meet at the web between them: their facing walls share a vertex or an edge there and
+    open slowly towards the tips (a 43-vertex hand cage: 0.1 % of its diagonal across half a finger's length). Walls
+    sharing a vertex were never taken as facing, so refinement found the gap one round at a time (40 rounds, twice,
+    then a third attempt); they are sampled finer from the start, as a slot's walls are."""
+    from lbc_core.meshing.surface import Surface
+
+    profile = np.array([[0, 0], [1, 0], [1, 0.495], [0.3, 0.5], [1, 0.505], [1, 1], [0, 1]], dtype=float)
+    n = len(profile)
+    vertices = np.concatenate([np.c_[profile, np.zeros(n)], np.c_[profile, np.ones(n)]])
+    faces = [list(range(n))[::-1], list(range(n, 2 * n))] + [[i, (i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
+    cage = make_cage(vertices, faces)  # faces 4 and 5 are the wedge's walls, meeting along x = 0.3, y = 0.5
+    wedge = Surface(cage, 0.05, np.random.default_rng(0), 10**6, band=0.035)
+    walls = np.unique(wedge.region[np.isin(cage.facet_face, [4, 5])])
+    assert sorted(np.flatnonzero(wedge.near)) == sorted(walls)
+    check_contract(cage, meshing.mesh_domain(cage, cells=2000))
+
+
 # ----------------------------------------------------------------------------------------------- API behaviour
 
 

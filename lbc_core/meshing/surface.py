@@ -7,8 +7,9 @@ a grid-subdivided side of a box, a plane nudged by round-off. The edges between 
 *feature edges*; only they are sampled as edges. Inside a region the split lines of n-gons are no features: a
 cap's skinny triangles and their small angles never reach the tetrahedraliser, which meets only the angles between
 feature edges. Every sample still keeps the facet it lies on and its barycentric coordinates there,
-so boundary values stay exact at every sample. A region facing another part of the cage (one it shares no vertex with)
-across a gap narrower than the spacing is sampled finer, by the gap (:data:`GAP_SPACING`).
+so boundary values stay exact at every sample. A region facing another region of the cage across a gap narrower than
+the spacing (two fingers' walls, also where they meet at the web between them) is sampled finer, by the gap
+(:data:`GAP_SPACING`).
 
 A quad whose two triangles are well shaped for the spacing (:func:`split_facets`) is the exception: each of its
 triangles is a region of its own, its diagonal and edges features. An artist's edit at rest bends the quads around
@@ -153,7 +154,7 @@ class Surface:
         edge_facets = np.repeat(np.arange(len(facets)), 3)[np.argsort(inverse, kind="stable")].reshape(-1, 2)
         region = _planar_regions(normals, areas, edge_facets, split)
         self._region_frames(region, facets, corners, normals, areas)
-        # Each region's own sample spacing: finer where it nearly touches a part of the cage it shares no vertex with.
+        # Each region's own sample spacing: finer where it faces another region across a narrow gap.
         self.region_spacing = np.full(self.n_regions, spacing)
         self.near = np.zeros(self.n_regions, dtype=bool)
         if band is not None:
@@ -260,9 +261,11 @@ class Surface:
         return self.to_plane(r, ends[:, 0]), self.to_plane(r, ends[:, 1])
 
     def _gaps(self, reach):
-        """Per region, how far it faces a part of the cage that shares no vertex with it: the distance along its
-        outward normal to an opposite facet where below ``reach``, as a quarter of the region's area sees it at least
-        (inf for a region that faces none over so much: a strip along an edge is left to refinement).
+        """Per region, how far it faces another region: the distance along its outward normal to an opposite facet
+        where below ``reach``, as a quarter of the region's area sees it at least (inf for a region that faces none
+        over so much: a strip along an edge is left to refinement). Regions sharing a vertex count too: two fingers'
+        walls meet at the web between them and open slowly (bench/RESULTS.md, "Meshing cages whose parts nearly
+        touch: sized by counting, bounded by counts").
 
         Measured at a few points of each facet (:data:`_GAP_PROBES`), each point weighing its facet's area."""
         cage = self.cage
@@ -279,11 +282,7 @@ class Surface:
             close = np.linalg.norm(centres[first] - centres[second], axis=1) < reach + radii[first] + radii[second]
             facing = np.einsum("ij,ij->i", normals[first], normals[second]) < -_FACING
             pairs = pairs[close & facing]
-        touching = np.zeros((len(cage.vertices), self.n_regions), dtype=bool)
-        for r, vertices in enumerate(self.region_vertices):
-            touching[vertices, r] = True
-        shares = (touching.T.astype(np.int64) @ touching.astype(np.int64)) > 0  # regions sharing a cage vertex
-        pairs = pairs[~shares[self.region[pairs[:, 0]], self.region[pairs[:, 1]]]] if len(pairs) else pairs
+        pairs = pairs[self.region[pairs[:, 0]] != self.region[pairs[:, 1]]] if len(pairs) else pairs
         if len(pairs) == 0:
             return gaps
         # Both ways: the probes of one facet against the other triangle.
