@@ -62,8 +62,10 @@ def thin_plate_domain(thickness, cells=2000):
 def test_a_thin_plate_gets_distances_no_shorter_than_the_straight_line():
     """A new user's bent plate cage (1/50 as thick as wide) bulged out of the cage: on the flattened tetrahedra of so
     thin a mesh the heat step oscillates in sign and its distances collapsed to a few percent of the straight line, so
-    every coordinate weighed nothing far from its vertex and spread over the whole plate."""
-    vertices, cells, sources = thin_plate_domain(0.04)
+    every coordinate weighed nothing far from its vertex and spread over the whole plate. Whether the heat step
+    collapses depends on the mesh: at 3000 cells it does (at 2000 the mesher's counted size now gives tetrahedra it
+    copes with, median 0.96 of the straight line)."""
+    vertices, cells, sources = thin_plate_domain(0.04, cells=3000)
     straight = np.linalg.norm(vertices[:, None] - vertices[sources][None], axis=2)
     distances = geodesic_distances(vertices, cells, sources)
     assert np.all(distances >= straight - 1e-12)

@@ -4,6 +4,8 @@ The checks here are independent of lbc_core.meshing's internals: which cage face
 found geometrically, and coverage is checked by summing areas per cage facet.
 """
 
+import itertools
+import time
 import types
 from pathlib import Path
 
@@ -16,7 +18,7 @@ from lbc_core.cage.make import make_cage
 from lbc_core.cage.record import Cage
 from lbc_core.kernel.geometry import closest_on_triangles, orient_positive, radius_ratios, signed_measures
 from lbc_core.kernel.geometry import signed_radius_ratios_by_coordinate
-from lbc_core.meshing import polygon, tetrahedra
+from lbc_core.meshing import lattice, polygon, sizing, tetrahedra
 from lbc_core.kernel.progress import Progress
 from lbc_core.errors import CageError, Cancelled
 from lbc_core.kernel.fem import boundary_facets
@@ -337,7 +339,7 @@ def test_depth_in_convex_cage_is_the_distance_to_its_surface():
     outside; a cage dented by 1e-3 is not convex, one dented by up to 1e-4 of its size still counts as convex."""
     cage = cube_cage()
     points = np.random.default_rng(0).uniform(-0.5, 1.5, (500, 3))
-    depth = tetrahedra._depth_in_convex(cage, points)
+    depth = lattice._depth_in_convex(cage, points)
     corners = cage.surface_vertices[cage.facets]
     squared = np.min([closest_on_triangles(points, *np.broadcast_to(c[:, None], (3, len(points), 3)))[0]
                       for c in corners], axis=0)
@@ -347,7 +349,7 @@ def test_depth_in_convex_cage_is_the_distance_to_its_surface():
     for dent, convex in ((1e-3, False), (1e-5, True), (1e-9, True)):
         vertices = CUBE_VERTICES.copy()
         vertices[7] -= dent  # the corner (1, 1, 1) moved towards the centre
-        assert (tetrahedra._depth_in_convex(make_cage(vertices, CUBE_QUADS), points) is not None) == convex
+        assert (lattice._depth_in_convex(make_cage(vertices, CUBE_QUADS), points) is not None) == convex
 
 
 @pytest.mark.parametrize("cage", [cube_cage(), make_cage(CUBE_VERTICES[[0, 1, 2, 4]], [[0, 2, 1], [0, 1, 3],
@@ -357,7 +359,7 @@ def test_convex_cages_lattice_as_the_general_band_test(cage, monkeypatch):
     """The plane-distance shortcut for convex cages keeps exactly the lattice points the general band and inside
     tests keep: the same mesh, bit for bit."""
     fast = meshing.mesh_domain(cage, cells=2000)
-    monkeypatch.setattr(tetrahedra, "_depth_in_convex", lambda cage, points: None)
+    monkeypatch.setattr(lattice, "_depth_in_convex", lambda cage, points: None)
     general = meshing.mesh_domain(cage, cells=2000)
     assert np.array_equal(fast.vertices, general.vertices) and np.array_equal(fast.cells, general.cells)
 
@@ -368,9 +370,9 @@ def test_small_cages_lattice_as_the_general_band_test(monkeypatch):
     vertices = CUBE_VERTICES.copy()
     vertices[7] -= 0.1
     cage = make_cage(vertices, CUBE_QUADS)
-    assert tetrahedra._depth_in_convex(cage, vertices) is None and len(cage.facets) <= tetrahedra._FEW_FACETS
+    assert lattice._depth_in_convex(cage, vertices) is None and len(cage.facets) <= lattice._FEW_FACETS
     few = meshing.mesh_domain(cage, cells=2000)
-    monkeypatch.setattr(tetrahedra, "_FEW_FACETS", 0)
+    monkeypatch.setattr(lattice, "_FEW_FACETS", 0)
     general = meshing.mesh_domain(cage, cells=2000)
     assert np.array_equal(few.vertices, general.vertices) and np.array_equal(few.cells, general.cells)
 
@@ -484,6 +486,58 @@ def test_3d_fingers_close_together_mesh_in_few_rounds(monkeypatch):
     assert ratios.mean() > 0.5 and np.mean(ratios < 0.1) < 0.03
 
 
+def test_3d_fingers_two_cube_sides_across_mesh_in_one_pass(monkeypatch):
+    """The hand's fingers are about two lattice cube sides across and face each other across slots: its samples
+    along the slots, and the band that leaves little lattice inside the fingers, made 44 % more cells than the
+    volume asked for, and a second conforming tetrahedralisation corrected it. The side is now counted before: one
+    pass, on target."""
+    passes = []
+    conforming = tetrahedra._conforming_delaunay
+    monkeypatch.setattr(tetrahedra, "_conforming_delaunay", lambda *args: passes.append(1) or conforming(*args))
+    cage = load_cage(HAND_CAGE)
+    mesh = meshing.mesh_domain(cage)
+    check_contract(cage, mesh)
+    assert len(passes) == 1
+    assert len(mesh.cells) == pytest.approx(meshing.DEFAULT_CELLS_3D, rel=0.1)
+
+
+def test_3d_sizing_counts_towards_the_target_within_its_bounds():
+    """The side counted next follows the count's power of the side, and stays within MOST_SIDE_CHANGE of the
+    volume's side: a count that hardly falls (the samples of a narrow gap) does not send it far off."""
+    target = sizing.Sizing(8000, 0.04)
+    first = target.candidate(0.04, 800, 2500)  # 12,188 predicted, mostly surface samples
+    second_side = target.next_side([first])
+    assert 0.04 < second_side <= 0.04 * sizing.MOST_SIDE_CHANGE
+    assert second_side == pytest.approx(0.04 * (first.predicted / 8000) ** (1 / 2.25), rel=0.05)
+    floor = target.candidate(0.04 * sizing.MOST_SIDE_CHANGE, 10, 3000)  # at the bound, still 14 % over
+    assert target.next_side([first, floor]) is None
+    assert target.near(target.candidate(0.04, 0, 8000 / sizing.CELLS_PER_SAMPLE))
+
+
+def test_3d_meshing_reads_no_clock(monkeypatch):
+    """Meshing's budgets are counts of work: a clock that runs a thousand seconds between two readings (a machine
+    under heavy load) gives the same mesh, bit for bit. A deadline used to end the refinement along the hand's slots,
+    so a bind under load got other cells (11,549 against 8830 on a user's hand)."""
+    cage = load_cage(HAND_CAGE)
+    expected = meshing.mesh_domain(cage)
+    ticks = itertools.count(0.0, 1000.0)
+    monkeypatch.setattr(time, "perf_counter", lambda: next(ticks))
+    monkeypatch.setattr(time, "monotonic", lambda: next(ticks))
+    mesh = meshing.mesh_domain(cage)
+    assert np.array_equal(mesh.vertices, expected.vertices) and np.array_equal(mesh.cells, expected.cells)
+
+
+def test_3d_refinement_stops_when_its_work_budget_is_spent(monkeypatch):
+    """The last guard is a count: the points handed to the tetrahedraliser in all. The hand's slots need a few
+    rounds of refinement; a budget of two rounds' points refuses the cage, naming faces, as the deadline did."""
+    calls = count_tetrahedralisations(monkeypatch)
+    monkeypatch.setattr(sizing, "WORK_PER_CELL", 0)
+    monkeypatch.setattr(sizing, "WORK_BASE", 12_000)
+    with pytest.raises(CageError, match="could not make the tetrahedra follow the cage surface near its faces"):
+        meshing.mesh_domain(load_cage(HAND_CAGE))
+    assert sum(calls) <= 12_000
+
+
 def test_3d_progress_is_reported_between_any_two_tetrahedralisations(monkeypatch):
     """Each refinement round tells how many surface triangles are left: the hand's rounds ran with the bar standing
     still (9 reports for 28 tetrahedralisations, up to 2.5 s apart)."""
@@ -505,7 +559,7 @@ def test_3d_only_walls_facing_across_a_narrow_gap_are_sampled_finer():
     from test_meshing_corpus import slotted_prism
 
     def surface(cage, band):
-        return Surface(cage, 0.05, np.random.default_rng(0), 10**6, np.inf, band=band)
+        return Surface(cage, 0.05, np.random.default_rng(0), 10**6, band=band)
 
     slotted = surface(slotted_prism(1e-3), 0.035)
     walls = np.unique(slotted.region[np.isin(slotted.cage.facet_face, [4, 6])])  # the faces at y = 0.5 ± gap / 2
@@ -515,6 +569,24 @@ def test_3d_only_walls_facing_across_a_narrow_gap_are_sampled_finer():
     assert not surface(cube, 0.035).near.any()
     plain, again = surface(cube, None), surface(cube, 0.035)
     assert np.array_equal(plain.samples(Progress()).points, again.samples(Progress()).points)
+
+
+def test_3d_walls_facing_across_a_wedge_that_meets_at_their_edge_are_sampled_finer():
+    """Two fingers of one cage meet at the web between them: their facing walls share a vertex or an edge there and
+    open slowly towards the tips (a 43-vertex hand cage: 0.1 % of its diagonal across half a finger's length). Walls
+    sharing a vertex were never taken as facing, so refinement found the gap one round at a time (40 rounds, twice,
+    then a third attempt); they are sampled finer from the start, as a slot's walls are."""
+    from lbc_core.meshing.surface import Surface
+
+    profile = np.array([[0, 0], [1, 0], [1, 0.495], [0.3, 0.5], [1, 0.505], [1, 1], [0, 1]], dtype=float)
+    n = len(profile)
+    vertices = np.concatenate([np.c_[profile, np.zeros(n)], np.c_[profile, np.ones(n)]])
+    faces = [list(range(n))[::-1], list(range(n, 2 * n))] + [[i, (i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
+    cage = make_cage(vertices, faces)  # faces 4 and 5 are the wedge's walls, meeting along x = 0.3, y = 0.5
+    wedge = Surface(cage, 0.05, np.random.default_rng(0), 10**6, band=0.035)
+    walls = np.unique(wedge.region[np.isin(cage.facet_face, [4, 5])])
+    assert sorted(np.flatnonzero(wedge.near)) == sorted(walls)
+    check_contract(cage, meshing.mesh_domain(cage, cells=2000))
 
 
 # ----------------------------------------------------------------------------------------------- API behaviour

@@ -22,6 +22,17 @@ def test_row_chunks_cover_the_rows_in_order_in_equal_slices_and_full_rounds(monk
     assert len(chunks) <= threads * len(rounds) and (m == 0 or len(chunks) > threads * (len(rounds) - 1))
 
 
+@pytest.mark.parametrize("m, most", [(48_612, 16_384), (810, 4096), (10, 4)])
+def test_row_chunks_are_the_same_slices_whatever_the_threads(monkeypatch, m, most):
+    """A chunk's rows are reduced together, padded to its longest row: slices that followed the cores gave other
+    weights on a machine with other cores."""
+    layouts = []
+    for threads in (1, 2, 3, 8):
+        monkeypatch.setattr(parallel, "worker_count", lambda: threads)
+        layouts.append([(rows.start, rows.stop) for rows in parallel.map_row_chunks(lambda rows: rows, m, most)])
+    assert all(layout == layouts[0] for layout in layouts)
+
+
 def test_row_chunks_run_on_several_threads():
     seen = set()
     barrier = threading.Barrier(min(parallel.worker_count(), 2), timeout=5)  # two chunks, one round

@@ -87,19 +87,20 @@ def test_reduce_reports_each_round_of_chunks_of_rows_and_stops_on_cancel(monkeyp
 
     import lbc_core.evaluate.reduction as reduction
     from lbc_core.errors import Cancelled
-    from lbc_core.kernel.parallel import worker_count
+    from lbc_core.kernel.parallel import CHUNKS_PER_ROUND, worker_count
 
     monkeypatch.setattr(reduction, "ROWS_PER_CHUNK", 100)
     threads = worker_count()
     rng = np.random.default_rng(4)
-    points = rng.uniform(0.0, 1.0, (300 * threads, 2))  # three rounds of one chunk per thread
+    points = rng.uniform(0.0, 1.0, (100 * CHUNKS_PER_ROUND, 2))  # chunks of 100 rows, one per thread a round
     weights = bilinear_weights(points)
     fractions, messages = [], []
     reduce_weights(weights, SQUARE, points, 1e-3, 1e-9,
                    progress=lambda fraction, message: fractions.append(fraction) or messages.append(message))
-    assert fractions == pytest.approx([0.0, 1 / 3, 2 / 3, 1.0])
-    m = len(points)  # each round says how far it is (a new user watched 97 % for 2-4 s with nothing new)
-    assert messages[1] == f"reducing the weights: {m // 3} of {m} points done"
+    m = len(points)
+    assert fractions == pytest.approx([100 * first / m for first in range(0, CHUNKS_PER_ROUND, threads)] + [1.0])
+    # each round says how far it is (a new user watched 97 % for 2-4 s with nothing new)
+    assert messages[1] == f"reducing the weights: {100 * threads} of {m} points done"
     chunks = []
     reduce_rows = reduction._reduce_rows
     monkeypatch.setattr(reduction, "_reduce_rows", lambda *arguments: chunks.append(1) or reduce_rows(*arguments))

@@ -17,6 +17,8 @@ _OWN_WORK = deque(maxlen=16)
 _COUNTING = threading.local()
 # Readings of the runnable threads averaged for the busy factor, and the seconds between them.
 RUNNABLE_SAMPLES, RUNNABLE_SPACING = 10, 0.002
+# Row chunks of map_row_chunks come in multiples of this many, whatever the threads (at most 8, worker_count).
+CHUNKS_PER_ROUND = 8
 # The cores a bind keeps busy on average, its threads' parallel parts and serial parts together (121-142 % CPU on
 # 2 cores: bench/RESULTS.md, "The busy factor counted now").
 BIND_CORES = 1.3
@@ -119,14 +121,16 @@ def thread_map(function, items):
 def map_row_chunks(function, m, most_rows, before_round=None):
     """``function(rows)`` over consecutive slices of ``range(m)``, one per thread at a time, in order.
 
-    The slices are of equal size (at most ``most_rows``) and come in full rounds of :func:`worker_count`, so no
-    thread idles through a short last round (Suzanne's 48,612 rows in 16,384-row chunks: three, the last round one
-    thread's; here four of 12,153). ``before_round(start)``, called on the calling thread with each round's first row,
-    reports progress and polls cancel, so that a cancel is seen after one round, not after them all.
+    The slices depend on ``m`` and ``most_rows`` alone, never on the threads: a chunk's rows are computed together
+    (padded to its longest row), so slices that followed the cores gave other weights on another machine. They are
+    of equal size (at most ``most_rows``), CHUNKS_PER_ROUND or a multiple of it, so that 1, 2, 4 or 8 threads idle
+    through no short last round (Suzanne's 48,612 rows in 16,384-row chunks: eight of 6077).
+    ``before_round(start)``, called on the calling thread with each round's first row, reports progress and polls
+    cancel, so that a cancel is seen after one round, not after them all.
     """
     threads = worker_count()
-    rounds = -(-m // (threads * most_rows))
-    size = max(-(-m // (threads * rounds)), 1) if m else 1
+    count = CHUNKS_PER_ROUND * -(-m // (CHUNKS_PER_ROUND * most_rows))
+    size = max(-(-m // count), 1) if m else 1
     starts = range(0, m, size)
     results = []
     for first in range(0, len(starts), threads):

@@ -9,11 +9,13 @@ refined (circumcentre insertion, or the split of the feature-edge piece it encro
 until every one is present. The surface then separates the tetrahedra into connected pieces; a piece is kept when
 the cage's winding number around it is 1. The lattice corners of poor tetrahedra are then moved, the tetrahedra
 kept, where that raises the least radius ratio around them (:func:`polish`): one tetrahedralisation in all, where
-smoothing and sliver perturbation by new tetrahedralisations took four. When the cell count misses the target by
-more than 15 % (thin or small cages), everything is done once more with a corrected size.
+smoothing and sliver perturbation by new tetrahedralisations took four. The lattice side is chosen before the
+tetrahedralisation, by counting the samples and lattice points it makes (:mod:`.sizing`); when the cell count still
+misses the target by more than 15 %, everything is done once more with the count model corrected.
 
-Every loop is bounded: recovery rounds, a surface-sample budget, a deadline (10 s plus 2 s per 1000 target cells,
-the last guard), and a cancel check in each round. Refinement whose missing triangles keep growing, on course to
+Every loop is bounded by counts, never by the clock, so the same cage takes the same path on any machine under any
+load: recovery rounds, a surface-sample budget, a work budget (the points handed to the tetrahedraliser in all, the
+last guard), and a cancel check in each round. Refinement whose missing triangles keep growing, on course to
 pass the sample budget (parts of the cage nearly touching, far closer than the sampling), is refused at once,
 naming the faces. When recovery runs out of its budget (feature edges meeting at very small angles can make
 Ruppert-style refinement cascade), the mesh is made again with fresh jitter and a coarser surface, and only then is
@@ -21,7 +23,8 @@ the cage refused, naming the faces where it failed.
 """
 
 import itertools
-import time
+from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -29,28 +32,16 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import CageError, GapTooNarrow
-from ..kernel.geometry import (
-    circumspheres,
-    closest_on_triangles,
-    orient_positive,
-    radius_ratios,
-    row_keys,
-    signed_measures,
-    signed_radius_ratios_by_coordinate,
-    triangle_normals,
-    unit,
-    winding_numbers,
-)
+from ..kernel.geometry import (circumspheres, orient_positive, radius_ratios, row_keys, signed_measures,
+                               signed_radius_ratios_by_coordinate, triangle_normals, winding_numbers)
 from .common import far_points, on_common, raw_mesh, rows_in
-from .surface import JITTER, OutOfBudget, Surface, split_facets
+from .lattice import bcc_lattice, check_winding
+from .sizing import Sizing, WorkBudget
+from .surface import OutOfBudget, Surface, split_facets
 
 # Sizing: the Delaunay tetrahedra of a body-centred cubic lattice of cube side a are 12 per a^3; with the band
 # along the surface, the corpus's meshes have 8.2 to 10.8 per a^3 at 8000 cells (7.1 to 13.9 at 2000).
 _TETS_PER_CUBE = 9.5
-# The lattice's axes (columns), turned away from the coordinate axes: the faces of boxes, cylinders and most cages
-# made in Blender are parallel to those, and a lattice aligned with a face puts whole layers of points at one
-# distance from it, where the band leaves slivers (the cube: 5 instead of 0, measured).
-_LATTICE_AXES = np.linalg.qr(np.array([[3.0, 1.0, 2.0], [-1.0, 3.0, 1.0], [1.0, -2.0, 3.0]]))[0]
 _COUNT_TOLERANCE = 0.15  # beyond this relative miss of the target cell count, mesh again with a corrected size
 _SURFACE_SPACING = 1.0  # surface sample spacing, × the lattice cube side
 _BAND = 0.7  # lattice points stay this far (× surface spacing) from the cage surface
@@ -61,13 +52,6 @@ _FLAT = 1e-9  # a tetrahedron of at most this share of the median volume is flat
 _POLISH_ROUNDS = 3
 _POLISH_TRIES = 8
 _POLISH_STEP = 0.3
-# Convex cages of at most this many facets test their lattice points by the facets' planes, cage vertices up to
-# _CONVEX_SLACK (unit-diagonal frame) outside a plane still convex (bench/RESULTS.md, "Constants' notes").
-_CONVEX_FACETS = 256
-_CONVEX_SLACK = 1e-4
-# Other cages with at most this many facets measure the lattice band against their facets directly, found plane by
-# plane (see _surface_distance), instead of against the regions' small triangles through a search tree.
-_FEW_FACETS = 32
 # qhull joggles its input (QJ) instead of merging degenerate facets; Q3 Q5 Q8 skip work on merged output; the
 # tetrahedra are checked as before (bench/RESULTS.md, "Constants' notes").
 _QHULL_OPTIONS = "QJ Qbb Q3 Q5 Q8"
@@ -79,18 +63,28 @@ _SAMPLE_BUDGET = 6
 # a 1e-4 slot passes it after 2 (measured at 2000 and 8000 cells).
 _GROWING_ROUNDS = 2
 _ATTEMPTS = 3  # fresh jitter and a coarser surface (× 1.5 spacing each time) before a cage is refused
-# Refinement stops after this long (seconds, plus _SECONDS_PER_1000 per 1000 target cells): the last guard,
-# after the runaway test (bench/RESULTS.md, "Constants' notes").
-_SECONDS = 10.0
-_SECONDS_PER_1000 = 2.0
+
+
+class _Made(NamedTuple):
+    """One conforming tetrahedralisation: its Surface (whose ``last`` samples are its first vertices), vertices (N, 3),
+    positively oriented tetrahedra (T, 4), the lattice side, the cell count predicted for it and whether that
+    prediction came near the target."""
+
+    surface: Surface
+    vertices: np.ndarray
+    tets: np.ndarray
+    side: float
+    predicted: float
+    sized: bool
 
 
 class _NotConforming(Exception):
-    """The tetrahedralisation could not be made to follow the surface; carries the cage facets where it failed."""
+    """The tetrahedralisation could not be made to follow the surface; carries the cage facets where it failed (and
+    the lattice side it tried, once known)."""
 
     def __init__(self, facets):
         super().__init__(facets)
-        self.facets = facets
+        self.facets, self.side = facets, None
 
 
 class _RunsAway(_NotConforming):
@@ -105,66 +99,67 @@ class _RunsAway(_NotConforming):
 def mesh(cage, cells, steps):
     """Tetrahedra filling the cage (in the meshing frame): a DomainMesh before the final check."""
     side = (_TETS_PER_CUBE * cage.measure / cells) ** (1.0 / 3.0)
-    deadline = time.perf_counter() + _SECONDS + _SECONDS_PER_1000 * cells / 1000.0
+    work = WorkBudget(cells)
     # Chosen at the first spacing and kept: regions that changed with a retry's spacing would undo its correction.
     split = split_facets(cage, _SURFACE_SPACING * side)
-    surface, vertices, tets = _attempts(cage, side, split, deadline, steps.part(0.0, 0.6))
-    ratio = len(tets) / cells
-    if abs(ratio - 1.0) > _COUNT_TOLERANCE:  # thin or small cages: mostly surface band, fewer tetrahedra per volume
+    made = _attempts(cage, side, split, Sizing(cells, side), work, steps.part(0.0, 0.8))
+    # The count model missed (thin or small cages): once more with the model corrected, unless the sizing could not
+    # reach the target anyway (the samples along narrow gaps alone make more cells than asked for).
+    if abs(len(made.tets) / cells - 1.0) > _COUNT_TOLERANCE and made.sized:
         try:
-            again = f"meshing again, {len(tets)} cells made for about {cells}: "  # said: progress steps back
-            surface, vertices, tets = _attempts(cage, side * ratio ** (1.0 / 3.0), split, deadline,
-                                                steps.part(0.6, 0.95, again))
+            again = f"meshing again, {len(made.tets)} cells made for about {cells}: "
+            sizing = Sizing(cells, side, scale=len(made.tets) / made.predicted)
+            made = _attempts(cage, made.side, split, sizing, work, steps.part(0.8, 0.95, again))
         except CageError:
             pass  # the first mesh conforms: keep it, with its cell count off target
     steps(0.95, "checking the tetrahedralisation")
-    samples = surface.last
-    return raw_mesh(vertices, tets, np.arange(len(samples.points)), samples.facet, samples.bary)
+    samples = made.surface.last
+    return raw_mesh(made.vertices, made.tets, np.arange(len(samples.points)), samples.facet, samples.bary)
 
 
-def _attempts(cage, side, split, deadline, steps):
-    """The smoothed conforming tetrahedralisation at lattice side ``side`` (``split``: see :class:`Surface`), retried
-    with fresh jitter and a coarser surface when refinement runs out of budget; CageError after the last attempt or
-    past the deadline."""
-    for attempt in range(_ATTEMPTS):
+def _attempts(cage, side, split, sizing, work, steps):
+    """The smoothed conforming tetrahedralisation sized for ``sizing`` from lattice side ``side`` on (``split``: see
+    :class:`Surface`), retried with fresh jitter and a coarser surface when refinement runs out of samples; CageError
+    after the last attempt or once the work budget is spent.
+
+    A sized attempt that fails at another side is tried again at ``side`` itself first: the sample budget and the
+    run-away test were measured there (a 1e-4 slot at 2000 cells, counted to a coarser side, ran out of samples
+    before the test saw the refinement grow).
+    """
+    plans = [(sizing, 1.0, 0)] + [(replace(sizing, rounds=1), 1.5**attempt, attempt) for attempt in range(_ATTEMPTS)]
+    for number, (plan, coarsening, seed) in enumerate(plans):
+        if number == 1 and tried_side == side:
+            continue  # the sized attempt failed at this side already
         try:
-            return _tetrahedralise(cage, side, split, 1.5**attempt, attempt, deadline,
-                                   steps.part(attempt / _ATTEMPTS, (attempt + 1) / _ATTEMPTS))
+            return _tetrahedralise(cage, side, split, coarsening, seed, plan, work,
+                                   steps.part(number / len(plans), (number + 1) / len(plans)))
         except _RunsAway as failure:
             raise GapTooNarrow(_diagnose_gap(cage, failure.facets, failure.spacing)) from None
         except _NotConforming as failure:
-            facets = failure.facets
-        if time.perf_counter() > deadline:
+            facets, tried_side = failure.facets, failure.side
+        if work.exhausted:
             break
     raise CageError(_diagnose(cage, facets))
 
 
-def _tetrahedralise(cage, side, split, coarsening, seed, deadline, steps):
-    """The conforming Delaunay tetrahedralisation for a lattice of cube side ``side``, smoothed (``split``: the
-    facets that are surface regions of their own, see :class:`Surface`).
+def _tetrahedralise(cage, side, split, coarsening, seed, sizing, work, steps):
+    """The conforming Delaunay tetrahedralisation sized for ``sizing`` (from lattice side ``side`` on), smoothed
+    (``split``: the facets that are surface regions of their own, see :class:`Surface`).
 
     Returns
     -------
-    surface : Surface, its ``last`` samples being the mesh's first vertices
-    vertices : (N, 3) float array
-    tets : (T, 4) int array, positively oriented
+    _Made: its surface's ``last`` samples are the mesh's first vertices
     """
     rng = np.random.default_rng(seed)  # fixed: the same cage always gives the same mesh
-    steps(0.0, "sampling the cage surface")
-    spacing = _SURFACE_SPACING * side * coarsening
-    budget = int(_SAMPLE_BUDGET * (_initial_count(cage, spacing)) + 5000)
+    chosen = None
     try:
-        surface = Surface(cage, spacing, rng, budget, deadline, split, band=_BAND * spacing)
-    except OutOfBudget:  # gaps too narrow to sample finely from the start: leave them to refinement
-        surface = Surface(cage, spacing, rng, budget, deadline, split)
-    try:
-        samples = surface.samples(steps)
-    except OutOfBudget:
-        raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
-    lattice = _bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
-    steps(0.5, "filling the cage with tetrahedra")
-    far = far_points(cage.vertices)
-    samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, deadline, steps)
+        surface, samples, lattice, chosen = _sized_start(cage, side, split, coarsening, sizing, rng, steps)
+        steps(0.5, "filling the cage with tetrahedra")
+        far = far_points(cage.vertices)
+        samples, lattice, delaunay = _conforming_delaunay(surface, lattice, far, work, steps)
+    except _NotConforming as failure:
+        failure.side = side if chosen is None else chosen.side
+        raise
     n_surface = len(samples.points)
     vertices = np.concatenate([samples.points, lattice, far])
     vertex_side = np.repeat([-1, 1, 0], [n_surface, len(lattice), len(far)])
@@ -180,7 +175,52 @@ def _tetrahedralise(cage, side, split, coarsening, seed, deadline, steps):
     vertices, tets = vertices[used], orient_positive(vertices[used], renumber[tets])
     tets = _flip_flat(vertices, tets, n_surface)
     steps(0.9, "improving the tetrahedra")
-    return surface, polish(vertices, tets, np.arange(len(vertices)) >= n_surface, side, rng, steps), tets
+    vertices = polish(vertices, tets, np.arange(len(vertices)) >= n_surface, chosen.side, rng, steps)
+    return _Made(surface, vertices, tets, chosen.side, chosen.predicted, sizing.near(chosen))
+
+
+def _sized_start(cage, side, split, coarsening, sizing, rng, steps):
+    """The surface samples and the lattice at the side whose predicted cell count comes nearest ``sizing``'s target,
+    of at most ``sizing.rounds`` sides counted from ``side`` on (see :mod:`.sizing`).
+
+    Returns
+    -------
+    surface : Surface
+    samples : surface.Samples, its first
+    lattice : (I, 3) float array
+    chosen : sizing.Candidate
+    """
+    best = None
+    tried = []
+    for _ in range(sizing.rounds):
+        steps(0.05 * len(tried), "sampling the cage surface" + (" again, at a size counted for about "
+                                                                 f"{sizing.target} cells" if tried else ""))
+        spacing = _SURFACE_SPACING * side * coarsening
+        # The sample budget at the volume's side whatever the side counted: a coarser one must not stop refinement
+        # before the run-away test has seen its rounds (a 1e-4 slot, refused as a gap).
+        budget = int(_SAMPLE_BUDGET * _initial_count(cage, _SURFACE_SPACING * sizing.volume_side * coarsening) + 5000)
+        surface, samples = _sampled_surface(cage, spacing, split, budget, rng, steps)
+        lattice = bcc_lattice(cage, side, _BAND * spacing, samples.points, samples.triangles, rng, steps)
+        tried.append(sizing.candidate(side, len(lattice), len(samples.points)))
+        if best is None or sizing.miss(tried[-1]) < sizing.miss(best[3]):
+            best = surface, samples, lattice, tried[-1]
+        side = None if sizing.near(tried[-1]) else sizing.next_side(tried)
+        if side is None:
+            break
+    return best
+
+
+def _sampled_surface(cage, spacing, split, budget, rng, steps):
+    """The Surface at ``spacing`` (regions facing a narrow gap sampled finer, unless that passes the sample
+    ``budget``) and its first samples; _NotConforming when its region boundaries cannot be recovered within it."""
+    try:
+        surface = Surface(cage, spacing, rng, budget, split, band=_BAND * spacing)
+    except OutOfBudget:  # gaps too narrow to sample finely from the start: leave them to refinement
+        surface = Surface(cage, spacing, rng, budget, split)
+    try:
+        return surface, surface.samples(steps)
+    except OutOfBudget:
+        raise _NotConforming(np.flatnonzero(np.isin(surface.region, surface.trouble))) from None
 
 
 def _initial_count(cage, spacing):
@@ -190,8 +230,9 @@ def _initial_count(cage, spacing):
     return area / (np.sqrt(3.0) / 2.0 * spacing**2) + cage.n_control_points
 
 
-def _conforming_delaunay(surface, lattice, far, deadline, steps):
-    """Refine the surface samples until every surface triangle is a face of the Delaunay tetrahedralisation.
+def _conforming_delaunay(surface, lattice, far, work, steps):
+    """Refine the surface samples until every surface triangle is a face of the Delaunay tetrahedralisation, or the
+    rounds or the ``work`` budget (a :class:`WorkBudget`) run out.
 
     Returns
     -------
@@ -202,12 +243,13 @@ def _conforming_delaunay(surface, lattice, far, deadline, steps):
     missing = []  # missing triangles per round
     try:
         for _ in range(_RECOVERY_ROUNDS):
-            if time.perf_counter() > deadline:
-                break
             samples = surface.samples(steps)
             lattice = _outside_protecting_spheres(lattice, samples.points, samples.triangles)
             steps.check()
-            delaunay = Delaunay(np.concatenate([samples.points, lattice, far]), qhull_options=_QHULL_OPTIONS)
+            points = np.concatenate([samples.points, lattice, far])
+            if not work.spend(len(points)):
+                break
+            delaunay = Delaunay(points, qhull_options=_QHULL_OPTIONS)
             # Only the tetrahedra with three corners or more on the surface have faces with all three there.
             touching = delaunay.simplices[np.count_nonzero(delaunay.simplices < len(samples.points), axis=1) >= 3]
             faces = _cell_faces(touching)
@@ -468,162 +510,6 @@ def _outside_protecting_spheres(lattice, points, triangles):
     return np.delete(lattice, drop, axis=0)
 
 
-def _bcc_lattice(cage, side, band, surface_points, triangles, rng, steps):
-    """Jittered body-centred cubic lattice points of cube side ``side`` inside the cage, except those closer than
-    ``band`` to the cage surface.
-
-    Returns
-    -------
-    (I, 3) float array
-    """
-    turned = cage.vertices @ _LATTICE_AXES  # the cage in the lattice's axes
-    low = turned.min(axis=0) - side
-    shape = np.ceil((turned.max(axis=0) + side - low) / side).astype(np.int64) + 1
-    index = np.stack(np.meshgrid(*[np.arange(m) for m in shape], indexing="ij"), axis=-1).reshape(-1, 3)
-    # Corners (i, j, k) then cube centres (i, j, k) + 1/2, numbered alike.
-    points = (low + side * np.concatenate([index, index + 0.5])) @ _LATTICE_AXES.T
-    points += JITTER * side * rng.uniform(-1.0, 1.0, points.shape)
-    # The turned lattice's box is larger than the cage's: the points outside the cage's box are outside the cage.
-    keep = np.all((points > cage.vertices.min(axis=0)) & (points < cage.vertices.max(axis=0)), axis=1)
-    depth = _depth_in_convex(cage, points[keep])
-    if depth is not None:  # small convex cages (boxes, cones, cylinders of few sides): no search needed
-        keep[keep] = depth >= band
-        return points[keep]
-    if len(cage.facets) <= _FEW_FACETS:  # small cages: the distance to their few facets, found plane by plane
-        keep[keep] = _surface_distance(cage.vertices[cage.facets], points[keep], band, steps) >= band
-    else:
-        # The nearest surface sample is at most one circumradius farther than the surface itself: only the points
-        # in between need the exact distance.
-        cover = circumspheres(surface_points, triangles)[1].max()
-        nearest = np.full(len(points), np.inf)
-        nearest[keep] = cKDTree(surface_points).query(points[keep], distance_upper_bound=band + cover)[0]  # inf beyond
-        keep &= nearest >= band
-        unsure = np.flatnonzero(keep & (nearest < band + cover))
-        # The regions' triangles tile the surface the tetrahedra will follow; being small (about the spacing), each
-        # unsure point meets only a few of them, where a cage's large facets would meet every point.
-        keep[unsure] = _surface_distance(surface_points[triangles], points[unsure], band, steps) >= band
-    # A lattice edge (centre to one of its cube's corners) between two kept points stays within its half length
-    # (at most 0.52 side with the jitter; band = 0.7 side) of one of them, so it cannot cross the surface: the kept
-    # points connected by lattice edges are all inside or all outside, which one winding number per piece decides.
-    centre = np.flatnonzero(np.all(index < shape - 1, axis=1) & keep[len(index):])
-    offsets = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
-    corner = np.ravel_multi_index((index[centre][:, None, :] + offsets[None]).reshape(-1, 3).T, shape)
-    centre = np.repeat(centre + len(index), len(offsets))
-    linked = keep[centre] & keep[corner]
-    inside = _inside_pieces(cage, points, keep, centre[linked], corner[linked], steps)
-    return points[keep & inside]
-
-
-def _depth_in_convex(cage, points):
-    """Distance from each point to the surface of a convex cage, negative outside; None for a cage that is not
-    convex (some cage vertex more than _CONVEX_SLACK outside a facet's plane) or has more than _CONVEX_FACETS facets.
-
-    Inside a convex polyhedron the distance to its surface is the least distance to its facets' planes: a point
-    that deep is inside, with no nearest-sample search, exact distances to the surface or winding numbers.
-
-    Parameters
-    ----------
-    cage : Cage, in the meshing frame (unit diagonal)
-    points : (P, 3) float array
-
-    Returns
-    -------
-    (P,) float array or None
-    """
-    if len(cage.facets) > _CONVEX_FACETS:
-        return None
-    corners = cage.vertices[cage.facets]
-    normals = unit(triangle_normals(corners))  # outward
-    if not np.all(np.isfinite(normals)):
-        return None
-    offsets = np.einsum("ij,ij->i", normals, corners[:, 0])
-    if np.max(cage.vertices @ normals.T - offsets) > _CONVEX_SLACK:
-        return None
-    # Facet by facet on coordinate rows: a (P, 3) x (3, F) product costs 3 to 7 times more at these sizes.
-    x, y, z = np.ascontiguousarray(points.T)
-    depth = np.full(len(points), np.inf)
-    for (nx, ny, nz), offset in zip(normals, offsets):
-        np.minimum(depth, offset - (nx * x + ny * y + nz * z), out=depth)
-    return depth
-
-
-def _inside_pieces(cage, points, keep, ends_a, ends_b, steps):
-    """Whether each point lies inside the cage, for graphs whose connected pieces are all inside or all outside.
-
-    Parameters
-    ----------
-    points : (P, 3) float array
-    keep : (P,) bool array, the points to classify (the others come out False)
-    ends_a, ends_b : (L,) int arrays, the graph's links between kept points
-
-    Returns
-    -------
-    (P,) bool array
-    """
-    graph = sp.coo_matrix((np.ones(len(ends_a)), (ends_a, ends_b)), shape=(len(points),) * 2)
-    _, piece = connected_components(graph, directed=False)
-    candidates = np.flatnonzero(keep)
-    pieces, first = np.unique(piece[candidates], return_index=True)
-    winding = winding_numbers(cage.vertices, cage.facets, points[candidates[first]], steps.check)
-    _check_winding(winding)
-    inside = np.zeros(piece.max() + 1, dtype=bool)
-    inside[pieces] = winding > 0.5
-    return keep & inside[piece]
-
-
-def _check_winding(winding):
-    """Raise CageError unless every winding number (at points off the surface) is 0 or 1."""
-    if np.any(np.abs(winding - np.round(winding)) > 0.1) or np.any((winding > 1.5) | (winding < -0.5)):
-        raise CageError(
-            "the cage surface overlaps itself (some space is enclosed twice or with the wrong orientation): "
-            "make sure the cage does not pass through itself and that no part is inside-out"
-        )
-
-
-def _surface_distance(corners, points, reach, steps):
-    """Distance from each point to a triangulated surface, where it is below ``reach`` (inf beyond).
-
-    Only the (point, triangle) pairs within ``reach`` of the triangle's plane and of its bounding sphere get the
-    exact closest point. A few triangles (up to _FEW_FACETS: a small cage's own facets) find them plane by plane;
-    many (the regions' small triangles) through a search tree, where each large triangle would meet every point.
-
-    Parameters
-    ----------
-    corners : (F, 3, 3) float array, the surface's triangles
-    points : (P, 3) float array
-    reach : float, length
-
-    Returns
-    -------
-    (P,) float array
-    """
-    centres = corners.mean(axis=1)
-    radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
-    normals = unit(triangle_normals(corners))
-    if len(corners) <= _FEW_FACETS:
-        x, y, z = np.ascontiguousarray(points.T)
-        point, facet = [], []
-        for f, ((cx, cy, cz), (nx, ny, nz)) in enumerate(zip(centres, normals)):
-            dx, dy, dz = x - cx, y - cy, z - cz
-            near = np.flatnonzero((np.abs(nx * dx + ny * dy + nz * dz) < reach)
-                                  & (dx * dx + dy * dy + dz * dz < (reach + radii[f]) ** 2))
-            point.append(near)
-            facet.append(np.full(len(near), f))
-        point, facet = np.concatenate(point), np.concatenate(facet)
-    else:
-        pairs = cKDTree(points).sparse_distance_matrix(cKDTree(centres), reach + radii.max(), output_type="ndarray")
-        point, facet = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
-        height = np.einsum("ij,ij->i", points[point] - centres[facet], normals[facet])
-        close = (pairs["v"] < reach + radii[facet]) & (np.abs(height) < reach)
-        point, facet = point[close], facet[close]
-    best = np.full(len(points), np.inf)
-    for chunk in np.array_split(np.arange(len(point)), max(1, len(point) // 500_000)):
-        steps.check()
-        squared, _ = closest_on_triangles(points[point[chunk]], *corners[facet[chunk]].transpose(1, 0, 2))
-        np.minimum.at(best, point[chunk], np.sqrt(squared))
-    return best
-
-
 def _cell_faces(tets):
     """The four faces of each tetrahedron, each sorted, face k opposite corner k of every tetrahedron in turn.
 
@@ -677,7 +563,7 @@ def _inside_tetrahedra(cage, vertices, tets, neighbours, samples, vertex_side, s
         alone = alone[np.argsort(-np.abs(signed_measures(vertices, tets[alone])), kind="stable")]
         pieces, first = np.unique(piece[alone], return_index=True)
         winding = winding_numbers(cage.vertices, cage.facets, vertices[tets[alone[first]]].mean(axis=1), steps.check)
-        _check_winding(winding)
+        check_winding(winding)
         high[pieces] = winding > 0.5
     return (high[piece] == 1) & ~flat
 

@@ -29,6 +29,9 @@ GRADIENT_CHUNK_PAIRS = 100_000
 
 # The largest violation of partition of unity or reproduction the solve's output keeps (unit-frame coordinates).
 EXACT = 1e-12
+# Row blocks of the gradient matrix, whatever the threads: Gᵀ sums one partial product per block, and a sum's
+# rounding follows its terms, so a count that followed the cores gave other weights on another machine.
+PRODUCT_BLOCKS = 8
 
 
 def key_positions(keys, sorted_keys):
@@ -203,7 +206,7 @@ class PairOperators:
             self.gradient = _gradient_matrix(mesh.scaled_gradients, self.pair_cell, corner_slot, sets.n_slots, dtype,
                                              check)
             del corner_slot
-            self.row_blocks = _row_blocks(self.gradient, worker_count())
+            self.row_blocks = _row_blocks(self.gradient, PRODUCT_BLOCKS)
         check()
         self.slot_mass = mesh.sqrt_mass[sets.vertex_of_slot].astype(dtype)
         # Control-major order: the matrix is block-diagonal over the control points, which the factorisation's
