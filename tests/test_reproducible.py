@@ -13,9 +13,7 @@ import numpy as np
 import pytest
 
 import lbc_core
-from lbc_core.binding import record as binding
 from lbc_core.kernel import parallel
-from lbc_core.solve import pairs as working_sets
 from lbc_core.io import read_mesh
 
 DATA = Path(__file__).resolve().parent / "data" / "cages-3d"
@@ -49,14 +47,21 @@ def test_a_bind_beside_a_cpu_burner_is_the_same_bit_for_bit():
     assert_same(quiet, loaded)
 
 
-def test_a_bind_is_the_same_whatever_the_thread_count(monkeypatch):
-    """One thread, three and eight: the solver's transposed product summed one partial product per thread, and the
-    reduction padded each thread's chunk of rows to its longest, so the weights followed the machine's cores (the
-    gargoyle's 27-vertex cage, its 2674 vertices)."""
+@pytest.mark.parametrize("cage, cells, splitting", [
+    ("gargoyle/cage_L08.obj", 2000, "working sets"),  # 168 control points: the working sets
+    ("gargoyle/cage_L12.obj", 8000, "dense"),  # 27: the dense splitting, its cells in chunks
+])
+def test_a_bind_is_the_same_whatever_the_thread_count(monkeypatch, cage, cells, splitting):
+    """One thread, three and eight, every module that asks the thread count told the same: the working sets'
+    transposed product summed one partial product per thread, the dense splitting one per chunk of cells made per
+    thread, and the reduction padded each thread's chunk of rows to its longest, so the weights followed the
+    machine's cores (the gargoyle's 2674 vertices)."""
+    asking = [module for name, module in sorted(sys.modules.items())
+              if name.startswith("lbc_core.") and hasattr(module, "worker_count")]
     bindings = []
     for threads in (1, 3, 8):
-        for module in (parallel, working_sets, binding):
+        for module in asking:
             monkeypatch.setattr(module, "worker_count", lambda: threads)
-        bindings.append(bind("gargoyle/cage_L12.obj", "gargoyle/mesh.off", cells=2000))
+        bindings.append(bind(cage, "gargoyle/mesh.off", cells=cells))
     for other in bindings[1:]:
         assert_same(bindings[0], other)

@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from ..errors import CageError
 from ..kernel import fem
 from ..kernel.factor import Factor
-from ..kernel.parallel import thread_map, worker_count
+from ..kernel.parallel import CHUNKS_PER_ROUND, thread_map, worker_count
 from .shrink import scaled_tv, shrink_factor, weighted_shrink_factors
 
 
@@ -340,13 +340,13 @@ NORM_SLICE = 4_000_000
 
 
 def _cell_chunks(problem, size_x):
-    """Split the cells into one chunk per core when the problem is large enough to gain from threads, and into more
-    (a multiple of the cores) when a chunk would exceed ENTRIES_PER_CHUNK."""
+    """Split the cells into CHUNKS_PER_ROUND chunks when the problem is large enough to gain from threads, and into
+    more (a multiple of it) when a chunk would exceed ENTRIES_PER_CHUNK: by the problem's size alone, never the
+    cores, since the step sums one partial product per chunk and a sum's rounding follows its terms."""
     if size_x < PARALLEL_MIN_ENTRIES:
         count = 1
     else:
-        rounds = -(-size_x // (ENTRIES_PER_CHUNK * worker_count()))
-        count = worker_count() * rounds
+        count = CHUNKS_PER_ROUND * -(-size_x // (ENTRIES_PER_CHUNK * CHUNKS_PER_ROUND))
     if count == 1:
         return [_Chunk(slice(0, problem.n_cells), problem.G, problem.GT)]
     bounds = np.linspace(0, problem.n_cells, count + 1).astype(int)
