@@ -26,6 +26,7 @@ import numpy as np
 
 from .binding.options import DEFAULT_CELLS, WEIGHTINGS, BindOptions
 from .errors import CageError, Cancelled
+from .evaluate.evaluators import EVALUATORS
 from .evaluate.smoothing import DEFAULT_SMOOTHNESS
 from .meshing import MESHERS, method_names
 from .version import __version__
@@ -74,6 +75,8 @@ def _solving_options():
     solving.add_argument("--method", choices=method_names(), help=f"the mesher that fills the cage: {_meshers()}")
     solving.add_argument("--smoothness", type=float, help="smooth ↔ local in [0, 1]: 1 folds bent joints least, 0 "
                          f"gives each point the fewest influences (default {DEFAULT_SMOOTHNESS:g})")
+    solving.add_argument("--evaluation", choices=tuple(EVALUATORS), help="how the weights are read at the points: "
+                         "smooth (the default) or linear (the paper's piecewise-linear interpolation)")
     return solving
 
 
@@ -414,7 +417,7 @@ def _options(args):
     """The bind options of the command's flags, checked (a bad value exits 2 before any file is read)."""
     return BindOptions(cells=args.cells, weighting=args.weighting, epsilon=args.epsilon, threshold=args.threshold,
                        tolerance=args.tolerance, max_iterations=args.max_iterations, method=args.method,
-                       smoothness=args.smoothness)
+                       smoothness=args.smoothness, evaluation=args.evaluation)
 
 
 def _read_inputs(cage_path, mesh_path=None):

@@ -70,6 +70,7 @@ def test_numbers_are_normalised():
         ("smoothness", -0.1, "smoothness must be in [0, 1], got -0.1"),
         ("smoothness", 1.5, "smoothness must be in [0, 1], got 1.5"),
         ("smoothness", "high", "smoothness must be a number, got the string 'high'"),
+        ("evaluation", "cubic", "evaluation 'cubic' is not one of smooth, linear"),
     ],
 )
 def test_bad_values_are_refused(field, value, message):

@@ -82,6 +82,22 @@ def test_every_rim_vertex_of_blender_cylinder_moves_the_points_inside_alike():
         assert sums[rim].max() < 3 * sums[rim].min()
 
 
+def test_the_linear_evaluator_gives_the_meshs_own_interpolation_and_the_smooth_one_differs():
+    """The evaluator is a seam: "linear" is the paper's piecewise-linear interpolation of the solved coordinates,
+    exactly, where the default smooth fit gives other weights inside (both reproduce the points)."""
+    from lbc_core.evaluate.interpolation import interpolation_matrix
+
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    points = np.random.default_rng(3).uniform(0.2, 0.8, (40, 2))
+    linear = lbc_core.bind(square, None, points, cells=300, threshold=0.0, evaluation="linear")
+    located = interpolation_matrix(linear.domain.vertices, linear.domain.cells, points)[0]
+    np.testing.assert_allclose(linear.weights.toarray(), located @ linear.domain_weights, atol=1e-12)
+    smooth = lbc_core.bind(square, None, points, cells=300, threshold=0.0)
+    assert smooth.options.evaluation == "smooth" and linear.options.evaluation == "linear"
+    assert abs(smooth.weights - linear.weights).max() > 1e-3
+    np.testing.assert_allclose(smooth.weights @ square, points, atol=1e-12)
+
+
 def test_points_outside_are_bound_and_counted():
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
     points = np.array([[0.5, 0.5], [1.5, 0.5], [0.25, -0.5]])

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import CageError
+from ..evaluate.evaluators import DEFAULT_EVALUATION, EVALUATORS
 from ..evaluate.smoothing import DEFAULT_SMOOTHNESS
 from ..meshing import AUTO, DEFAULT_CELLS, mesher, method_names
 from ..solve.geodesics import WEIGHTINGS as _RHO
@@ -53,6 +54,10 @@ class BindOptions:
         Smooth ↔ local, in [0, 1]: the smooth evaluation's reach (:func:`lbc_core.evaluate.smoothing.radius_for`; 1
         folds bent joints least, 0 keeps each point's weights on the fewest cage vertices). None:
         :data:`DEFAULT_SMOOTHNESS`.
+    evaluation : str
+        How the coordinates at the domain mesh's vertices become weights at the points: a name of
+        :data:`lbc_core.evaluate.evaluators.EVALUATORS`, "smooth" (the default) or "linear" (the paper's
+        piecewise-linear interpolation).
 
     Raises
     ------
@@ -68,11 +73,12 @@ class BindOptions:
     max_iterations: int = None
     method: str = None
     smoothness: float = None
+    evaluation: str = None
 
     def __post_init__(self):
         problems = []
         for name in ("cells", "weighting", "epsilon", "threshold", "tolerance", "max_iterations", "method",
-                     "smoothness"):
+                     "smoothness", "evaluation"):
             try:
                 value = _CHECKS[name](getattr(self, name))
             except _Bad as bad:
@@ -189,6 +195,14 @@ def _bounded(default, whole, accept, advice):
     return check
 
 
+def _evaluation(value):
+    if value is None:
+        return DEFAULT_EVALUATION
+    if not isinstance(value, str) or value not in EVALUATORS:
+        raise _Bad(f"{value!r} is not one of {', '.join(EVALUATORS)}")
+    return value
+
+
 def _method(value):
     if value is None:
         return AUTO
@@ -216,4 +230,5 @@ _CHECKS = {
     "smoothness": _bounded(DEFAULT_SMOOTHNESS, False, lambda value: 0 <= value <= 1,
                            f"must be in [0, 1], got {{value:g}}: 0 the most local weights, 1 the smoothest joints "
                            f"(left out, or None: {DEFAULT_SMOOTHNESS:g})"),
+    "evaluation": _evaluation,
 }

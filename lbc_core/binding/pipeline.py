@@ -21,7 +21,7 @@ from ..cage import make_cage, real_array, some_indices
 from ..errors import CageError, PointsOutside
 from ..evaluate.interpolation import interpolation_matrix
 from ..evaluate.reduction import interpolate_and_reduce
-from ..evaluate.smoothing import DEFAULT_SMOOTHNESS, SmoothInterpolation, radius_for
+from ..evaluate.evaluators import EVALUATORS, EvaluationRequest
 from ..kernel.frame import UnitFrame, principal_aspect
 from ..kernel.parallel import busy_factor, counted_in_load
 from ..kernel.progress import Laps, Progress
@@ -115,6 +115,7 @@ def bind(
     tolerance=None,
     max_iterations=None,
     smoothness=None,
+    evaluation=None,
     options=None,
     progress=None,
     cancel=None,
@@ -128,13 +129,14 @@ def bind(
         None: a 2D polygon, vertices in boundary order. Else the faces of a closed 3D cage.
     points : (m, d) float array
         The points to bind (a mesh's vertices). 2D points may be given with a constant z.
-    cells, weighting, epsilon, threshold, method, tolerance, max_iterations, smoothness : optional
+    cells, weighting, epsilon, threshold, method, tolerance, max_iterations, smoothness, evaluation : optional
         The fields of :class:`lbc_core.binding.options.BindOptions` (None: the default): about how many triangles /
         tetrahedra fill the cage (3000 in 2D, 8000 in 3D; more is finer and slower), ρ of the geodesic TV weights
         ("quadratic", the paper's default, "linear", "sqrt", "constant" or a function), the C¹ relaxation width
         (0: plain total variation), the reduction threshold (1e-3 / n), the domain mesher ("auto"), the ADMM
-        stopping tolerance (the solver's), its iteration limit (10000) and smooth ↔ local in [0, 1] (0.5; 1 folds
-        bent joints least, 0 gives each point the fewest influences).
+        stopping tolerance (the solver's), its iteration limit (10000), smooth ↔ local in [0, 1] (0.5; 1 folds
+        bent joints least, 0 gives each point the fewest influences) and the evaluator at the points ("smooth"; or
+        "linear", the paper's piecewise-linear interpolation).
     options : BindOptions, optional
         The same options as one object; keywords given besides it override its fields.
     progress : callable(fraction, message), optional
@@ -153,7 +155,8 @@ def bind(
     """
     clock = StageClock(Progress.of(progress, cancel), BIND_STAGES)
     request = BindOptions.of(options, cells=cells, weighting=weighting, epsilon=epsilon, threshold=threshold,
-                             method=method, tolerance=tolerance, max_iterations=max_iterations, smoothness=smoothness)
+                             method=method, tolerance=tolerance, max_iterations=max_iterations, smoothness=smoothness,
+                             evaluation=evaluation)
     cage, points, told = check_request(cage_vertices, cage_faces, points, request, clock.progress)
     clock.weigh(told)
     clock.done("checks")
@@ -167,7 +170,7 @@ def bind(
     result = solve(clock, domain.vertices, domain.cells, domain.boundary_vertices, fixed, unit_cage.vertices, omega,
                    request)
     weights = evaluate(clock, domain, located, result.weights, unit_cage, request.threshold_for(cage.n_control_points),
-                       points=frame.to_unit(points), outside=outside, smoothness=request.smoothness)
+                       request, points=frame.to_unit(points), outside=outside)
     clock.progress(1.0, "bound")
     return lbc_binding(frame, cage, domain, result, weights, outside, points, request, clock)
 
@@ -224,20 +227,19 @@ def solve(clock, vertices, cells, fixed, values, control_points, omega, request,
     return result
 
 
-def evaluate(clock, domain, located, domain_weights, unit_cage, threshold, reach=1.0, points=None, outside=None,
-             smoothness=DEFAULT_SMOOTHNESS):
-    """The reduction stage: the smooth evaluation at the located points, reduced (weights below ``threshold``
-    dropped, the constraints restored); ``reach`` scales the fit's radii, depths and fade, in median edges, and
-    ``smoothness`` (:class:`BindOptions`) sets the fit's radius (:func:`~lbc_core.evaluate.smoothing.radius_for`).
-    With the (unit frame) ``points`` and their ``outside`` flags, the rows of points outside the cage extrapolate
-    to them (:class:`~lbc_core.evaluate.smoothing.SmoothInterpolation`).
+def evaluate(clock, domain, located, domain_weights, unit_cage, threshold, request, reach=1.0, points=None,
+             outside=None):
+    """The reduction stage: the rows of the evaluator ``request.evaluation`` names at the located points
+    (:data:`~lbc_core.evaluate.evaluators.EVALUATORS`), reduced (weights below ``threshold`` dropped, the constraints
+    restored); ``reach`` scales the smooth fit's radii, depths and fade, in median edges. With the (unit frame)
+    ``points`` and their ``outside`` flags, the rows of points outside the cage may extrapolate to them.
 
     Returns the (m, n) sparse weights.
     """
     part = clock.part("reduction")
-    smooth = SmoothInterpolation(domain.vertices, domain.cells, located, radius_edges=radius_for(smoothness),
-                                 reach=reach, progress=part, points=points, outside=outside)
-    weights = interpolate_and_reduce(smooth, domain_weights, unit_cage.vertices, domain.vertices, threshold,
+    evaluator = EVALUATORS[request.evaluation]
+    rows = evaluator(domain, located, EvaluationRequest(request.smoothness, reach, points, outside, part))
+    weights = interpolate_and_reduce(rows, domain_weights, unit_cage.vertices, domain.vertices, threshold,
                                      tolerance=REPRODUCTION_TOLERANCE * unit_cage.bbox_diagonal, progress=part)
     clock.done("reduction")
     return weights

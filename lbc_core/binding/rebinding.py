@@ -132,8 +132,8 @@ def rebind(previous, cage_vertices, cage_faces=None, points=None, *, progress=No
     # New points (e.g. another mesh in this cage) are refused as bind refuses them.
     located, outside_again = locate(clock, carry.mesh, unit_points[again], refuse_outside=len(again) == len(points))
     weights_again = evaluate(clock, carry.mesh, located, result.weights, carry.unit_cage,
-                             request.threshold_for(cage.n_control_points), reach, unit_points[again], outside_again,
-                             request.smoothness)
+                             request.threshold_for(cage.n_control_points), request, reach, unit_points[again],
+                             outside_again)
     if len(again) == len(points):
         weights, outside = weights_again, outside_again
     else:
