@@ -10,7 +10,7 @@ command. The parts, in the order they run:
 
     authors         2D: our solver against the authors' ADMM on their packs (bench/bench_2d.py), and a plot
     default-binds   whole binds of the gargoyle in three cages at the default resolution (bench/run.py's bench_3d)
-    scaling         bind time and peak memory against cells and control points, beside 5715f72, the last release of
+    scaling         bind time and peak memory against cells and control points, beside 0.1.0 (5715f72), the last release of
                     the dense solver (bench/scaling.py), and a plot
     deform          per-frame cost of the sparse weights against dense mean value coordinates (bench/run.py)
     meshing         meshing on the cage corpus (bench/bench_mesher.py)
@@ -50,7 +50,8 @@ import figures  # noqa: E402  (tools/figures.py: the figures the docs quote from
 
 DOC = ROOT / "docs" / "benchmarks.md"
 QUICK_OUT = ROOT / "out" / "bench-quick"
-BASELINE = "5715f72"
+BASELINE = "5715f72"  # release 0.1.0 (tag v0.1.0): its commit, which every clone has
+BASELINE_RELEASE = "0.1.0"
 BASELINE_DIR = ROOT / "out" / f"baseline-{BASELINE}"
 PARTS = ["authors", "default-binds", "scaling", "deform", "meshing", "mesh-deform", "per-frame"]
 BLENDER_PARTS = ("mesh-deform", "per-frame")
@@ -243,8 +244,8 @@ def part_scaling(context):
                     line += ["not run" if tree is not None else "", "", "", ""]
                 lines.append(line)
                 print("| " + " | ".join(line) + " |", flush=True)
-    table = markdown_table(["cage (control points)", "tetrahedra", "bind", "peak memory", f"{BASELINE}'s bind",
-                            f"{BASELINE}'s peak", "faster", "memory"], lines)
+    table = markdown_table(["cage (control points)", "tetrahedra", "bind", "peak memory", f"{BASELINE_RELEASE}'s bind",
+                            f"{BASELINE_RELEASE}'s peak", "faster", "memory"], lines)
     scaling.draw(rows, context["images"] / "scaling.png")
     fits = ""
     if len(rows) >= 3:
@@ -253,13 +254,14 @@ def part_scaling(context):
                 f"cells^{memory_fit[0]:.2f} · n^{memory_fit[1]:.2f}")
         if len(base_rows) >= 3 and len({r["n"] for r in base_rows}) > 1 and len({r["cells"] for r in base_rows}) > 1:
             base_time, base_memory = scaling.fit(base_rows, "total"), scaling.fit(base_rows, "peak_mb")
-            fits += (f", where {BASELINE} measured cells^{base_time[0]:.2f} · n^{base_time[1]:.2f} and "
+            fits += (f", where {BASELINE_RELEASE} measured cells^{base_time[0]:.2f} · n^{base_time[1]:.2f} and "
                      f"cells^{base_memory[0]:.2f} · n^{base_memory[1]:.2f}")
         fits += " (n: control points)."
     cages = ", ".join(dict.fromkeys(name for name, _ in plan))
     split = " (\"split\": every triangle split in four at its edges' midpoints)" if "split" in cages else ""
     text = (f"The gargoyle mesh (2674 points) in its cages {cages}{split}, each "
-            f"bind in its own process (`bench/scaling.py`); {BASELINE}, the last release of the dense solver, binds "
+            f"bind in its own process (`bench/scaling.py`); {BASELINE_RELEASE}, the last release of the dense solver "
+            f"alone, binds "
             "the same cages one after the other in the same run, up to a size it can bind in a few minutes "
             "(\"not run\" beyond).")
     if note:
