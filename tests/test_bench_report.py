@@ -22,7 +22,7 @@ COLUMNS = {
                 "our objective vs reference's"],
     "default-binds": ["cage", "control points", "tets", "total s", "meshing + geodesics", "iterations",
                       "influences per vertex, mean / max", "peak memory"],
-    "scaling": ["cage (control points)", "tetrahedra", "bind", "peak memory", "5715f72's bind", "5715f72's peak",
+    "scaling": ["cage (control points)", "tetrahedra", "bind", "peak memory", "0.1.0's bind", "0.1.0's peak",
                 "faster", "memory"],
     "deform": ["points", "cage (control points)", "weights per point", "LBC", "bare sparse product, same weights",
                "dense MVC product", "LBC / MVC", "memory: LBC / MVC"],
