@@ -1,6 +1,7 @@
-"""Two house rules for lbc_core and lbc_addon, checked: no function longer than a reviewer can hold in mind, and no
-constant buried under a lab notebook.
+"""Three house rules for lbc_core and lbc_addon, checked: no module holding more than one job, no function longer
+than a reviewer can hold in mind, and no constant buried under a lab notebook.
 
+- A module is at most MAX_MODULE_LINES lines: a longer one holds more than one job; move one into a module of its own.
 - A function's body (its docstring left out) is at most MAX_BODY_LINES lines: split a longer one into well-named
   helpers.
 - A module-level UPPER_CASE constant has at most MAX_COMMENT_LINES comment lines right above it: what it is, its unit,
@@ -18,6 +19,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 MAX_BODY_LINES = 60
 MAX_COMMENT_LINES = 3
+MAX_MODULE_LINES = 600
 CONSTANT = re.compile(r"_?[A-Z][A-Z0-9_]*")
 
 # "path:name" (a function's qualified name, Class.method, or a constant's) → the reason a reviewer accepted.
@@ -100,6 +102,9 @@ def violations():
                 f"{path}:{line}: function {name} has a body of {lines} lines (over {MAX_BODY_LINES}): split it into "
                 f"well-named helpers, or add '{path}:{name}' to ALLOWED in tests/test_house.py with the reason a "
                 "reviewer accepted")
+        if source.count("\n") > MAX_MODULE_LINES:
+            found[path] = (f"{path} has {source.count(chr(10))} lines (over {MAX_MODULE_LINES}): it holds more than one "
+                           "job; move one into a module of its own in the same folder")
         for line, names, comments in buried_constants(source):
             for name in names:
                 found[f"{path}:{name}"] = (
@@ -113,7 +118,7 @@ def violations():
 # ------------------------------------------------------------------------------------------------------ the rules
 
 
-def test_no_function_is_too_long_and_no_constant_buried():
+def test_no_module_function_or_constant_breaks_a_rule():
     broken = [message for key, message in sorted(violations().items()) if key not in ALLOWED]
     assert not broken, "\n".join(broken)
 
