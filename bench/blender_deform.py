@@ -600,10 +600,10 @@ def smoothness_variants(mesh, cage, values):
         bpy.context.scene.collection.objects.link(obj)
         start = time.perf_counter()
         summary = api.bind(obj, cage, smoothness=value)
-        print(f"  LBC bound in {time.perf_counter() - start:.1f} s at Smoothness {value:g}: K = {summary['slots']}, "
-              f"{summary['mean_influences']:.1f} influences per vertex on average")
+        print(f"  LBC bound in {time.perf_counter() - start:.1f} s at Smoothness {value:g}: K = {summary.slots}, "
+              f"{summary.mean_influences:.1f} influences per vertex on average")
         bpy.context.scene.collection.objects.unlink(obj)
-        variants[f"LBC smoothness {value:g} K={summary['slots']}"] = obj
+        variants[f"LBC smoothness {value:g} K={summary.slots}"] = obj
     return variants
 
 
@@ -616,13 +616,13 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
     bpy.context.scene.collection.objects.link(default)
     start = time.perf_counter()
     summary = api.bind(mesh, cage, thinning=EVERY_WEIGHT)  # every weight: the other variants are thinned from it
-    full = summary["slots"]
+    full = summary.slots
     print(f"  LBC bound in {time.perf_counter() - start:.1f} s with every weight: K = {full}, "
-          f"{summary['mean_influences']:.1f} influences per vertex on average, {summary['outside']} outside")
+          f"{summary.mean_influences:.1f} influences per vertex on average, {summary.outside} outside")
     start = time.perf_counter()
     summary = api.bind(default, cage)
-    print(f"  LBC bound in {time.perf_counter() - start:.1f} s with the add-on's defaults: K = {summary['slots']}, "
-          f"{summary['mean_influences']:.1f} influences per vertex on average")
+    print(f"  LBC bound in {time.perf_counter() - start:.1f} s with the add-on's defaults: K = {summary.slots}, "
+          f"{summary.mean_influences:.1f} influences per vertex on average")
     scale = float(np.linalg.norm(np.ptp(positions(mesh.data), axis=0)))
     for obj in (mesh, default):
         bpy.context.scene.collection.objects.unlink(obj)
@@ -630,14 +630,14 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
     variants = {"no deformer": copy_object(mesh, "plain")}
     variants["Mesh Deform"] = mesh_deform_variant(mesh, cage, "meshdeform", precision)
     variants[f"LBC every weight K={full}"] = mesh
-    variants[f"LBC default K={summary['slots']}"] = default
+    variants[f"LBC default K={summary.slots}"] = default
     variants.update(others)
 
     def compare(key, reference, what):
         error = deformation_error(variants[key], reference, cage, rest, scale)
         print(f"  {key}: largest difference to {what} over three poses {error:.2e} of the mesh's diagonal")
 
-    compare(f"LBC default K={summary['slots']}", mesh, "every weight")
+    compare(f"LBC default K={summary.slots}", mesh, "every weight")
     if reference_cells:
         # The yardstick for thinning's error: how far the binding itself is from one on twice as fine a domain mesh.
         variants[f"LBC {reference_cells} cells"] = fine = copy_object(mesh, "fine")
@@ -659,8 +659,8 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
         compare(f"LBC every weight {form}", mesh, "the add-on's tree")
         variants[f"LBC default {form}"] = lbc_variant(default, cage, form, None, form)
     for slots in shared:  # the default's weights, another split of the slots (0: every slot for every vertex)
-        key = f"LBC default shared {slots or summary['slots']}"
-        variants[key] = lbc_variant(default, cage, key, shared_slots=slots or summary["slots"])
+        key = f"LBC default shared {slots or summary.slots}"
+        variants[key] = lbc_variant(default, cage, key, shared_slots=slots or summary.slots)
         compare(key, default, "the default's")
     for form in trees:
         key = f"LBC default {form}"
@@ -669,7 +669,7 @@ def run_scene(name, thinnings, sum_forms, rounds, precision, reference_cells, ha
         compare(key, default, "the default's")
     without_handler = ()
     if handler_off:  # the default binding again, the add-on's check of it after each cage edit left out
-        without_handler = (f"LBC default K={summary['slots']} no handler",)
+        without_handler = (f"LBC default K={summary.slots} no handler",)
         variants[without_handler[0]] = default
     for mode in modes:
         playback = mode == "playback"

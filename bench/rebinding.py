@@ -122,7 +122,7 @@ def on_carried_mesh(previous, edited_cage, faces, tolerance=None):
     if mesh is None:
         return None
     weights = tv_weights(mesh.cells, geodesic_distances(mesh.vertices, mesh.cells, mesh.control_vertices),
-                         previous.options["weighting"])
+                         previous.options.weighting)
     return solve_on_mesh(mesh.vertices, mesh.cells, mesh.boundary_vertices, boundary_weights(mesh, unit_cage),
                          unit_cage.vertices, weights, max_iterations=20000,
                          **({} if tolerance is None else {"tolerance": tolerance}))
@@ -218,9 +218,9 @@ def gargoyle_64k():
 def addon_scene(cage, faces, points, edits, level="L10"):
     """The add-on's warm re-bind against its cold bind, and against the warm re-bind thinning every row."""
     from lbc_addon import jobs
+    from lbc_addon.options import AddonOptions
 
-    options = {"cells": 0, "weighting": "quadratic", "epsilon": 0.0, "tolerance": 0.0, "thinning": 0.0,
-               "influences": 0, "mode": "3D"}
+    options = AddonOptions(mode="3D")
 
     def request(cage_points):
         return jobs.BindRequest(mesh_uid=1, cage_uid=2, mesh_name="Gargoyle", points=points, cage_points=cage_points,

@@ -143,7 +143,7 @@ def bench_addon(settings):
         cage_obj.data.update()
         name = f"{threshold:g} : {influences}" + (" (defaults)" if (threshold, influences) == (0.0, 0) else "")
         row(name, seconds, capsule.kink_figures(mesh, evaluated_positions(mesh_obj), faces),
-            f"{summary['mean_influences']:.1f} / {summary['slots']}")
+            f"{summary.mean_influences:.1f} / {summary.slots}")
     seconds, moved = capsule.mesh_deform(mesh, faces, cage, cage_faces, posed, precision=5)
     row("Mesh Deform, precision 5", seconds, capsule.kink_figures(mesh, moved, faces), "—")
     print(f"  ({load()})")

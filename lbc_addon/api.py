@@ -5,19 +5,22 @@ Example::
     import bpy
     from lbc_addon import api   # inside Blender with the extension enabled: from bl_ext.user_default.lbc import api
     summary = api.bind(bpy.data.objects["Body"], bpy.data.objects["Cage"], cells=20000)
-    print(summary)
+    print(summary.warnings)
+    assert api.status(bpy.data.objects["Body"]).ok
     bpy.ops.wm.save_mainfile()
 """
 
 import logging
 import warnings
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import bpy
 
 from . import deformer, diagnosis, geometry, jobs, node_group, writing
 from .core import DEFAULT_SMOOTHNESS, CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
-from .properties import DEFAULT_INFLUENCES, is_bound
+from .diagnosis import Note, NoteKind  # noqa: F401  (for scripts: what Status.notes holds)
+from .options import DEFAULT_INFLUENCES, MESHER_NAMES, AddonOptions
+from .properties import is_bound
 
 # A bind's warnings go to this logger for pipelines; the NullHandler keeps Python's last-resort handler from printing
 # them a second time in background mode, where they are printed anyway.
@@ -25,44 +28,140 @@ logger = logging.getLogger(__name__)
 logger.addHandler(logging.NullHandler())
 
 
+@dataclass(frozen=True)
+class BindSummary:
+    """What one bind did: :func:`bind` returns it, :func:`rebind_all` one per mesh.
+
+    Attributes
+    ----------
+    mesh : str
+        The bound mesh object's name.
+    dimension : int
+        2 or 3: how the weights were computed.
+    control_points : int
+        The cage's vertices after welding duplicates.
+    cells : int
+        The triangles (2D) or tetrahedra (3D) the weights were computed on.
+    slots : int
+        K, the most cage vertices moving one mesh vertex (the deformer's attribute pairs).
+    mean_influences : float
+        Cage vertices moving a mesh vertex, on average (3 decimals: stored as float32, its noise says nothing).
+    outside : int
+        Mesh vertices outside the cage, which follow it by extrapolation.
+    warnings : tuple of str
+        The bind's warnings, and why the deformer is held off if the modifier stack holds it off.
+    seconds : float
+        The bind's time, writing included.
+    rebind : str
+        For a mesh bound before in this session, how it went (from its previous binding, or from scratch and why);
+        "" for a first bind (unless ``from_scratch``).
+
+    Examples
+    --------
+    >>> summary = api.bind(bpy.data.objects["Sphere"], bpy.data.objects["Box"], cells=1000)
+    >>> summary.dimension, summary.control_points, summary.outside
+    (3, 8, 0)
+    >>> summary.warnings
+    ()
+    """
+
+    mesh: str
+    dimension: int
+    control_points: int
+    cells: int
+    slots: int
+    mean_influences: float
+    outside: int
+    warnings: tuple
+    seconds: float
+    rebind: str
+
+
+@dataclass(frozen=True)
+class Status:
+    """What :func:`status` says of an object: whether its deformer works, and what else the panels say of it.
+
+    Attributes
+    ----------
+    following : bool
+        The deformer works: the mesh follows its cage.
+    message : str
+        The panel's status line: "Following 'Cage'", or why the mesh stays at rest and what to do.
+    notes : tuple of :class:`Note`
+        What the panels add of a mesh that follows, each with its ``kind`` (a :class:`NoteKind`) and ``text``:
+        lasting problems of the binding (much of the mesh outside a cage too small, the mesh moved out of its cage)
+        and advice (few cells for the cage; the cage edited since the bind, the mesh moved as an object).
+
+    Examples
+    --------
+    >>> state = api.status(bpy.data.objects["Sphere"])
+    >>> state.ok, state.message
+    (True, "Following 'Box'")
+    >>> [note.kind for note in state.notes]
+    []
+    """
+
+    following: bool
+    message: str
+    notes: tuple = ()
+
+    @property
+    def ok(self):
+        """Following, and no note is a problem (:attr:`Note.problem`): what a pipeline checks before a render."""
+        return self.following and not any(note.problem for note in self.notes)
+
+    @property
+    def text(self):
+        """The message and the notes' texts, joined by "; ", as one line to print."""
+        return "; ".join([self.message] + [note.text for note in self.notes])
+
+
 def bind(mesh_obj, cage_obj, *, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0, thinning=0.0,
-         influences=DEFAULT_INFLUENCES, mode="AUTO", smoothness=DEFAULT_SMOOTHNESS, from_scratch=False, progress=None,
+         influences=DEFAULT_INFLUENCES, mode="AUTO", mesher=MESHER_NAMES[0], smoothness=DEFAULT_SMOOTHNESS,
+         from_scratch=False, progress=None,
          cancel=None):
     """Bind ``mesh_obj`` to ``cage_obj`` (replacing an existing binding) and add the deformer.
 
-    Parameters are those of the Bind operator; ``progress(fraction, message)`` and ``cancel() -> bool`` are passed
-    to lbc_core. Nothing in the scene changes unless the bind succeeds. A mesh bound before in this session starts
-    from its previous binding (``lbc_core.rebind``) unless ``from_scratch``: a pipeline that wants the same result
-    whatever the session bound before asks for that.
+    Parameters are those of the Bind operator (``mode`` its Dimension, ``mesher`` its Mesher: "auto" or
+    "delaunay"); ``progress(fraction, message)`` and ``cancel() -> bool`` are passed to lbc_core. Nothing in the
+    scene changes unless the bind succeeds. A mesh bound before in this session starts from its previous binding
+    (``lbc_core.rebind``) unless ``from_scratch``: a pipeline that wants the same result whatever the session bound
+    before asks for that.
 
     Returns
     -------
-    dict
-        ``dimension``, ``control_points``, ``slots`` (K), ``mean_influences``, ``outside``, ``warnings`` (the bind's,
-        and why the deformer is held off if the modifier stack holds it off), ``seconds``, and ``rebind``: for a mesh
-        bound before in this session, how it went (from its previous binding, or from scratch and why); "" for a first
-        bind (unless ``from_scratch``). With no ``progress`` in background mode, progress lines are printed, and the
-        warnings after them ("LBC bind: warning: Body: ..."). The warnings are also logged, at level WARNING, to the
-        ``logging`` logger named after this module (e.g. "bl_ext.user_default.lbc.api"), for pipelines.
+    BindSummary
+        With no ``progress`` in background mode, progress lines are printed, and the warnings after them ("LBC bind:
+        warning: Body: ..."). The warnings are also logged, at level WARNING, to the ``logging`` logger named after
+        this module (e.g. "bl_ext.user_default.lbc.api"), for pipelines.
 
     Raises
     ------
     CageError
-        With lbc_core's message, for a cage or mesh that cannot be bound (``api.CageError``, a ValueError).
+        With lbc_core's message, for a cage or mesh that cannot be bound (``api.CageError``, a ValueError); at once,
+        in the Bind button's words, for a would-be cage that is most likely the mesh (mesh and cage swapped).
     Cancelled
         When ``cancel()`` turned true.
     RuntimeError
         When the extension is installed but not enabled (before any work).
+
+    Examples
+    --------
+    >>> api.bind(bpy.data.objects["Sphere"], bpy.data.objects["Box"], cells=1000, thinning=0.01).slots
+    8
+    >>> api.bind(bpy.data.objects["Box"], bpy.data.objects["Sphere"])  # swapped: refused before any work
+    Traceback (most recent call last):
+    lbc_core.errors.CageError: 'Sphere' is active and would be the cage; ...
     """
     _require_enabled()
-    request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), cells=cells,
-                                weighting=weighting, epsilon=epsilon, tolerance=tolerance, thinning=thinning,
-                                influences=influences, mode=mode, smoothness=smoothness)
+    options = AddonOptions(cells=cells, weighting=weighting, epsilon=epsilon, tolerance=tolerance, thinning=thinning,
+                           influences=influences, mode=mode, mesher=mesher, smoothness=smoothness)
+    request = geometry.snapshot(mesh_obj, cage_obj, bpy.context.evaluated_depsgraph_get(), options)
     return _bind_request(replace(request, from_scratch=from_scratch), progress, cancel)
 
 
 def _bind_request(request, progress, cancel, solved=None):
-    """Solve and write one :class:`jobs.BindRequest`; returns :func:`bind`'s summary. ``solved``: a list of the
+    """Solve and write one :class:`jobs.BindRequest`; returns its :class:`BindSummary`. ``solved``: a list of the
     (request, result) pairs of the same call, which the solve may start from (:func:`jobs.solve`) and this one joins."""
     printing = progress is None and bpy.app.background
     if printing:
@@ -75,16 +174,18 @@ def _bind_request(request, progress, cancel, solved=None):
     held_off = diagnosis.held_off_warning(bound)
     found = list(result.warnings) + ([held_off] if held_off else [])
     _tell(bound.name, found, printing)
-    return {
-        "dimension": settings.dimension,
-        "control_points": settings.control_points,
-        "slots": settings.slots,
-        "mean_influences": round(settings.mean_influences, 3),  # stored as float32: its noise says nothing
-        "outside": settings.outside,
-        "warnings": found,
-        "seconds": settings.bind_seconds,
-        "rebind": result.rebind,
-    }
+    return BindSummary(
+        mesh=bound.name,
+        dimension=settings.dimension,
+        control_points=settings.control_points,
+        cells=settings.domain_cells,
+        slots=settings.slots,
+        mean_influences=round(settings.mean_influences, 3),  # stored as float32: its noise says nothing
+        outside=settings.outside,
+        warnings=tuple(found),
+        seconds=settings.bind_seconds,
+        rebind=result.rebind,
+    )
 
 
 def _tell(mesh_name, found, printing):
@@ -126,8 +227,7 @@ def rebind_all(cage_obj, *, from_scratch=False, progress=None, cancel=None):
 
     A mesh that cannot be bound before any work (e.g. its data shared by a linked duplicate, Alt+D) or whose LBC
     modifier was removed or applied is left as it was with a ``UserWarning`` saying why, as the Rebind All operator
-    does (and logs it, as :func:`bind` logs its warnings). Returns the summaries of :func:`bind`, one
-    per mesh bound; raises as :func:`bind` does when every mesh is refused or a solve fails, the meshes bound before
+    does (and logs it, as :func:`bind` logs its warnings). Returns a :class:`BindSummary` per mesh bound; raises as :func:`bind` does when every mesh is refused or a solve fails, the meshes bound before
     the error keeping their new binding.
     """
     _require_enabled()
@@ -192,28 +292,35 @@ def save_shape_key(mesh_obj, name=""):
 
 
 def status(mesh_obj):
-    """(ok, message): whether the deformer of a bound mesh works, and if not, why (for an unbound object: that it
-    is not bound); a mesh that follows gets the panel's notes after its message: much of it outside a cage too small,
-    a cage edited since the bind, the mesh moved as an object."""
+    """Whether the deformer of a bound mesh works and, if not, why; for an unbound object, that it is not bound.
+
+    Returns
+    -------
+    Status
+        A mesh that follows gets the panels' notes (:attr:`Status.notes`); ``ok`` is false when one of them is a
+        lasting problem, as much of the mesh outside a cage too small.
+
+    Examples
+    --------
+    >>> api.status(bpy.data.objects["Sphere"]).text
+    "Following 'Box'"
+    >>> api.status(bpy.data.objects["Box"]).text
+    "'Box' is not bound to a cage: bind it first (api.bind)"
+    """
     _require_enabled()
     if not isinstance(mesh_obj, bpy.types.Object):
-        return False, f"{mesh_obj!r} is not an object: pass it as e.g. bpy.data.objects['Name']"
+        return Status(False, f"{mesh_obj!r} is not an object: pass it as e.g. bpy.data.objects['Name']")
     if mesh_obj.type != "MESH":
-        return False, geometry.not_a_mesh(mesh_obj, "only meshes can be bound", "bind a mesh")
+        return Status(False, geometry.not_a_mesh(mesh_obj, "only meshes can be bound", "bind a mesh"))
     if not is_bound(mesh_obj):
         leftover = ("; it carries LBC weights for no binding (from a bound mesh joined into it), which api.unbind "
                     "removes" if geometry.leftover_weights(mesh_obj) else "")
-        return False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}"
+        return Status(False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}")
     ok, message = diagnosis.status(mesh_obj, bpy.context.evaluated_depsgraph_get())
     if not ok:
-        return ok, message
+        return Status(False, message)
     # Following, with the panel's notes: a pipeline checks here what an artist reads there.
-    notes = [jobs.cage_too_small(mesh_obj.lbc, len(mesh_obj.data.vertices))]
-    if diagnosis.edited_since_bind(mesh_obj.lbc):
-        notes.append(diagnosis.edited_since_bind_note("rebind (api.rebind_all(cage))"))
-    if diagnosis.moved_as_an_object(mesh_obj):
-        notes.append(diagnosis.moved_as_an_object_note(mesh_obj, "rebind (api.bind)"))
-    return ok, "; ".join([message] + [note for note in notes if note])
+    return Status(True, message, diagnosis.notes(mesh_obj, diagnosis.SCRIPT_WORDS))
 
 
 def _require_enabled():

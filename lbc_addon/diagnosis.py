@@ -1,13 +1,77 @@
 """Why a bound mesh's deformer cannot work: the twelve causes :func:`diagnose` tells apart, each with its message,
-and the checks behind them (the mesh moved as a whole, welded cage vertices posed apart).
+and the checks behind them (the mesh moved as a whole, welded cage vertices posed apart); and what the panels and
+``api.status`` add of a mesh that follows (:func:`notes`).
 """
+
+import enum
+from dataclasses import dataclass
 
 import bpy
 import numpy as np
 
 from . import deformer, geometry, node_group, storage
 from .core import POSED_APART
-from .jobs import read_welded
+from .jobs import cage_too_small, few_cells_warning, read_welded
+
+
+class NoteKind(enum.Enum):
+    """What a note on a bound mesh that follows is about (:func:`notes`)."""
+
+    CAGE_TOO_SMALL = "cage too small"  # much of the mesh outside its cage: it follows by extrapolation
+    OUTSIDE_ITS_CAGE = "outside its cage"  # moved as an object out of its cage, which still places it
+    FEW_CELLS = "few cells"  # few cells for the cage's vertices: coarse weights
+    EDITED_SINCE_BIND = "edited since bind"  # the cage edited at rest: the mesh follows the edit as a pose
+    MOVED_AS_AN_OBJECT = "moved as an object"  # which shows nothing: the cage alone places the mesh
+
+
+# The notes that are lasting problems of the binding rather than advice: ``api.status(...).ok`` is false with one.
+PROBLEMS = frozenset({NoteKind.CAGE_TOO_SMALL, NoteKind.OUTSIDE_ITS_CAGE})
+
+
+@dataclass(frozen=True)
+class Note:
+    """One note on a bound mesh that follows: its ``kind`` and the ``text`` the panels and ``api.status`` show."""
+
+    kind: NoteKind
+    text: str
+
+    @property
+    def problem(self):
+        """Whether the note is a lasting problem of the binding (:data:`PROBLEMS`), not advice."""
+        return self.kind in PROBLEMS
+
+
+@dataclass(frozen=True)
+class RebindWords:
+    """How the notes tell to bind again where they are read: one mesh (``one``) and every mesh of a cage (``all``)."""
+
+    one: str
+    all: str
+
+
+PANEL_WORDS = RebindWords("Rebind", "Rebind")
+SCRIPT_WORDS = RebindWords("rebind (api.bind)", "rebind (api.rebind_all(cage))")
+
+
+def notes(mesh_obj, words=PANEL_WORDS):
+    """What the panels and ``api.status`` add of a bound mesh that follows its cage, as :class:`Note` records in the
+    order shown: much of it outside a cage too small, few cells for the cage, the cage edited since the bind, the mesh
+    moved as an object (out of its cage, or not). ``words``: how to rebind there."""
+    settings = mesh_obj.lbc
+    found = []
+    too_small = cage_too_small(settings, len(mesh_obj.data.vertices))
+    if too_small:
+        found.append(Note(NoteKind.CAGE_TOO_SMALL, too_small))
+    few = few_cells_warning(settings.dimension, settings.control_points, settings.domain_cells)
+    if few:
+        found.append(Note(NoteKind.FEW_CELLS, few))
+    if edited_since_bind(settings):
+        found.append(Note(NoteKind.EDITED_SINCE_BIND, edited_since_bind_note(words.all)))
+    if moved_as_an_object(mesh_obj):
+        found.append(Note(NoteKind.OUTSIDE_ITS_CAGE, outside_its_cage_note(mesh_obj)) if outside_its_cage(mesh_obj)
+                     else Note(NoteKind.MOVED_AS_AN_OBJECT, moved_as_an_object_note(mesh_obj, words.one)))
+    return tuple(found)
+
 
 # Causes (see :func:`diagnose`) the node group cannot see, so the add-on clears its "Enabled" input.
 STOPPED_HERE = ("topology", "welded apart", "rest moved")
@@ -66,7 +130,17 @@ def diagnose(mesh_obj, depsgraph, cages=None):
     if difference is not None:
         return None, (f"Following '{cage.name}' in the viewport, but renders leave the mesh undeformed: the cage's "
                       f"{difference}. Make them the same and Rebind")
-    return None, f"Following '{cage.name}'"
+    return None, following_message(mesh_obj)
+
+
+def following_message(mesh_obj):
+    """The status line of a bound mesh that follows its cage: "Following 'Cage'", with the share of the mesh outside
+    the cage where the cage is too small for it, a lasting state the cage's panel lists too."""
+    settings = mesh_obj.lbc
+    if not cage_too_small(settings, len(mesh_obj.data.vertices)):
+        return f"Following '{settings.cage.name}'"
+    share = settings.outside / (settings.mesh_vertex_count or len(mesh_obj.data.vertices))
+    return f"Following '{settings.cage.name}', with {share:.0%} of the mesh outside it: the cage is too small"
 
 
 def _mesh_fault(mesh_obj, modifier):
@@ -133,18 +207,23 @@ def _modifier_fault(mesh_obj, modifier, depsgraph):
     changes the vertex count, an error its node group raised, or the artist switching it off; or None."""
     # What only the modifier sees (Blender 4.3 and newer; the causes above are ruled out): the vertex count reaching
     # it differs. While the add-on holds the deformer off, its warning is the add-on's own, and the cause is gone.
+    # The group's own warnings are looked up by their messages (node_group.warning_cause), never parsed.
     warnings = getattr(modifier, "node_warnings", ()) if deformer.is_enabled(modifier) else ()
-    messages = [warning.message[len("LBC: "):] for warning in warnings if warning.message.startswith("LBC: ")]
+    causes = [node_group.warning_cause(modifier.node_group, warning.message) for warning in warnings]
+    causes = [cause for cause in causes if cause is not None]
     # Which modifier: one above that can change the count, as the modifier's error confirms (4.2 has no Warning node
     # to confirm it; there the modifier's type alone says so).
     above = _vertex_count_modifier_above(mesh_obj, modifier, depsgraph)
-    if above is not None and (messages or not node_group.has_warning_nodes(modifier.node_group)):
+    if above is not None and (causes or not node_group.has_warning_nodes(modifier.node_group)):
         return "modifier above", (
             f"The modifier '{above.name}' above '{modifier.name}' changes the mesh's vertex count: the mesh stays "
             f"undeformed. Move '{modifier.name}' to the top of the stack"
         )
-    if messages:
-        return "modifier error", messages[0][:1].upper() + messages[0][1:]
+    if causes:
+        settings = mesh_obj.lbc
+        counts = settings.cage_vertex_count, settings.mesh_vertex_count or len(mesh_obj.data.vertices)
+        message = node_group.stop_messages(*counts)[causes[0]]
+        return "modifier error", message[:1].upper() + message[1:]
     if not modifier.show_viewport:
         return "modifier off", (
             f"The modifier '{modifier.name}' is switched off in the viewport (its screen icon): the mesh stays at rest "
@@ -228,13 +307,46 @@ def edited_since_bind(settings):
 
 
 def moved_as_an_object(obj):
-    """Whether a bound mesh's own transform (location, rotation, scale: what G, R, S and their keys change) differs
-    from the one at bind time: the deformer puts the mesh where its cage holds it, so the move shows nothing. Moves
-    that come from a parent (the cage, or a rig carrying both) leave it as it was."""
-    then = np.array(obj.lbc.mesh_transform).reshape(4, 4)
+    """Whether a bound mesh was moved as an object since the bind, away from its cage: its own transform (location,
+    rotation, scale: what G, R, S and their keys change) and its place relative to its cage both differ from the bind's.
+    The deformer puts the mesh where its cage holds it, so such a move shows nothing. Moves that come from a parent
+    (the cage, or a rig carrying both) leave its own transform as it was; a copy made with its cage (Shift+D of both)
+    and moved with it keeps its place relative to the cage, and deforms where it is."""
+    settings = obj.lbc
+    then = np.array(settings.mesh_transform).reshape(4, 4)
     if not then.any():  # bound before the transform was recorded
         return False
-    return not np.allclose(np.array(obj.matrix_basis), then, rtol=1e-5, atol=1e-5 * max(1.0, np.abs(then).max()))
+    if _close(np.array(obj.matrix_basis), then):
+        return False
+    placed = np.array(settings.mesh_in_cage).reshape(4, 4)
+    cage = settings.cage
+    if not placed.any() or cage is None:  # bound before the place in the cage was recorded, or the cage deleted
+        return True
+    return not _close(np.array(mesh_in_cage(obj, cage)), placed)
+
+
+def _close(matrix, then):
+    """Whether two 4×4 transforms agree, to float32 rounding of their size."""
+    return np.allclose(matrix, then, rtol=1e-5, atol=1e-5 * max(1.0, np.abs(then).max()))
+
+
+def mesh_in_cage(mesh_obj, cage_obj):
+    """The mesh object's world transform in its cage's frame (a ``mathutils.Matrix``): what moving both together
+    keeps, and moving one alone changes."""
+    return cage_obj.matrix_world.inverted_safe() @ mesh_obj.matrix_world
+
+
+def outside_its_cage(obj):
+    """Whether a bound mesh, where it is now (its vertices at rest under its own transform), lies wholly outside its
+    cage's bounding box: a copy (Shift+D) moved away from the cage, which the cage still places, and which no Rebind
+    can bind where it is. A bounding-box test, cheap enough for every redraw of the panel."""
+    cage = obj.lbc.cage
+    if cage is None or cage.type != "MESH" or not len(cage.data.vertices) or not len(obj.data.vertices):
+        return False
+    points = geometry.transform(obj.matrix_world, geometry.vertex_positions(obj.data))
+    corners = geometry.transform(cage.matrix_world, np.array(cage.bound_box))
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    return not np.any(np.all((points >= low) & (points <= high), axis=1))
 
 
 def moved_as_an_object_note(obj, rebind):
@@ -243,6 +355,15 @@ def moved_as_an_object_note(obj, rebind):
     return (f"'{obj.name}' was moved as an object since the bind, which does not move it: its cage alone places it. "
             "Undo the move, then move the cage instead, or parent the mesh to the cage (Ctrl+P) to move both "
             f"together; or {rebind} to bind it where it is now")
+
+
+def outside_its_cage_note(obj):
+    """What the panel and ``api.status`` say of a mesh moved as an object out of its cage (:func:`outside_its_cage`):
+    a Rebind there would find no vertex inside the cage."""
+    cage = obj.lbc.cage.name
+    return (f"'{obj.name}' was moved as an object out of its cage '{cage}', which still places it where the cage is. "
+            f"Move it back into '{cage}' (or undo the move); or, to deform it where it is now, give it a cage there "
+            f"(duplicate '{cage}' and move the copy around it) and bind it to that cage")
 
 
 def edited_since_bind_note(rebind):

@@ -11,9 +11,10 @@ import bpy
 import numpy as np
 
 from . import storage
-from .core import DEFAULT_SMOOTHNESS, MAX_CONTROL_POINTS, CageError, flatten, some_indices
-from .jobs import BindRequest, check_options, verb_for
-from .properties import DEFAULT_INFLUENCES, is_bound
+from .core import MAX_CONTROL_POINTS, CageError, flatten, some_indices
+from .jobs import BindRequest, verb_for
+from .options import AddonOptions
+from .properties import is_bound
 
 
 def vertex_positions(mesh):
@@ -280,18 +281,17 @@ def swapped_selection(cage_obj, mesh_objs):
             "meshes to bind")
 
 
-def snapshot(mesh_obj, cage_obj, depsgraph, cells=0, weighting="quadratic", epsilon=0.0, tolerance=0.0,
-             thinning=0.0, influences=DEFAULT_INFLUENCES, mode="AUTO", smoothness=DEFAULT_SMOOTHNESS):
-    """Copy what binding ``mesh_obj`` to ``cage_obj`` needs; raises CageError for what can be seen already."""
-    options = {"cells": cells, "weighting": weighting, "epsilon": epsilon, "tolerance": tolerance,
-               "thinning": thinning, "influences": influences, "mode": mode, "smoothness": smoothness}
-    check_options(options)
-    # As Object.lbc stores them, so that a Rebind, which reads them back, asks for the same solve.
-    options.update({key: float(np.float32(options[key])) for key in ("epsilon", "tolerance", "thinning", "smoothness")})
+def snapshot(mesh_obj, cage_obj, depsgraph, options=AddonOptions()):
+    """Copy what binding ``mesh_obj`` to ``cage_obj`` with ``options`` (:class:`AddonOptions`) needs; raises
+    CageError for what can be seen already."""
     _check_roles(mesh_obj, cage_obj)
+    swapped = swapped_selection(cage_obj, [mesh_obj])
+    if swapped:  # at once, in the Bind button's words: the cage's checks would take seconds on a dense mesh
+        raise CageError(f"{swapped} (in a script: api.bind(mesh, cage), the mesh first)")
     _check_bindable(mesh_obj, cage_obj)
     points = _mesh_points(mesh_obj)
-    cage_points, cage_faces, flat, cage_topology, world = _cage_geometry(mesh_obj, cage_obj, depsgraph, points, mode)
+    cage_points, cage_faces, flat, cage_topology, world = _cage_geometry(mesh_obj, cage_obj, depsgraph, points,
+                                                                         options.mode)
     return BindRequest(
         mesh_uid=mesh_obj.session_uid,
         cage_uid=cage_obj.session_uid,
@@ -452,7 +452,7 @@ def snapshots(targets, depsgraph, skip_refused=False, left_out=()):
     requests, refused = [], list(left_out)
     for mesh_obj, cage_obj, options in targets:
         try:
-            requests.append(snapshot(mesh_obj, cage_obj, depsgraph, **options))
+            requests.append(snapshot(mesh_obj, cage_obj, depsgraph, options))
         except CageError as error:
             if not skip_refused:
                 raise

@@ -130,6 +130,7 @@ def refresh_outdated_groups():
         # The add-on's stop for a changed topology stays as it was (attach enables the new group).
         deformer.set_inputs(modifier, {"Enabled": kept.get("Enabled", True)})
         obj.lbc.node_group = modifier.node_group
+        obj.lbc.node_group_bytes = node_group.saved_bytes(modifier.node_group)
         deformer.release_group(replaced, modifier.node_group)
         refreshed.append(obj)
     return refreshed

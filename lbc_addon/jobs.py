@@ -19,7 +19,6 @@ solver state is 8-30 MB a binding (their thinned weights about 8 MB for 64k vert
 reopened file, or a mesh bound long ago, binds from scratch.
 """
 
-import numbers
 import re
 import threading
 import time
@@ -29,18 +28,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import storage
-from .core import (BindOptions, CageError, CageVertexError, PointsOutside, bind, make_cage, rebind,
-                   rebind_report, reframed, solved_again, thin_changed_rows, thin_weights, floor_for,
-                   too_small_warning)
+from .core import (FEW_CELLS_PER_CONTROL_POINT, CageError, CageVertexError, PointsOutside, bind, make_cage, rebind,
+                   rebind_report, reframed, solved_again, thin_changed_rows, thin_weights, too_small_warning)
+from .options import AddonOptions
 
 
 # How many meshes' last bindings (with their solver state) this session keeps for a warm re-bind.
 KEPT_BINDINGS = 4
 # The share of a bind's progress bar for the thinning after lbc_core's bind: 0.4 of the demo's 4.1 s.
 THINNING_SHARE = 0.1
-# The bind options that must match the previous binding's for a warm start (Thinning and Max Influences are applied
-# after the bind).
-_SOLVE_OPTIONS = ("cells", "weighting", "epsilon", "tolerance", "mode", "smoothness")
 
 
 @dataclass
@@ -50,11 +46,15 @@ class _Previous:
     mesh_uid: int
     mesh_name: str
     cage_uid: int
-    options: dict
+    options: AddonOptions
     loop: np.ndarray  # the flat cage's outline of a 2D bind, else None
     binding: object  # lbc_core.Binding
     thinned: object  # the binding's weights thinned as the options say (scipy.sparse, one column per control point)
     plane: tuple = None  # a 2D bind's (origin, axes): the frame of its flat cage's plane
+
+    @property
+    def dimension(self):
+        return 2 if self.loop is not None else 3
 
 
 _previous = OrderedDict()  # mesh session_uid -> _Previous, the most recent last
@@ -72,7 +72,7 @@ class BindRequest:
     cage_points: np.ndarray  # (c, 3) evaluated cage vertices, mesh space
     cage_faces: list  # faces of the evaluated cage (3D)
     flat: object  # lbc_core.cage.planar.FlatCage of a 2D bind (the outline and the points in the plane), else None
-    options: dict  # the bind options by their Object.lbc property names (0: lbc_core's default)
+    options: AddonOptions  # the bind options, as Object.lbc stores them
     cage_topology: str
     mesh_topology: str
     cage_shape: str = ""  # geometry.shape_fingerprint of the cage's own data: an edit at rest since changes it
@@ -121,6 +121,7 @@ class BindResult:
     control_points: int
     outside: int
     core_fingerprint: str
+    cells: int = 0  # the domain mesh's triangles or tetrahedra
     warnings: list = field(default_factory=list)
     seconds: float = 0.0
     welded: str = ""  # "copy:kept,..." cage vertices welded into one control point (the deformer reads the kept one)
@@ -129,44 +130,6 @@ class BindResult:
     plane: tuple = None  # a 2D bind's (origin, axes): the frame of its flat cage's plane, for a re-bind to keep
     rebind: str = ""  # for a bind that had a previous binding to start from: how it went (lbc_core.rebind)
     stages: dict = field(default_factory=dict)  # seconds: lbc_core's stages, then "thinning" and "slots"
-
-
-MODES = ("AUTO", "2D", "3D")  # the Dimension choices (properties.MODE_ITEMS)
-
-
-def check_options(options):
-    """Raise CageError for options a bind would fail on or misuse, before any work: lbc_core's (through
-    :func:`core_options`), and the add-on's own Thinning, Max Influences and Dimension, which a script can set to
-    anything the UI's properties would not allow."""
-    core_options(options)
-    thinning, influences, mode = options["thinning"], options["influences"], options["mode"]
-    if isinstance(thinning, bool) or not isinstance(thinning, numbers.Real) or not thinning >= 0:
-        raise CageError(f"thinning must be a number of at least 0 (0: from Smoothness), not {thinning!r}")
-    if isinstance(influences, bool) or not isinstance(influences, numbers.Integral) or influences < 0:
-        raise CageError(f"influences must be a whole number of at least 0 (0: no limit), not {influences!r}")
-    if mode not in MODES:
-        raise CageError(f"mode must be one of {', '.join(map(repr, MODES))}, not {mode!r}")
-
-
-def core_options(options):
-    """lbc_core's :class:`~lbc_core.binding.options.BindOptions` of the add-on's options: the one place their names and
-    defaults meet (a Blender property cannot be None, so 0 stands for lbc_core's default).
-
-    Parameters
-    ----------
-    options : dict
-        ``cells``, ``weighting``, ``epsilon``, ``tolerance`` as stored in ``Object.lbc`` (``thinning`` and
-        ``influences`` are the add-on's own: :func:`solve` thins the weights with them).
-    """
-    return BindOptions(
-        cells=options["cells"] or None,
-        weighting=options["weighting"],
-        epsilon=options["epsilon"],
-        tolerance=options["tolerance"] or None,
-        smoothness=options["smoothness"],
-        # Shewchuk's Triangle is not bundled (its licence is not GPL-compatible): use lbc_core's own mesher.
-        method="delaunay",
-    )
 
 
 def welded_pairs(copies, kept):
@@ -227,6 +190,17 @@ def cage_too_small(settings, vertex_count):
     return too_small_warning(settings.outside, total, "Rebind")
 
 
+def few_cells_warning(dimension, control_points, cells):
+    """What to say of a 3D binding whose ``cells`` tetrahedra are few for its ``control_points``: fewer than lbc_core's
+    FEW_CELLS_PER_CONTROL_POINT each, where the weights are coarse (bench/RESULTS.md, "Few cells per control point");
+    with the cells to ask for. "" otherwise (0 cells: bound before they were recorded)."""
+    if dimension != 3 or not cells or cells >= FEW_CELLS_PER_CONTROL_POINT * control_points:
+        return ""
+    enough = -(-FEW_CELLS_PER_CONTROL_POINT * control_points // 1000) * 1000
+    return (f"the cage's {control_points} vertices have {cells / control_points:.0f} cells each ({cells} in all), "
+            f"few for so fine a cage: the weights are coarse. Bind again with Cells {enough} or more (a slower bind)")
+
+
 def _cap_warning(weights, cap):
     """A warning when Max Influences ``cap`` could not be kept everywhere: a vertex its ``cap`` largest weights cannot
     hold in place keeps the fewest that can (lbc_core.evaluate.thinning), and the panel would show more than the cap."""
@@ -253,12 +227,10 @@ def solve(request, progress=None, cancel=None, earlier=()):
         if previous is not None:
             binding = rebind(previous.binding, cage_vertices, faces, points, progress=core_progress, cancel=cancel)
         else:
-            binding = bind(cage_vertices, faces, points, options=core_options(request.options),
+            binding = bind(cage_vertices, faces, points, options=request.options.core_options(request.dimension),
                            progress=core_progress, cancel=cancel)
     except PointsOutside as error:
-        raise CageError(f"every vertex of '{request.mesh_name}' lies outside the cage '{request.cage_name}': the cage "
-                        "must enclose the mesh. Is it the right cage? (Select the mesh, then the cage last so it is "
-                        "active.)") from error
+        raise CageError(_all_outside(request)) from error
     except CageError as error:
         cause, note = _cage_modifiers_notes(request, error)
         hint = _swapped_hint(request)
@@ -266,11 +238,12 @@ def solve(request, progress=None, cancel=None, earlier=()):
             raise CageError(f"{hint}{cause}{error}{f' ({note})' if note else ''}") from error
         raise
     column_vertex = column_base[binding.cage.first_inputs]
+    cells = len(binding.domain.cells)
     # The deformer's cost per frame grows with the influences per vertex: fewer, continuously (lbc_core.evaluate.thinning).
     rest = binding.rest_cage_vertices
-    thinning = _thinning(request.options)
+    thinning = request.options.floor_and_cap
     clock = time.perf_counter()
-    if previous is not None and _thinning(previous.options) == thinning:
+    if previous is not None and previous.options.floor_and_cap == thinning:
         # A warm re-bind keeps the rows its edit cannot reach: only the others are thinned again.
         weights, _ = thin_changed_rows(previous.thinned, previous.binding.weights, binding.weights,
                                        previous.binding.rest_cage_vertices, rest, *thinning,
@@ -293,7 +266,9 @@ def solve(request, progress=None, cancel=None, earlier=()):
         outside=int(np.count_nonzero(binding.outside)),
         core_fingerprint=binding.cage.fingerprint(),
         warnings=request.warnings + _outside_warning(binding.outside) + list(binding.cage.warnings)
-        + ([] if binding.converged else [_not_converged(binding.iterations)]) + _cap_warning(weights, thinning[1]),
+        + ([] if binding.converged else [_not_converged(binding.iterations)]) + _cap_warning(weights, thinning[1])
+        + [warning for warning in [few_cells_warning(request.dimension, len(column_vertex), cells)] if warning],
+        cells=cells,
         welded=welded_pairs(column_base, column_vertex[binding.cage.vertex_map]),
         seconds=time.perf_counter() - start,
         binding=binding,
@@ -302,6 +277,19 @@ def solve(request, progress=None, cancel=None, earlier=()):
         rebind=_rebind_report(request, previous, binding),
         stages=stages,
     )
+
+
+def _all_outside(request):
+    """The refusal of a mesh wholly outside its cage. Bound to it already (a Rebind), the mesh was moved away as an
+    object (a Shift+D copy moved off, which its cage still places): nothing was selected the wrong way round."""
+    mesh, cage = request.mesh_name, request.cage_name
+    if request.bound_to_cage:
+        return (f"every vertex of '{mesh}' lies outside its cage '{cage}' where '{mesh}' is now: it was moved as an "
+                f"object out of the cage, which still places it. Move it back into '{cage}' (or undo the move); or, to "
+                f"deform it where it is now, give it a cage there (duplicate '{cage}' and move the copy around it) "
+                "and bind it to that cage")
+    return (f"every vertex of '{mesh}' lies outside the cage '{cage}': the cage must enclose the mesh. Is it the right "
+            "cage? (Select the mesh, then the cage last so it is active.)")
 
 
 def _progress_parts(progress):
@@ -374,12 +362,6 @@ def _cage_modifiers_notes(request, error):
     return cause, note
 
 
-def _thinning(options):
-    """(floor, Max Influences) the weights are thinned with, from the add-on's options (Thinning 0: Smoothness's
-    floor, lbc_core.evaluate.thinning.floor_for)."""
-    return options["thinning"] or floor_for(options["smoothness"]), options["influences"]
-
-
 def _not_converged(iterations):
     """The warning of a solve stopped at the iteration limit: the weights are valid, only less local."""
     return (f"the solver stopped at its limit of {iterations} iterations before its tolerance: the weights still sum "
@@ -420,7 +402,7 @@ def _same_solve(previous, request):
     """Whether ``previous`` bound to the request's cage with its solve options and, in 2D, outline."""
     if previous.cage_uid != request.cage_uid:
         return False
-    if any(previous.options[key] != request.options[key] for key in _SOLVE_OPTIONS):
+    if previous.options.solve_changes(request.options, request.dimension):
         return False
     loop = request.loop
     return (previous.loop is None) == (loop is None) and (loop is None or np.array_equal(previous.loop, loop))
@@ -428,7 +410,7 @@ def _same_solve(previous, request):
 
 def _as_previous(request, result):
     """The :class:`_Previous` record of a solved request."""
-    return _Previous(request.mesh_uid, request.mesh_name, request.cage_uid, dict(request.options), request.loop,
+    return _Previous(request.mesh_uid, request.mesh_name, request.cage_uid, request.options, request.loop,
                      result.binding, result.thinned, result.plane)
 
 
@@ -444,7 +426,7 @@ def _rebind_report(request, previous, binding):
     if previous is None and request.from_scratch:
         return "bound from scratch, as asked (From Scratch)"
     if previous is None and own is not None and own.cage_uid == request.cage_uid:
-        changed = [key for key in _SOLVE_OPTIONS if own.options[key] != request.options[key]]
+        changed = own.options.solve_changes(request.options, request.dimension)
         return f"bound from scratch: its {', '.join(changed)} changed since its last bind" if changed else report
     if previous is None and own is None and request.bound_to_cage:
         return (f"bound from scratch: no earlier binding of it is in memory (kept for this session's last "

@@ -13,6 +13,10 @@ the vertex count (faces rebuilt, vertices reordered) is caught by :func:`handler
 modifier's "Enabled" input (:mod:`deformer`); the panel says why and offers Rebind.
 """
 
+import enum
+import os
+import tempfile
+
 import bpy
 import numpy as np
 
@@ -24,11 +28,50 @@ GROUP_NAME = "LBC Deform"
 # same counts keeps it: building one takes 0.05-0.15 s, a fifth of a warm Rebind.
 LAYOUT_KEY = "lbc_layout"
 # The version of the node group's layout: bump it when build_node_group's nodes change, so older groups are rebuilt.
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 
 _COLUMN = 220  # node editor spacing, for a readable node group
 # Blender 4.3 and newer: the node group shows its reasons to stop as errors on the modifier.
 HAS_WARNING_NODE = hasattr(bpy.types, "GeometryNodeWarning")
+# What the modifier's errors begin with, so that the artist sees which modifier speaks.
+WARNING_PREFIX = "LBC: "
+
+
+class StopCause(enum.Enum):
+    """Why the node group leaves the mesh undeformed; each has its Warning node, named ``"Stop: " + value``."""
+
+    CAGE_VERTICES = "cage vertices"  # the cage is gone or has another vertex count
+    MESH_VERTICES = "mesh vertices"  # the mesh reaching the modifier has another vertex count
+    DISABLED = "disabled"  # the add-on cleared "Enabled": the cage's topology changed, its vertex count kept
+
+
+def stop_messages(cage_vertex_count, mesh_vertex_count):
+    """{StopCause: what to tell}, for the bind's counts: the Warning nodes show them (after :data:`WARNING_PREFIX`),
+    and :mod:`diagnosis` tells them for the cause it looks up (:func:`warning_cause`)."""
+    return {
+        StopCause.CAGE_VERTICES: f"the cage is gone or no longer has the {cage_vertex_count} vertices it was bound "
+                                 "with; the mesh is left undeformed. Bind again, or restore the cage",
+        StopCause.MESH_VERTICES: f"the mesh reaching this modifier no longer has the {mesh_vertex_count} vertices it "
+                                 "was bound with (edited, joined, separated, or a modifier above adds or removes "
+                                 "vertices); it is left undeformed. Rebind in the LBC panel, or move the LBC modifier "
+                                 "above any modifier that adds or removes vertices",
+        StopCause.DISABLED: "the cage's topology changed since binding (same vertex count); the mesh is left "
+                            "undeformed. Rebind in the LBC panel",
+    }
+
+
+def _warning_node_name(cause):
+    return f"Stop: {cause.value}"
+
+
+def warning_cause(group, message):
+    """The :class:`StopCause` whose Warning node in ``group`` shows ``message`` (one of the modifier's
+    ``node_warnings``), or None for a message no such node of the group shows."""
+    causes = {_warning_node_name(cause): cause for cause in StopCause}
+    for node in group.nodes:
+        if node.bl_idname == "GeometryNodeWarning" and _input(node, "Message").default_value == message:
+            return causes.get(node.name)
+    return None
 
 # The Strength input's range, as its slider offers it.
 STRENGTH_RANGE = (-10.0, 10.0)
@@ -344,21 +387,14 @@ def _stop_condition(group, group_in, cage_geometry, cage_vertex_count, mesh_vert
     disabled.operation = "NOT"
     disabled.location = (_COLUMN * 3, 650)
     links.new(group_in.outputs["Enabled"], _inputs(disabled, "Boolean")[0])
-    causes = (
-        (cage_changed, f"LBC: the cage is gone or no longer has the {cage_vertex_count} vertices it was bound with; "
-                       "the mesh is left undeformed. Bind again, or restore the cage"),
-        (mesh_changed, f"LBC: the mesh reaching this modifier no longer has the {mesh_vertex_count} vertices it was "
-                       "bound with (edited, joined, separated, or a modifier above adds or removes vertices); it is "
-                       "left undeformed. Rebind in the LBC panel, or move the LBC modifier above any modifier that "
-                       "adds or removes vertices"),
-        (disabled.outputs["Boolean"], "LBC: the cage's topology changed since binding (same vertex count); the mesh "
-                                      "is left undeformed. Rebind in the LBC panel"),
-    )
+    messages = stop_messages(cage_vertex_count, mesh_vertex_count)
+    causes = ((cage_changed, StopCause.CAGE_VERTICES), (mesh_changed, StopCause.MESH_VERTICES),
+              (disabled.outputs["Boolean"], StopCause.DISABLED))
     # The raw conditions stop the deformer too, not only through the Warning nodes: Blender 4.2 loads those as
     # undefined nodes whose outputs are false, and a group made in 4.3 or newer then never stopped there.
     stops = []
-    for row, (condition, message) in enumerate(causes):
-        shown = _warning(nodes, links, condition, message, (_COLUMN * 4, 500 + 150 * row))
+    for row, (condition, cause) in enumerate(causes):
+        shown = _warning(nodes, links, condition, cause, messages[cause], (_COLUMN * 4, 500 + 150 * row))
         stops += [condition] if shown is condition else [condition, shown]
     stop = stops[0]
     for row, condition in enumerate(stops[1:]):
@@ -384,14 +420,15 @@ def _count_differs(group, geometry, expected, location):
     return differs.outputs["Result"]
 
 
-def _warning(nodes, links, condition, message, location):
-    """``condition`` passed through a Warning node that shows ``message`` on the modifier while it is true; the
-    condition itself where Blender has no Warning node (4.2)."""
+def _warning(nodes, links, condition, cause, message, location):
+    """``condition`` passed through a Warning node, named after ``cause``, that shows ``message`` on the modifier
+    while it is true; the condition itself where Blender has no Warning node (4.2)."""
     if not HAS_WARNING_NODE:
         return condition
     node = nodes.new("GeometryNodeWarning")
+    node.name = _warning_node_name(cause)
     node.warning_type = "ERROR"
-    _input(node, "Message").default_value = message
+    _input(node, "Message").default_value = WARNING_PREFIX + message
     node.location = location
     links.new(condition, _input(node, "Show"))
     return node.outputs["Show"]
@@ -413,7 +450,20 @@ def has_warning_nodes(group):
 
 def outdated(group):
     """Whether a node group of this add-on does not suit the running Blender: nodes it does not know (a group made in a
-    newer line, opened in 4.2), or no Warning nodes where Blender has them (made in 4.2), whose errors the modifier
-    and the panel's diagnosis rely on."""
+    newer line, opened in 4.2), or where Blender has Warning nodes, not one named after each :class:`StopCause`
+    (made in 4.2, or before they were named), whose errors the modifier and the panel's diagnosis rely on."""
+    named = {node.name for node in group.nodes if node.bl_idname == "GeometryNodeWarning"}
     return (any(node.bl_idname == "NodeUndefined" for node in group.nodes)
-            or (HAS_WARNING_NODE and not has_warning_nodes(group)))
+            or (HAS_WARNING_NODE and named != {_warning_node_name(cause) for cause in StopCause}))
+
+
+def saved_bytes(group):
+    """What ``group`` adds to a saved .blend, in bytes: the size of a file holding it alone (written with
+    ``bpy.data.libraries.write``, uncompressed as Blender saves by default) less that of an empty one. The group is
+    about 3.7 kB a node in 4.5, as much as the weights on a mesh of a few thousand vertices (bench/RESULTS.md, "What a
+    binding adds to the .blend")."""
+    with tempfile.TemporaryDirectory() as folder:
+        empty, alone = os.path.join(folder, "empty.blend"), os.path.join(folder, "group.blend")
+        bpy.data.libraries.write(empty, set(), compress=False)
+        bpy.data.libraries.write(alone, {group}, compress=False)
+        return max(os.path.getsize(alone) - os.path.getsize(empty), 0)

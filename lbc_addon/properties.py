@@ -9,10 +9,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
                        StringProperty)
 
 from .core import DEFAULT_CELLS, DEFAULT_SMOOTHNESS, DEFAULT_TOLERANCE, floor_for
-
-# Influences per mesh vertex by default, 0 for no cap (the Thinning floor alone): a cap creases where a vertex's weight
-# ranks swap (bench/RESULTS.md, "Second round: the smooth evaluation's weights thinned, continuously").
-DEFAULT_INFLUENCES = 0
+from .options import DEFAULT_INFLUENCES, AddonOptions
 
 # lbc_core's weighting functions ρ of the geodesic distance D in the TV weights ω = ρ(D).
 WEIGHTING_ITEMS = (
@@ -20,6 +17,13 @@ WEIGHTING_ITEMS = (
     ("linear", "Linear", "ρ(D) = D"),
     ("sqrt", "Square Root", "ρ(D) = √D: smoother, less local"),
     ("constant", "Constant", "ρ(D) = 1: plain total variation, no locality prior"),
+)
+
+# lbc_core's meshers of 3D cages that the extension bundles (lbc_core.meshing.MESHERS), "auto" first.
+MESHER_ITEMS = (
+    ("auto", "Auto", "lbc_core's default mesher, the same in every Blender and on the command line (lbc bind)"),
+    ("delaunay", "Delaunay", "A conforming Delaunay tetrahedralisation of samples on the cage and a body-centred "
+     "cubic lattice inside"),
 )
 
 MODE_ITEMS = (
@@ -62,6 +66,8 @@ class BindOptionProperties:
         min=0,
         soft_max=200000,
     )
+    mesher: EnumProperty(name="Mesher", description="What fills a 3D cage with tetrahedra before the solve (a flat "
+                         "cage bound in 2D uses lbc_core's default)", items=MESHER_ITEMS, default="auto")
     weighting: EnumProperty(name="Weighting", description="How the geodesic distance weighs the total variation",
                             items=WEIGHTING_ITEMS, default="quadratic")
     epsilon: FloatProperty(
@@ -109,8 +115,8 @@ class BindOptionProperties:
     )
 
     def bind_options(self):
-        """The options as keyword arguments for :func:`lbc_addon.geometry.snapshot`."""
-        return {name: getattr(self, name) for name in OPTION_NAMES}
+        """The options, as :class:`~lbc_addon.options.AddonOptions` (checked)."""
+        return AddonOptions.read(self)
 
 
 OPTION_NAMES = tuple(BindOptionProperties.__annotations__)
@@ -133,10 +139,16 @@ class LBC_PG_binding(BindOptionProperties, bpy.types.PropertyGroup):
                                "modifiers) at bind time: an edit at rest changes it, a pose does not")
     mesh_transform: FloatVectorProperty(name="Mesh Transform", size=16, description="The mesh object's own transform "
                                         "(location, rotation, scale) at bind time, row by row (all 0: not recorded)")
+    mesh_in_cage: FloatVectorProperty(name="Mesh in Cage", size=16, description="The mesh object's world transform in "
+                                      "its cage's frame at bind time, row by row (all 0: not recorded)")
     core_fingerprint: StringProperty(name="Core Fingerprint", description="lbc_core's fingerprint of the welded cage")
     welded: StringProperty(name="Welded", description="Cage vertices that were one point at bind time, as copy:kept "
                            "pairs: the deformer reads the kept one, so the copies must stay with it")
     control_points: IntProperty(name="Control Points", description="Cage vertices after welding duplicates")
+    domain_cells: IntProperty(name="Cells Made", description="The triangles or tetrahedra the weights were computed "
+                              "on (0: not recorded)")
+    node_group_bytes: IntProperty(name="Node Group Size", description="What the deformer's node group adds to a saved "
+                                  ".blend, in bytes, measured at bind time (0: not measured)")
     slots: IntProperty(name="Slots", description="K: the largest number of cage vertices moving one mesh vertex")
     mean_influences: FloatProperty(name="Mean Influences")
     outside: IntProperty(name="Outside", description="Mesh vertices outside the cage at bind time")

@@ -4,9 +4,9 @@ import textwrap
 
 import bpy
 
-from . import deformer, geometry, jobs, storage
+from . import deformer, diagnosis, geometry, storage
 from .core import format_size
-from .diagnosis import edited_since_bind, moved_as_an_object, moved_as_an_object_note
+from .diagnosis import NoteKind, edited_since_bind
 from .properties import bound_to, is_bound
 
 # Above this mean the panel suggests Max Influences: where each vertex feels most of a small cage's vertices (a 50k
@@ -20,21 +20,21 @@ def draw_binding(layout, obj):
     """State, figures and actions of a bound mesh."""
     settings = obj.lbc
     ok = settings.state == "FOLLOWING"
-    too_small = jobs.cage_too_small(settings, len(obj.data.vertices)) if ok else ""
+    notes = diagnosis.notes(obj) if ok else ()
     box = layout.box()
-    box.label(text=settings.status or "Bound", icon="CHECKMARK" if ok and not too_small else "ERROR")
-    if too_small:  # following, but much of the mesh only by extrapolation from the closest points inside
-        wrapped_label(box, too_small)
+    box.label(text=settings.status or "Bound",
+              icon="CHECKMARK" if ok and not any(note.problem for note in notes) else "ERROR")
+    for note in notes:  # a lasting problem first (a cage too small, the mesh out of its cage), then advice
+        if note.kind == NoteKind.EDITED_SINCE_BIND:
+            box.label(text="The cage was edited since the bind,", icon="INFO")
+            box.label(text="and the mesh follows the edit: Rebind to make it the rest shape")
+            box.operator("object.lbc_rebind", icon="FILE_REFRESH")
+        else:
+            wrapped_label(box, note.text, icon="ERROR" if note.problem else "INFO")
     if settings.cage is None:  # deleted: bind to another cage (Bind's poll says what to select)
         box.operator("object.lbc_bind", icon="MOD_MESHDEFORM")
     elif not ok:
         box.operator("object.lbc_rebind", icon="FILE_REFRESH")
-    elif edited_since_bind(settings):
-        box.label(text="The cage was edited since the bind,", icon="INFO")
-        box.label(text="and the mesh follows the edit: Rebind to make it the rest shape")
-        box.operator("object.lbc_rebind", icon="FILE_REFRESH")
-    if ok and moved_as_an_object(obj):  # Mesh Deform users expect the mesh to move with its object
-        wrapped_label(box, moved_as_an_object_note(obj, "Rebind"), icon="INFO")
     draw_modifier_inputs(layout, obj)
     column = layout.column(align=True)
     column.label(text=f"Cage: {settings.cage.name if settings.cage else '(deleted)'}", icon="MESH_CUBE")
@@ -45,12 +45,13 @@ def draw_binding(layout, obj):
         wrapped_label(column, f"Each vertex follows most of the cage's vertices here, which Thinning leaves: Bind "
                       f"with Max Influences (e.g. {SUGGESTED_INFLUENCES}) for faster frames, if the deformation it "
                       "gives suits (it follows fewer cage vertices, and a bent smooth mesh may crease)", icon="INFO")
-    memory = storage.memory_bytes(len(obj.data.vertices), settings.slots)
-    column.label(text=f"Cache in the .blend: {format_size(memory)}")
+    column.label(text=blend_size_label(obj))
     column.label(text=f"Bind time: {settings.bind_seconds:.1f} s")
     if settings.bind_report:  # warm (what was solved again) or from scratch (why)
         column.label(text=settings.bind_report[:1].upper() + settings.bind_report[1:])
-    others = _without(settings.warnings, too_small)  # said in the state's box already
+    others = settings.warnings
+    for note in notes:  # said in the state's box already
+        others = _without(others, note.text)
     if others:
         wrapped_label(layout, others, icon="INFO")
     row = layout.row(align=True)
@@ -58,6 +59,20 @@ def draw_binding(layout, obj):
     row.operator("object.lbc_unbind", icon="X")
     layout.operator("object.lbc_save_shape_key", icon="SHAPEKEY_DATA")
     draw_influence(layout, obj)
+
+
+def blend_size_label(obj):
+    """What the binding adds to a .blend saved uncompressed: the weights in the mesh and the deformer's node group
+    (measured at bind time, :func:`node_group.saved_bytes`), within 2 % of what such a save adds; Blender 5 compresses
+    files by default, which keeps about a fifth to a third of it (bench/RESULTS.md, "What a binding adds to the
+    .blend")."""
+    settings = obj.lbc
+    weights = storage.memory_bytes(len(obj.data.vertices), settings.slots)
+    group = settings.node_group_bytes
+    if not group:  # bound before the group's size was measured
+        return f"In the .blend, uncompressed: weights {format_size(weights)}, and the deformer's node group"
+    return (f"In the .blend, uncompressed: {format_size(weights + group)} (weights {format_size(weights)}, deformer "
+            f"{format_size(group)})")
 
 
 def _without(warnings, warning):
@@ -122,7 +137,12 @@ def draw(layout, context):
     if meshes:
         layout.label(text=f"Cage of {len(meshes)} mesh(es):", icon="MOD_MESHDEFORM")
         for mesh_obj in meshes:
-            layout.label(text=f"{mesh_obj.name}: {mesh_obj.lbc.status}")
+            following = mesh_obj.lbc.state == "FOLLOWING"
+            problems = [note for note in diagnosis.notes(mesh_obj) if note.problem] if following else []
+            layout.label(text=f"{mesh_obj.name}: {mesh_obj.lbc.status}",
+                         icon="ERROR" if problems or not following else "NONE")
+            for note in problems:  # lasting: the cage's panel shows them as long as they last
+                wrapped_label(layout, note.text, icon="BLANK1")
         if any(edited_since_bind(mesh_obj.lbc) for mesh_obj in meshes):
             layout.label(text="Edited since the bind: the meshes follow the edit.", icon="INFO")
             layout.label(text="Rebind All makes it their rest shape")

@@ -54,7 +54,11 @@ def _write(mesh_obj, cage_obj, request, result):
     modifier, replaced_group = deformer.attach(mesh_obj, cage_obj, result.index.shape[1], len(request.cage_points),
                                               len(request.points), node_group.shared_slot_count(result.weight))
     _store_settings(settings, request, result, cage_obj, modifier.node_group)
+    settings.status = diagnosis.following_message(mesh_obj)  # with the share outside, from the start
     settings.mesh_transform = _flat(mesh_obj.matrix_basis)
+    settings.mesh_in_cage = _flat(diagnosis.mesh_in_cage(mesh_obj, cage_obj))
+    if replaced_group is not None or not settings.node_group_bytes:  # a new group (a kept one keeps its size)
+        settings.node_group_bytes = node_group.saved_bytes(modifier.node_group)
     if cage_obj.users_collection:  # from now on, leaving every collection means X deleted it
         handlers.note_cage_in_scene(cage_obj)
     if settings.show_influence:  # repainted with the new weights
@@ -66,8 +70,7 @@ def _store_settings(settings, request, result, cage_obj, group):
     settings.is_bound = True
     settings.cage = cage_obj
     settings.node_group = group
-    for key, value in request.options.items():
-        setattr(settings, key, value)
+    request.options.write(settings)
     settings.dimension = request.dimension
     settings.cage_vertex_count = len(request.cage_points)
     settings.mesh_vertex_count = len(request.points)
@@ -76,6 +79,7 @@ def _store_settings(settings, request, result, cage_obj, group):
     settings.core_fingerprint = result.core_fingerprint
     settings.welded = result.welded
     settings.control_points = result.control_points
+    settings.domain_cells = result.cells
     settings.slots = result.index.shape[1]
     settings.mean_influences = float(np.count_nonzero(result.weight, axis=1).mean()) if len(result.weight) else 0.0
     settings.outside = result.outside

@@ -16,14 +16,15 @@ from .cage.planar import flatten, reframed
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
 from .evaluate.smoothing import DEFAULT_SMOOTHNESS
 from .evaluate.thinning import DEFAULT_FLOOR, floor_for, thin_changed_rows, thin_weights
+from .meshing import FEW_CELLS_PER_CONTROL_POINT, MESHERS, method_names
 from .solve import forecast
 from .solve.forecast import format_size
 from .version import __version__
 
 __all__ = [
     "BindOptions", "CageError", "CageVertexError", "Cancelled", "DEFAULT_CELLS", "DEFAULT_FLOOR", "DEFAULT_SMOOTHNESS",
-    "DEFAULT_TOLERANCE", "MAX_CONTROL_POINTS", "POSED_APART", "PointsOutside", "__version__", "bind", "flatten",
-    "floor_for", "format_size", "make_cage", "rebind",
+    "DEFAULT_TOLERANCE", "FEW_CELLS_PER_CONTROL_POINT", "MAX_CONTROL_POINTS", "MESHERS", "POSED_APART", "PointsOutside",
+    "__version__", "bind", "flatten", "floor_for", "format_size", "make_cage", "method_names", "rebind",
     "rebind_report", "reframed", "solved_again", "some_indices", "thin_changed_rows", "thin_weights",
     "too_small_warning",
 ]

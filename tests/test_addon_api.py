@@ -31,12 +31,13 @@ def test_api_bind_returns_the_figures_and_unbind_restores_the_mesh():
     before = mesh_state(mesh)
     fractions = []
     summary = api.bind(mesh, cage, cells=1000, progress=lambda fraction, message: fractions.append(fraction))
-    assert summary["dimension"] == 3 and summary["control_points"] == 8
-    assert 1 <= summary["mean_influences"] <= summary["slots"] <= 8
-    assert summary["mean_influences"] == round(summary["mean_influences"], 3)  # a new user read 10.100202560424805
-    assert summary["outside"] == 0 and summary["seconds"] > 0
+    assert summary.dimension == 3 and summary.control_points == 8
+    assert 1 <= summary.mean_influences <= summary.slots <= 8
+    assert summary.mean_influences == round(summary.mean_influences, 3)  # a new user read 10.100202560424805
+    assert summary.outside == 0 and summary.seconds > 0
     assert fractions and fractions[-1] == pytest.approx(1.0)
-    assert api.status(mesh) == (True, "Following 'Box'")
+    assert api.status(mesh) == api.Status(following=True, message="Following 'Box'", notes=())
+    assert api.status(mesh).ok and summary.cells > 500 and summary.mesh == "Sphere"
     api.unbind(mesh)
     assert mesh_state(mesh) == before and not is_bound(mesh)
 
@@ -48,25 +49,27 @@ def test_api_status_gives_the_panel_s_notes_on_an_edited_cage_and_a_moved_mesh()
     api.bind(mesh, cage, cells=1000)
     cage.data.vertices[0].co.x -= 0.1  # an edit of the cage at rest, which the mesh follows as a pose
     cage.data.update()
-    ok, message = api.status(mesh)
-    assert ok and message == ("Following 'Box'; the cage was edited since the bind, and the mesh follows the edit: "
-                              "rebind (api.rebind_all(cage)) to make it the rest shape")
+    state = api.status(mesh)
+    assert state.ok and state.text == ("Following 'Box'; the cage was edited since the bind, and the mesh follows the "
+                                       "edit: rebind (api.rebind_all(cage)) to make it the rest shape")
+    assert [note.kind for note in state.notes] == [api.NoteKind.EDITED_SINCE_BIND]
     cage.data.vertices[0].co.x += 0.1
     cage.data.update()
     mesh.location.z += 0.5
-    ok, message = api.status(mesh)
-    assert ok and message.startswith("Following 'Box'; 'Sphere' was moved as an object since the bind, which does "
-                                     "not move it") and message.endswith("or rebind (api.bind) to bind it where it is now")
+    state = api.status(mesh)
+    assert state.ok and state.text.startswith("Following 'Box'; 'Sphere' was moved as an object since the bind, which "
+                                              "does not move it")
+    assert state.text.endswith("or rebind (api.bind) to bind it where it is now")
 
 
 def test_api_bind_warns_when_renders_would_see_other_cage_vertices():
     mesh, cage = sphere_in_box_scene()
     cage.modifiers.new("Subdivision", "SUBSURF").levels = 0  # nothing in the viewport, 2 levels in renders
     summary = api.bind(mesh, cage, cells=1000)
-    assert summary["warnings"][0] == (
+    assert summary.warnings[0] == (
         "renders leave 'Sphere' undeformed: the cage's modifier 'Subdivision' has 2 levels in renders and 0 in the "
         "viewport; make the viewport and render settings the same (or apply the modifier) and Rebind")
-    assert api.status(mesh)[0] and "renders leave the mesh undeformed" in api.status(mesh)[1]
+    assert api.status(mesh).ok and "renders leave the mesh undeformed" in api.status(mesh).message
 
 
 def test_api_bind_refuses_a_mesh_wholly_outside_before_the_solve_and_warns_about_some_outside():
@@ -83,9 +86,9 @@ def test_api_bind_refuses_a_mesh_wholly_outside_before_the_solve_and_warns_about
     mesh.data.vertices[0].co.z = 3.0  # two vertices pulled out through the top of the box
     mesh.data.vertices[1].co.z = 3.0
     summary = api.bind(mesh, cage, cells=1000)
-    assert summary["outside"] == 2
-    assert summary["warnings"] == [
-        "2 vertices lie outside the cage; they follow the cage around the closest points inside it"]
+    assert summary.outside == 2
+    assert summary.warnings == (
+        "2 vertices lie outside the cage; they follow the cage around the closest points inside it",)
     empty = bpy.data.objects.new("Empty mesh", bpy.data.meshes.new("Empty mesh"))
     bpy.context.scene.collection.objects.link(empty)
     with pytest.raises(lbc_core.CageError, match="'Empty mesh' has no vertices: there is nothing to bind"):
@@ -98,9 +101,9 @@ def test_a_mirrored_cage_binds_without_a_warning_about_its_faces():
     cage.scale.x *= -1.0  # mirrored: its faces still point outward in Blender
     summary = api.bind(mesh, cage, cells=1000)
     # No "reversed all cage faces: they pointed inward" (the mirrored box leaves a few vertices outside, said apart).
-    assert [warning for warning in summary["warnings"] if "outside the cage" not in warning] == []
-    ok, message = api.status(mesh)  # followed, perhaps by the note that much of the sphere lies outside the box
-    assert ok and message.split(";")[0] == "Following 'Box'"
+    assert [warning for warning in summary.warnings if "outside the cage" not in warning] == []
+    state = api.status(mesh)  # followed, perhaps with the note that much of the sphere lies outside the box
+    assert state.following and state.message.startswith("Following 'Box'")
 
 
 def test_an_error_naming_vertices_of_a_cage_with_modifiers_says_they_are_the_evaluated_ones():
@@ -159,7 +162,7 @@ def test_a_cage_blender_does_not_evaluate_is_refused_when_its_modifiers_would_ch
         api.bind(mesh, cage, cells=1000)
     cages.hide_viewport = False
     cage.hide_set(True)  # hidden (H) is still evaluated
-    assert api.bind(mesh, cage, cells=1000)["control_points"] == 26
+    assert api.bind(mesh, cage, cells=1000).control_points == 26
 
 
 def test_a_cage_object_scaled_to_zero_on_an_axis_is_refused_as_such():
@@ -192,11 +195,11 @@ def test_messages_about_a_cage_name_its_modifiers_when_they_make_it_another_cage
     subdivision.levels = subdivision.render_levels = 1
     api.bind(mesh, cage, cells=1000)
     subdivision.show_viewport = False
-    assert api.status(mesh)[1].startswith(
+    assert api.status(mesh).message.startswith(
         "The cage 'Box' has 8 vertices (its modifier 'Subdivision' is off in viewports), it was bound with 26")
     subdivision.show_viewport = True
     subdivision.levels = 2
-    assert api.status(mesh)[1].startswith(
+    assert api.status(mesh).message.startswith(
         "The cage 'Box' has 98 vertices (its modifier 'Subdivision' makes them), it was bound with 26")
 
 
@@ -216,7 +219,7 @@ def test_api_rebind_all_leaves_linked_duplicates_as_they_were_with_a_warning(cap
         for name in sorted((mesh.name, linked.name))]
     assert sorted(str(warning.message) for warning in caught) == expected
     assert sorted(record.getMessage() for record in caplog.records) == expected  # logged for pipelines too
-    assert len(summaries) == 1 and summaries[0]["control_points"] == 8
+    assert len(summaries) == 1 and summaries[0].control_points == 8
     assert is_bound(mesh) and is_bound(linked) and is_bound(single)
 
 
@@ -234,8 +237,8 @@ def test_api_bind_raises_lbc_cores_error_and_changes_nothing():
 
 def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work():
     mesh, cage = sphere_in_box_scene()
-    assert api.status(mesh) == (False, "'Sphere' is not bound to a cage: bind it first (api.bind)")
-    assert api.status(None) == (False, "None is not an object: pass it as e.g. bpy.data.objects['Name']")
+    assert api.status(mesh) == api.Status(False, "'Sphere' is not bound to a cage: bind it first (api.bind)")
+    assert api.status(None) == api.Status(False, "None is not an object: pass it as e.g. bpy.data.objects['Name']")
     with pytest.raises(lbc_core.CageError, match="the cage to bind is None, not an object"):
         api.bind(mesh, bpy.data.objects.get("Cgae"))
     text = bpy.data.objects.new("Label", bpy.data.curves.new("Label", "FONT"))
@@ -245,7 +248,7 @@ def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work()
     with pytest.raises(lbc_core.CageError, match=r"^'Label' \(Text\) is not a mesh, and only meshes can be bound: "
                                                  r"convert it \(Object > Convert > Mesh\), or bind a mesh$"):
         api.bind(text, cage)  # a new user's first try: text deformed by a cage
-    assert api.status(text) == (False, "'Label' (Text) is not a mesh, and only meshes can be bound: convert it "
+    assert api.status(text) == api.Status(False, "'Label' (Text) is not a mesh, and only meshes can be bound: convert it "
                                        "(Object > Convert > Mesh), or bind a mesh")
     bpy.context.view_layer.objects.active = mesh
     bpy.ops.object.mode_set(mode="EDIT")
@@ -259,7 +262,7 @@ def test_api_refuses_no_object_a_mesh_in_edit_mode_and_a_cycle_before_any_work()
     with pytest.raises(lbc_core.CageError, match="the cage 'Sphere' is itself deformed by 'Box' .bound to it.: "
                                                  "binding 'Box' to it would make each follow the other"):
         api.bind(cage, mesh, cells=1000)
-    assert mesh_state(cage) == before and not is_bound(cage) and api.status(mesh)[0]
+    assert mesh_state(cage) == before and not is_bound(cage) and api.status(mesh).ok
     with pytest.raises(TypeError, match=r"set_deformer\(strength=...\) takes a float or int, not str 'x'"):
         api.set_deformer(mesh, strength="x")
     with pytest.raises(ValueError, match=r"set_deformer\(strength=1000000000.0\) is out of the Strength range -10 "):
@@ -318,11 +321,11 @@ def test_meshes_with_their_own_transforms_in_one_cage_share_its_solve_exactly(mo
     bpy.context.view_layer.update()
     api.bind(mesh, cage, cells=1000)
     shared = api.bind(other, cage, cells=1000)
-    assert shared["rebind"].startswith("started from the binding of 'Sphere' to the same cage: 0 of "), shared
+    assert shared.rebind.startswith("started from the binding of 'Sphere' to the same cage: 0 of "), shared
     shared_slots = storage.read(other.data)
     api.unbind(other)
     jobs._previous.clear()
-    assert api.bind(other, cage, cells=1000)["rebind"] == ""  # alone: a cold bind
+    assert api.bind(other, cage, cells=1000).rebind == ""  # alone: a cold bind
     alone_slots = storage.read(other.data)
     np.testing.assert_array_equal(shared_slots[0], alone_slots[0])
     np.testing.assert_array_equal(shared_slots[1], alone_slots[1])
@@ -345,14 +348,14 @@ def test_reopened_blend_deforms_the_same_without_recomputing(bound_gargoyle, tmp
     bpy.ops.wm.open_mainfile(filepath=str(path))
     mesh = bpy.data.objects["Gargoyle"]
     assert np.array_equal(evaluated_positions(mesh), expected)
-    assert api.status(mesh)[0]
+    assert api.status(mesh).ok
 
 
 def test_rebind_all_and_the_deformer_inputs_from_a_script():
     mesh, cage = sphere_in_box_scene()
     api.bind(mesh, cage, cells=600, influences=4)
     summaries = api.rebind_all(cage)
-    assert len(summaries) == 1 and summaries[0]["slots"] == mesh.lbc.slots < 8  # capped: 4, or more where needed
+    assert len(summaries) == 1 and summaries[0].slots == mesh.lbc.slots < 8  # capped: 4, or more where needed
     assert (mesh.lbc.cells, mesh.lbc.influences) == (600, 4)
     rest = evaluated_positions(mesh)
     cage.location.x += 0.4
@@ -369,9 +372,9 @@ def test_rebind_all_and_the_deformer_inputs_from_a_script():
 def test_api_prints_progress_in_background_and_says_how_a_rebind_went(capsys):
     mesh, cage = sphere_in_box_scene()
     first = api.bind(mesh, cage, cells=1000)
-    assert "LBC bind: 100% bound" in capsys.readouterr().out and first["rebind"] == ""
+    assert "LBC bind: 100% bound" in capsys.readouterr().out and first.rebind == ""
     again = api.bind(mesh, cage, cells=1000)
-    assert again["rebind"].startswith("bound again from the previous binding")
+    assert again.rebind.startswith("bound again from the previous binding")
 
 
 def test_api_prints_and_logs_the_warnings_of_bind_and_rebind_all(capsys, caplog):
@@ -404,9 +407,9 @@ def test_a_bind_from_scratch_of_a_mesh_bound_before_says_why(tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     again, = api.rebind_all(bpy.data.objects["Box"])
-    assert again["rebind"] == ("bound from scratch: no earlier binding of it is in memory (kept for this session's "
+    assert again.rebind == ("bound from scratch: no earlier binding of it is in memory (kept for this session's "
                                "last 4 meshes, not in the .blend: a reopened file or an Unbind forgets it)")
-    assert api.bind(bpy.data.objects["Sphere"], bpy.data.objects["Box"], cells=1000)["rebind"].startswith(
+    assert api.bind(bpy.data.objects["Sphere"], bpy.data.objects["Box"], cells=1000).rebind.startswith(
         "bound again from the previous binding")
 
 
@@ -420,12 +423,12 @@ def test_api_from_scratch_binds_anew_and_rebind_all_still_solves_the_cage_once(m
     cage.data.vertices[7].co.z += 0.02
     cage.data.update()
     first, second = api.rebind_all(cage, from_scratch=True)
-    assert first["rebind"] == "bound from scratch, as asked (From Scratch)", first
-    assert second["rebind"].startswith("started from the binding of 'Sphere' to the same cage, bound from scratch just "
+    assert first.rebind == "bound from scratch, as asked (From Scratch)", first
+    assert second.rebind.startswith("started from the binding of 'Sphere' to the same cage, bound from scratch just "
                                        "before (From Scratch): 0 of "), second
-    assert api.bind(mesh, cage, cells=1000, from_scratch=True)["rebind"] == "bound from scratch, as asked (From " \
+    assert api.bind(mesh, cage, cells=1000, from_scratch=True).rebind == "bound from scratch, as asked (From " \
                                                                              "Scratch)"
-    assert api.bind(mesh, cage, cells=1000)["rebind"].startswith("bound again from the previous binding")
+    assert api.bind(mesh, cage, cells=1000).rebind.startswith("bound again from the previous binding")
 
 
 def test_rebind_all_of_more_meshes_than_are_kept_says_why_each_bound_from_scratch():
@@ -438,7 +441,7 @@ def test_rebind_all_of_more_meshes_than_are_kept_says_why_each_bound_from_scratc
     for each in meshes:
         api.bind(each, cage, cells=1000)
     cage.data.vertices[7].co.z += 2.0  # far beyond the cells: no warm start can carry them
-    reports = [summary["rebind"] for summary in api.rebind_all(cage)]
+    reports = [summary.rebind for summary in api.rebind_all(cage)]
     assert reports[0].startswith("bound from scratch: "), reports
     assert all(report.startswith("started from the binding of 'Sphere") for report in reports[1:]), reports
 
@@ -483,23 +486,23 @@ def test_rebind_all_after_api_bind_with_options_blender_rounds_starts_from_the_p
     mesh, cage = sphere_in_box_scene()
     api.bind(mesh, cage, cells=1000, tolerance=1e-4, epsilon=0.01, thinning=0.003)
     again, = api.rebind_all(cage)
-    assert again["rebind"].startswith("bound again from the previous binding"), again["rebind"]
+    assert again.rebind.startswith("bound again from the previous binding"), again.rebind
     other = api.bind(mesh, cage, cells=1000, tolerance=3e-4, epsilon=0.01, thinning=0.003)
-    assert other["rebind"] == "bound from scratch: its tolerance changed since its last bind"  # was "" (a tester)
+    assert other.rebind == "bound from scratch: its tolerance changed since its last bind"  # was "" (a tester)
 
 
 def test_a_mesh_with_a_mirror_is_warned_that_the_mirrored_half_copies_the_deformation():
     """A new user's finding: a half character with a Mirror bound without a word, and the mirrored half then copied
     the bound half's pose (the deformer goes above modifiers that change the vertex count)."""
     mesh, cage = sphere_in_box_scene()
-    assert not any("Mirror" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    assert not any("Mirror" in warning for warning in api.bind(mesh, cage, cells=1000).warnings)
     mesh.modifiers.new("Mirror", "MIRROR")
-    warnings = api.bind(mesh, cage, cells=1000)["warnings"]
+    warnings = api.bind(mesh, cage, cells=1000).warnings
     assert any("the mesh's Mirror modifier 'Mirror' comes after the deformer: the mirrored half copies this half's "
                "deformation" in warning and "Apply the Mirror" in warning for warning in warnings), warnings
     mesh.shape_key_add(name="Basis")  # Blender applies no modifier to a mesh with shape keys: what then
     assert any("there, Mesh Deform below the Mirror deforms both halves" in warning
-               for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+               for warning in api.bind(mesh, cage, cells=1000).warnings)
 
 
 def test_a_cage_bound_while_its_armature_is_posed_is_warned():
@@ -514,15 +517,15 @@ def test_a_cage_bound_while_its_armature_is_posed_is_warned():
     bpy.ops.object.mode_set(mode="OBJECT")
     cage.modifiers.new("Armature", "ARMATURE").object = armature
     cage.vertex_groups.new(name="Spine").add(range(len(cage.data.vertices)), 1.0, "REPLACE")
-    assert not any("armature" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    assert not any("armature" in warning for warning in api.bind(mesh, cage, cells=1000).warnings)
     armature.pose.bones["Spine"].location = (0.05, 0.0, 0.0)
     bpy.context.view_layer.update()
-    warnings = api.bind(mesh, cage, cells=1000)["warnings"]
+    warnings = api.bind(mesh, cage, cells=1000).warnings
     assert any("as the armature 'Rig' poses it now (bone 'Spine' out of its rest pose)" in warning
                and "Rest Position" in warning for warning in warnings), warnings
     armature.data.pose_position = "REST"
     bpy.context.view_layer.update()
-    assert not any("armature" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    assert not any("armature" in warning for warning in api.bind(mesh, cage, cells=1000).warnings)
     armature.data.pose_position = "POSE"
     armature.pose.bones["Spine"].location = (0.0, 0.0, 0.0)
     target = bpy.data.objects.new("Target", None)
@@ -531,7 +534,7 @@ def test_a_cage_bound_while_its_armature_is_posed_is_warned():
     armature.pose.bones["Spine"].constraints.new("DAMPED_TRACK").target = target  # posed by a constraint alone
     bpy.context.view_layer.update()
     assert any("bone 'Spine' out of its rest pose" in warning
-               for warning in api.bind(mesh, cage, cells=1000)["warnings"]), "a constraint's pose is a pose too"
+               for warning in api.bind(mesh, cage, cells=1000).warnings), "a constraint's pose is a pose too"
 
 
 def test_a_cage_bound_with_a_shape_key_of_its_own_on_is_warned():
@@ -539,13 +542,13 @@ def test_a_cage_bound_with_a_shape_key_of_its_own_on_is_warned():
     mesh, cage = sphere_in_box_scene()
     cage.shape_key_add(name="Basis")
     key = cage.shape_key_add(name="Bulge")  # Blender 5 makes it at value 1, 4.x at 0: a copy of the basis either way
-    assert not any("shape key" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    assert not any("shape key" in warning for warning in api.bind(mesh, cage, cells=1000).warnings)
     key.data[0].co.x -= 0.1
     key.value = 0.0
-    assert not any("shape key" in warning for warning in api.bind(mesh, cage, cells=1000)["warnings"])
+    assert not any("shape key" in warning for warning in api.bind(mesh, cage, cells=1000).warnings)
     key.value = 0.7
     bpy.context.view_layer.update()
-    warnings = api.bind(mesh, cage, cells=1000)["warnings"]
+    warnings = api.bind(mesh, cage, cells=1000).warnings
     assert any("the cage is bound with its shape key 'Bulge' at 0.7: that shape is the rest" in warning
                for warning in warnings), warnings
 

@@ -176,7 +176,8 @@ def test_apply_transforms_on_the_bound_mesh_stops_it_in_place_until_undone_or_bo
         assert bpy.ops.object.lbc_rebind() == {"FINISHED"}  # bound again where it now is: it follows
     cage.location.x += 0.1
     assert np.abs(evaluated_positions(mesh) - positions(mesh.data)).max() > 0.05
-    assert mesh.lbc.status == f"Following '{cage.name}'"
+    # The cage was posed 0.3 away before the Rebind, so most of the mesh lies outside its new rest: said too.
+    assert mesh.lbc.status.startswith(f"Following '{cage.name}', with ")
 
 
 def test_a_move_as_a_whole_is_seen_far_from_the_origin_and_at_large_scales():
@@ -469,11 +470,11 @@ def test_a_rebind_below_a_modifier_that_changes_the_vertex_count_says_the_deform
     mesh.modifiers.move(len(mesh.modifiers) - 1, 0)
     plain = mesh.modifiers[deformer.MODIFIER_NAME].name
     summary = api.bind(mesh, cage, cells=CELLS)
-    assert summary["warnings"][-1] == (
+    assert summary.warnings[-1] == (
         f"bound, but the deformer is held off: the modifier 'Decimate' above '{plain}' changes the mesh's vertex "
         f"count: the mesh stays undeformed. Move '{plain}' to the top of the stack")
     mesh.modifiers.move(0, 1)
-    assert not any("held off" in warning for warning in api.bind(mesh, cage, cells=CELLS)["warnings"])
+    assert not any("held off" in warning for warning in api.bind(mesh, cage, cells=CELLS).warnings)
 
 
 def test_the_modifier_switched_off_in_the_viewport_is_said(bound_gargoyle, capsys):

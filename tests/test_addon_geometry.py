@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from lbc_addon import geometry
+from lbc_addon.options import AddonOptions
 from lbc_core import CageError
 from helpers.blender_scenes import mesh_object, reset, sphere_in_box_scene
 
@@ -65,7 +66,7 @@ def test_snapshot_of_a_flat_grid_cage_is_a_2d_request_on_its_outline():
     lifted = mesh_object("Lifted", [[1.2, 1.5, 0.5]], [])
     assert geometry.snapshot(lifted, cage, bpy.context.evaluated_depsgraph_get()).dimension == 3
     with pytest.raises(CageError, match="2D binding needs a flat cage"):
-        geometry.snapshot(lifted, cage, bpy.context.evaluated_depsgraph_get(), mode="2D")
+        geometry.snapshot(lifted, cage, bpy.context.evaluated_depsgraph_get(), AddonOptions(mode="2D"))
 
 
 def test_positions_are_read_in_mesh_space_relative_to_the_cage():

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from lbc_addon import jobs
-from lbc_core import BindOptions, Cancelled
+from lbc_addon.options import AddonOptions
+from lbc_core import BindOptions, CageError, Cancelled
 from lbc_core.cage.planar import flatten
 from lbc_core.evaluate.thinning import floor_for
 
@@ -18,8 +19,7 @@ pytestmark = pytest.mark.blender
 ROOT = Path(__file__).resolve().parents[1]
 BOX = np.array([[x, y, z] for x in (-1.2, 1.2) for y in (-1.1, 1.3) for z in (-1.0, 1.4)])
 BOX_FACES = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
-OPTIONS = {"cells": 1000, "weighting": "quadratic", "epsilon": 0.0, "tolerance": 0.0, "thinning": 0.0,
-           "influences": 0, "mode": "AUTO", "smoothness": 0.5}
+OPTIONS = {"cells": 1000}
 
 
 def request(cage_points=BOX, cage_faces=BOX_FACES, points=None, flat=None, **options):
@@ -27,7 +27,7 @@ def request(cage_points=BOX, cage_faces=BOX_FACES, points=None, flat=None, **opt
     if points is None:
         points = np.random.default_rng(0).uniform(-0.8, 0.8, (200, 3))
     return jobs.BindRequest(mesh_uid=1, cage_uid=2, mesh_name="Mesh", points=points, cage_points=cage_points,
-                            cage_faces=cage_faces, flat=flat, options={**OPTIONS, **options},
+                            cage_faces=cage_faces, flat=flat, options=AddonOptions(**{**OPTIONS, **options}),
                             cage_topology="", mesh_topology="")
 
 
@@ -45,8 +45,8 @@ def test_jobs_imports_and_solves_without_bpy():
         "from lbc_addon import jobs\n"
         "box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)\n"
         "faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]\n"
-        "options = dict(cells=300, weighting='quadratic', epsilon=0.0, tolerance=0.0, thinning=0.0,\n"
-        "               influences=0, mode='AUTO', smoothness=0.5)\n"
+        "from lbc_addon.options import AddonOptions\n"
+        "options = AddonOptions(cells=300)\n"
         "request = jobs.BindRequest(1, 2, 'Mesh', np.full((3, 3), 0.5), box, faces, None, options, '', '')\n"
         "print(jobs.solve(request).weight.shape[0])\n"
     )
@@ -57,9 +57,29 @@ def test_jobs_imports_and_solves_without_bpy():
 
 
 def test_the_add_on_options_become_lbc_core_options_in_one_place():
-    assert jobs.core_options(OPTIONS) == BindOptions(cells=1000, method="delaunay")
-    tuned = jobs.core_options({**OPTIONS, "cells": 0, "tolerance": 1e-3, "thinning": 2e-3, "epsilon": 0.5})
-    assert tuned == BindOptions(tolerance=1e-3, epsilon=0.5, method="delaunay")  # thinning is the add-on's
+    assert AddonOptions(**OPTIONS).core_options(3) == BindOptions(cells=1000, method="auto")
+    tuned = AddonOptions(tolerance=1e-3, thinning=2e-3, epsilon=0.5, mesher="delaunay").core_options(3)
+    assert tuned == BindOptions(tolerance=np.float32(1e-3), epsilon=0.5, method="delaunay")  # thinning: the add-on's
+    assert AddonOptions(mesher="delaunay").core_options(2).method == "auto"  # the Mesher names 3D meshers
+
+
+def test_the_add_on_options_are_checked_when_made():
+    for bad, message in (({"mode": "3d"}, "mode must be one of 'AUTO', '2D', '3D', not '3d'"),
+                         ({"mesher": "triangle"}, "mesher must be one of 'auto', 'delaunay', not 'triangle'"),
+                         ({"influences": None}, "influences must be a whole number"),
+                         ({"thinning": -0.05}, "thinning must be a number of at least 0"),
+                         ({"cells": 5}, "cells must be at least 10")):
+        with pytest.raises(CageError, match=message):
+            AddonOptions(**bad)
+
+
+def test_a_redo_that_sets_an_option_to_what_the_bind_used_asks_the_same_solve():
+    """Adjust Last Operation binds again with the panel's values: Cells 0 and 8000 (the default), the Mesher "auto"
+    and "delaunay" (what it runs), the Dimension Automatic and 3D ask the same solve of a 3D cage, which a warm start
+    reuses; another weighting does not."""
+    first = AddonOptions()
+    assert first.solve_changes(AddonOptions(cells=8000, mesher="delaunay", mode="3D", thinning=0.01), 3) == []
+    assert first.solve_changes(AddonOptions(cells=9000, weighting="linear"), 3) == ["cells", "weighting"]
 
 
 def test_solve_thins_the_weights_by_thinning_and_the_max_influences():
@@ -121,8 +141,9 @@ def test_worker_solves_in_its_thread_reports_progress_and_stops_when_cancelled()
 def test_a_solve_stopped_at_the_iteration_limit_is_a_warning(monkeypatch):
     from dataclasses import replace
 
-    core_options = jobs.core_options
-    monkeypatch.setattr(jobs, "core_options", lambda options: replace(core_options(options), max_iterations=6))
+    core_options = AddonOptions.core_options
+    monkeypatch.setattr(AddonOptions, "core_options",
+                        lambda options, dimension: replace(core_options(options, dimension), max_iterations=6))
     result = jobs.solve(request())
     assert any("stopped at its limit of 6 iterations" in warning for warning in result.warnings), result.warnings
     np.testing.assert_allclose(result.weight.sum(axis=1), 1.0, atol=1e-5)
@@ -160,7 +181,7 @@ def test_a_warm_re_bind_thins_only_the_rows_it_changed_and_gives_the_same_slots(
     assert 0 < counts[0] < len(points)
     binding = warm.binding
     rest = binding.rest_cage_vertices
-    every_row = jobs.thin_weights(binding.weights, rest, binding.weights @ rest, *jobs._thinning(second.options))
+    every_row = jobs.thin_weights(binding.weights, rest, binding.weights @ rest, *second.options.floor_and_cap)
     index, weight = jobs.storage.slot_arrays(every_row, binding.cage.first_inputs)
     np.testing.assert_array_equal(warm.index, index)
     np.testing.assert_allclose(warm.weight, weight, atol=1e-7)
@@ -324,9 +345,10 @@ def test_the_thinning_has_its_own_part_of_the_progress_bar_and_bound_comes_last(
 def test_smoothness_sets_the_fit_and_the_thinning():
     """Smoothness is lbc_core's option (the fit's radius) and, with Thinning 0, the add-on's floor: higher keeps more
     influences per vertex."""
-    assert jobs.core_options({**OPTIONS, "smoothness": 0.8}).smoothness == 0.8
-    assert jobs._thinning({**OPTIONS, "smoothness": 1.0}) == (floor_for(1.0), 0)
-    assert jobs._thinning({**OPTIONS, "smoothness": 1.0, "thinning": 0.01}) == (0.01, 0)
+    assert AddonOptions(smoothness=0.8).core_options(3).smoothness == np.float32(0.8)
+    assert AddonOptions(smoothness=1.0).floor_and_cap == (floor_for(1.0), 0)
+    assert AddonOptions(smoothness=1.0, thinning=0.01).floor_and_cap == (np.float32(0.01), 0)
+    assert "smoothness" in AddonOptions(smoothness=0.2).solve_changes(AddonOptions(smoothness=0.8), 3)
     counts = [np.count_nonzero(jobs.solve(request(smoothness=smoothness)).weight, axis=1).mean()
               for smoothness in (0.0, 1.0)]
     assert counts[1] > counts[0]

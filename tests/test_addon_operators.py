@@ -8,6 +8,7 @@ import pytest
 from mathutils import Matrix
 
 from lbc_addon import storage
+from lbc_addon.options import AddonOptions
 from lbc_addon.properties import is_bound
 from helpers.blender_scenes import (
     bind,
@@ -166,13 +167,13 @@ def test_weights_joined_into_an_unbound_mesh_are_removed_by_unbind(capfd):
     assert bind(mesh, cage, cells=CELLS) == {"FINISHED"}
     _join_into(target, mesh)
     assert not is_bound(target) and geometry.leftover_weights(target)
-    assert "carries LBC weights for no binding" in api.status(target)[1]
+    assert "carries LBC weights for no binding" in api.status(target).message
     with bpy.context.temp_override(active_object=target, object=target, selected_objects=[target]):
         assert bpy.ops.object.lbc_unbind() == {"FINISHED"}
     assert "removed the LBC weights it carried for no binding" in capfd.readouterr().out
     assert not any(name.startswith(".lbc") for name in target.data.attributes.keys())
     assert "temperature" in target.data.attributes and not geometry.leftover_weights(target)
-    assert api.status(target)[1] == "'Target' is not bound to a cage: bind it first (api.bind)"
+    assert api.status(target).message == "'Target' is not bound to a cage: bind it first (api.bind)"
 
 
 def test_two_bound_meshes_joined_are_told_their_vertex_count_changed():
@@ -187,8 +188,9 @@ def test_two_bound_meshes_joined_are_told_their_vertex_count_changed():
     assert other.lbc.slots > mesh.lbc.slots  # so the joined mesh holds more slots than its binding
     count = len(mesh.data.vertices)
     _join_into(mesh, other)
-    ok, message = api.status(mesh)
-    assert not ok and message.startswith(f"The mesh has {len(mesh.data.vertices)} vertices, it was bound with {count}")
+    state = api.status(mesh)
+    assert not state.ok and state.message.startswith(f"The mesh has {len(mesh.data.vertices)} vertices, it was bound "
+                                                     f"with {count}")
 
 
 def test_api_unbind_removes_joined_weights_and_keeps_a_linked_duplicates():
@@ -376,7 +378,7 @@ class _ModalHarness:
 def _requests(mesh, cage):
     from lbc_addon import geometry
 
-    return [geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), cells=CELLS)]
+    return [geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), AddonOptions(cells=CELLS))]
 
 
 def test_modal_bind_shows_progress_and_applies_when_the_worker_is_done():

@@ -17,17 +17,17 @@ def test_weighting_choices_are_lbc_cores():
 def test_bind_options_are_stored_and_reused_by_rebind(monkeypatch):
     mesh, cage = sphere_in_box_scene()
     options = {"cells": 800, "weighting": "linear", "epsilon": 0.01, "tolerance": 1e-3, "thinning": 2e-3,
-               "influences": 5, "mode": "3D"}
+               "influences": 5, "mode": "3D", "mesher": "delaunay"}
     assert bind(mesh, cage, **options) == {"FINISHED"}
     stored = mesh.lbc.bind_options()
-    assert stored["cells"] == 800 and stored["weighting"] == "linear" and stored["mode"] == "3D"
-    assert stored["influences"] == 5 and mesh.lbc.slots <= 5
-    assert abs(stored["epsilon"] - 0.01) < 1e-7 and abs(stored["thinning"] - 2e-3) < 1e-9
+    assert stored.cells == 800 and stored.weighting == "linear" and stored.mode == "3D"
+    assert stored.influences == 5 and mesh.lbc.slots <= 5 and stored.mesher == "delaunay"
+    assert abs(stored.epsilon - 0.01) < 1e-7 and abs(stored.thinning - 2e-3) < 1e-9
     from lbc_addon import geometry
 
     seen = []
     original = geometry.snapshot
-    monkeypatch.setattr(geometry, "snapshot", lambda *args, **kwargs: seen.append(kwargs) or original(*args, **kwargs))
+    monkeypatch.setattr(geometry, "snapshot", lambda *args: seen.append(args[3]) or original(*args))
     with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
         assert bpy.ops.object.lbc_rebind() == {"FINISHED"}
     assert seen == [stored]
@@ -54,7 +54,16 @@ def test_a_file_saved_before_the_cells_rename_keeps_its_cell_count(tmp_path):
 
 
 def test_the_dimension_choices_are_the_ones_the_options_check_accepts():
-    from lbc_addon import jobs
+    from lbc_addon import options
     from lbc_addon.properties import MODE_ITEMS
 
-    assert sorted(item[0] for item in MODE_ITEMS) == sorted(jobs.MODES)
+    assert sorted(item[0] for item in MODE_ITEMS) == sorted(options.MODES)
+
+
+def test_the_mesher_choices_are_lbc_cores_bundled_meshers_of_3d_cages():
+    """CONTRIBUTING.md's "Adding a mesher backend": the Mesher menu offers "auto" and every bundled 3D mesher."""
+    from lbc_addon.properties import MESHER_ITEMS
+    from lbc_core.meshing import MESHERS, method_names
+
+    bundled = [name for name, mesher in MESHERS[3].items() if mesher.bundled]
+    assert [item[0] for item in MESHER_ITEMS] == [method_names(3)[0]] + bundled

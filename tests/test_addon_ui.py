@@ -73,7 +73,7 @@ def test_bound_mesh_shows_state_figures_and_actions(bound_gargoyle):
     text = layout.labels()
     assert "Following 'Cage'" in text and "Cage: Cage" in text
     assert "67 control points" in text and "2674 mesh vertices, 0 outside" in text
-    assert f"max {mesh.lbc.slots}" in text and "Cache in the .blend:" in text and "KB" in text
+    assert f"max {mesh.lbc.slots}" in text and "In the .blend, uncompressed:" in text and "KB" in text
     assert {"object.lbc_rebind", "object.lbc_unbind", "object.lbc_show_influence"} <= set(layout.operators())
     assert "Max Influences" not in text  # 15-16 influences: no hint
     # The modifier's inputs, drawn from the modifier itself (one source of truth, also in the modifier panel).
@@ -104,13 +104,13 @@ def test_where_each_vertex_follows_most_of_the_cage_the_panel_suggests_max_influ
     cage = bpy.context.active_object
     bpy.ops.mesh.primitive_ico_sphere_add(radius=0.5)
     sphere = bpy.context.active_object
-    assert api.bind(sphere, cage, cells=2000)["mean_influences"] > 60
+    assert api.bind(sphere, cage, cells=2000).mean_influences > 60
     assert "Bind with Max Influences (e.g. 24)" in " ".join(_draw(sphere, [sphere]).labels().split("\n"))
     capped = api.bind(sphere, cage, cells=2000, influences=24)
-    assert capped["mean_influences"] < 30
+    assert capped.mean_influences < 30
     # Vertices that 24 cage vertices cannot hold in place keep more, and the bind says so.
     assert any(warning.startswith("Max Influences 24: ") and "the fewest that can hold them in place" in warning
-               for warning in capped["warnings"])
+               for warning in capped.warnings)
     assert "Bind with Max Influences" not in " ".join(_draw(sphere, [sphere]).labels().split("\n"))
 
 
@@ -124,17 +124,20 @@ def test_a_cage_far_too_small_warns_in_the_state_with_the_share_outside_and_the_
     assert layout.icons["Following 'Box'"] == "CHECKMARK" and "Scale the cage up" not in layout.labels()
     mesh.data.transform(Matrix.Scale(1.5, 4))  # the sphere now pokes out of the box on every side
     summary = api.bind(mesh, cage, cells=1000)
-    outside = summary["outside"]
+    outside = summary.outside
     assert outside > 0.05 * 42
     warning = (f"{outside} of 42 vertices ({outside / 42:.0%}) lie outside the cage, which is too small for the mesh: "
                "they follow the cage only by extrapolation from the closest points inside it. Scale the cage up so "
                "it encloses the mesh, then Rebind")
-    assert warning in summary["warnings"]
+    assert warning in summary.warnings
     layout = _draw(mesh, [mesh])
-    assert layout.icons["Following 'Box'"] == "ERROR"
+    line = f"Following 'Box', with {outside / 42:.0%} of the mesh outside it: the cage is too small"
+    assert mesh.lbc.status == line and layout.icons[line] == "ERROR"
     text = " ".join(layout.labels().split("\n"))
     assert warning in text and text.count("lie outside the cage") == 1  # in the state's box, not again below
-    assert api.status(mesh) == (True, f"Following 'Box'; {warning}")  # what a pipeline reads says it too
+    state = api.status(mesh)  # what a pipeline reads says it too
+    assert state.text == f"Following 'Box', with {outside / 42:.0%} of the mesh outside it: the cage is too small; {warning}"
+    assert not state.ok and state.following and [note.kind for note in state.notes] == [api.NoteKind.CAGE_TOO_SMALL]
 
 
 def test_deleted_cage_shows_why_and_offers_bind(bound_gargoyle):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from lbc_addon import deformer, geometry, influence, jobs, node_group, storage, writing
+from lbc_addon.options import AddonOptions
 from lbc_addon.properties import is_bound
 from lbc_core import CageError, Cancelled
 from helpers.blender_scenes import evaluated_positions, mesh_state, sphere_in_box_scene
@@ -18,7 +19,7 @@ OPTIONS = {"cells": 1000}
 
 
 def _request(mesh, cage, **options):
-    return geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), **{**OPTIONS, **options})
+    return geometry.snapshot(mesh, cage, bpy.context.evaluated_depsgraph_get(), AddonOptions(**{**OPTIONS, **options}))
 
 
 def test_cancelled_worker_leaves_the_scene_unchanged():

@@ -102,7 +102,7 @@ bpy.ops.mesh.primitive_uv_sphere_add(radius=0.7)
 sphere = bpy.context.active_object
 bpy.ops.mesh.primitive_cube_add(size=2.0)
 cage = bpy.context.active_object
-result["control_points"] = api.bind(sphere, cage, cells=1000)["control_points"]
+result["control_points"] = api.bind(sphere, cage, cells=1000).control_points
 cage.location.x += 0.5
 evaluated = sphere.evaluated_get(bpy.context.evaluated_depsgraph_get())
 result["moved"] = evaluated.to_mesh().vertices[0].co.x - sphere.data.vertices[0].co.x

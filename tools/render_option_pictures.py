@@ -179,7 +179,7 @@ def bind(tube_obj, cage, **options):
     """Bind the tube to the cage at rest, as the Bind button does, with these options."""
     pose(cage, False)
     summary = api.bind(tube_obj, cage, from_scratch=True, progress=lambda fraction, message: None, **options)
-    print(f"bound with {options or 'the defaults'}: {summary['mean_influences']:.1f} influences per vertex (mean)")
+    print(f"bound with {options or 'the defaults'}: {summary.mean_influences:.1f} influences per vertex (mean)")
     return summary
 
 

@@ -80,7 +80,7 @@ cage = bpy.context.active_object
 sphere_rest = state(sphere)
 
 result["bind_operator"] = run_operator(lambda: bpy.ops.object.lbc_bind(cells=1000), cage, [sphere, cage])
-result["bind_api"] = api.bind(ico, cage, cells=1000)["control_points"]
+result["bind_api"] = api.bind(ico, cage, cells=1000).control_points
 cage.location.x += 0.5
 result["moved"] = [shift_x(sphere), shift_x(ico)]
 
@@ -113,7 +113,7 @@ result["reopened_without"] = [MODULE in bpy.context.preferences.addons, shift_x(
 bpy.ops.preferences.addon_enable(module=MODULE)
 bpy.ops.wm.open_mainfile(filepath=BLEND)
 sphere, cage = bpy.data.objects["Sphere"], bpy.data.objects["Cube"]
-result["reopened_with"] = [api.status(sphere), shift_x(sphere)]
+result["reopened_with"] = [[api.status(sphere).ok, api.status(sphere).message], shift_x(sphere)]
 result["rebind"] = run_operator(bpy.ops.object.lbc_rebind, sphere, [sphere])
 result["rest_after_rebind"] = shift_x(sphere)  # bound again to the cage where it stands now
 cage.location.x += 0.25
