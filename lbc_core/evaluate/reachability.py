@@ -90,6 +90,11 @@ class DomainPaths:
         self.searches, self.reached = search.searches, search.reached
         self.has_blocked = np.zeros(self.count, dtype=bool)
         self.has_blocked[self.keys // max(self.count, 1)] = True
+        # Each blocked pair's place in ``factors``, plus 1, at (corner, vertex): a lookup by binary search in the
+        # corner's row, shorter than one over every key.
+        self._places = sp.csr_array((np.arange(1, len(self.keys) + 1, dtype=float),
+                                     (self.keys // max(self.count, 1), self.keys % max(self.count, 1))),
+                                    shape=(self.count, self.count))
 
     def factors_of(self, linear, distances):
         """Each stored pair's factor (0 to 1) in ``distances``: the points' (rows of ``linear``, their barycentric
@@ -119,15 +124,16 @@ class DomainPaths:
         owner = np.repeat(np.arange(len(touched)), counts)
         pairs = np.repeat(distances.indptr[touched] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
         targets = distances.indices[pairs].astype(np.int64)
-        factor[pairs] = 0.0
+        total = np.zeros(len(pairs))
         for slot in range(corners.shape[1]):
             # A corner without blocked pairs adds its share times 1, as a search that finds nothing would.
             value = np.ones(len(pairs))
             look = np.flatnonzero(blocked[touched, slot][owner])
-            key = corners[touched, slot][owner[look]] * self.count + targets[look]
-            at = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
-            value[look] = np.where(self.keys[at] == key, self.factors[at], 1.0)
-            factor[pairs] += shares[touched, slot][owner] * value
+            if len(look):
+                place = np.asarray(self._places[corners[touched, slot][owner[look]], targets[look]], dtype=np.int64)
+                value[look] = np.where(place > 0, self.factors[place - 1], 1.0)
+            total += shares[touched, slot][owner] * value
+        factor[pairs] = total
         return factor
 
 
