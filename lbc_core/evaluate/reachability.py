@@ -12,6 +12,8 @@ so it is continuous in the point. Inside one part, paths along tetrahedral edges
 (at most about 1.3 times), nothing is blocked and the fit is the plain one, as smooth.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
@@ -148,14 +150,12 @@ def _corners(linear):
     """Each row's corners and their weights, (k, c) each, in the order of the barycentric CSR ``linear``'s rows (-1
     and 0 where a row has fewer corners)."""
     counts = np.diff(linear.indptr)
-    width = int(counts.max(initial=0))
-    slots = np.arange(width)
+    slots = np.arange(int(counts.max(initial=0)))
     has = slots[None, :] < counts[:, None]
-    at = linear.indptr[:-1, None] + np.minimum(slots[None, :], np.maximum(counts - 1, 0)[:, None])
-    at = np.minimum(at, max(len(linear.indices) - 1, 0))
     if not len(linear.indices):
         return np.full(has.shape, -1, dtype=np.int64), np.zeros(has.shape)
-    return (np.where(has, linear.indices[at], -1).astype(np.int64), np.where(has, linear.data[at], 0.0))
+    at = np.minimum(linear.indptr[:-1, None] + slots[None, :], len(linear.indices) - 1)
+    return np.where(has, linear.indices[at], -1).astype(np.int64), np.where(has, linear.data[at], 0.0)
 
 
 def _search_by_sample(search, sources):
@@ -175,11 +175,12 @@ def _search_by_sample(search, sources):
     return sample, rest, far
 
 
-class _Found:
+class _Found(NamedTuple):
     """What a round of searches found: the blocked pairs' keys and factors, and the sources it left undecided."""
 
-    def __init__(self, keys, factors, unresolved):
-        self.keys, self.factors, self.unresolved = keys, factors, unresolved
+    keys: np.ndarray
+    factors: np.ndarray
+    unresolved: np.ndarray
 
 
 class _Search:
