@@ -117,7 +117,7 @@ def evaluated(evaluation, smoothness):
                                  radius_edges=radius_for(smoothness), points=evaluation.points,
                                  outside=binding.outside)
     weights = interpolate_and_reduce(smooth, binding.domain_weights, evaluation.unit_cage.vertices,
-                                     evaluation.vertices, binding.options["threshold"],
+                                     evaluation.vertices, binding.outcome.threshold,
                                      REPRODUCTION_TOLERANCE * evaluation.unit_cage.bbox_diagonal)
     return weights, time.perf_counter() - start
 

@@ -12,11 +12,14 @@ so it is continuous in the point. Inside one part, paths along tetrahedral edges
 (at most about 1.3 times), nothing is blocked and the fit is the plain one, as smooth.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
+from ..kernel.geometry import row_keys
 from ..kernel.progress import Progress
 
 # Detours through the domain, in fit radii, over which a vertex's weight in the fit fades out (bench/RESULTS.md,
@@ -24,12 +27,25 @@ from ..kernel.progress import Progress
 # straight line, less than NEAR radii longer, so the fit is left alone there).
 NEAR = 0.75
 FAR = 1.5
-_SOURCES_PER_CALL = 256  # Dijkstra's sources at a time: bounds its dense (sources, N) output
+# Dijkstra's dense (sources, N) output per call, in entries, and its sources per call at most.
+_ENTRIES_PER_CALL = 1 << 20
+_SOURCES_PER_CALL = 64
+# A search limit this much (relative) past a pair's FAR detour proves its factor exactly 0 without its path.
+_MARGIN = 1e-9
+# One corner in this many searched up to NEAR first, as a sample of where the gaps are.
+_SAMPLE_EVERY = 8
 
 
 class DomainPaths:
     """The blocked pairs (corner, vertex) of a domain mesh for a fit of a given radius, and each point's factor per
     fitted vertex.
+
+    A corner's pairs need its shortest paths only up to its reach plus :data:`FAR` radii (beyond, every factor is
+    0), and to show a pair unblocked only up to its reach plus :data:`NEAR` radii. So each corner is searched up to
+    NEAR first, and again up to FAR only if that left a pair's factor undecided (a pair across a gap); a corner whose
+    nearest sampled corner needed FAR is searched up to FAR at once. The paths within a bound are exact whatever the
+    bound, so every factor is that of the pair's shortest path, as an unbounded search would find it
+    (bench/RESULTS.md, "The fit through the domain, cheaper").
 
     Parameters
     ----------
@@ -43,6 +59,15 @@ class DomainPaths:
         The vertices whose pairs are wanted (the corners of the points' cells); None: every vertex.
     progress : Progress, optional
         Checked between rounds of sources.
+
+    Attributes
+    ----------
+    keys : (b,) int64 array
+        The blocked pairs, corner * N + vertex, sorted.
+    factors : (b,) float array
+        Their factors (:func:`path_factor`).
+    searches, reached : int
+        The work: searches from a corner, and the vertices they reached, summed.
     """
 
     def __init__(self, vertices, cells, radius, depth, corners=None, progress=None):
@@ -54,33 +79,24 @@ class DomainPaths:
         # A point's fit reaches vertices within the radius, and its cell's corners lie within their longest edge of
         # it; a vertex deeper than that has the whole ball inside the domain.
         reach = self.radius + longest
-        tree = cKDTree(vertices)
-        near = tree.sparse_distance_matrix(tree, reach.max(initial=0.0), output_type="coo_matrix")
         wanted = np.asarray(depth) < reach
         if corners is not None:
-            wanted &= np.isin(np.arange(self.count), corners)
-        close = (near.data < reach[near.row]) & wanted[near.row]
-        # Each pair's straight distance (a tiny one for a vertex and itself, so that the pair is stored).
-        pairs = sp.csr_matrix((np.maximum(near.data[close], np.finfo(float).tiny), (near.row[close], near.col[close])),
-                              shape=(self.count, self.count))
-        limit = reach.max(initial=0.0) + FAR * self.radius
-        pairs.sort_indices()  # so the keys below come out sorted: sources in order, then targets
-        sources = np.flatnonzero(np.diff(pairs.indptr))
-        keys, factors = [np.zeros(0, dtype=np.int64)], [np.zeros(0)]
-        for start in range(0, len(sources), _SOURCES_PER_CALL):
-            progress.check()
-            chunk = sources[start:start + _SOURCES_PER_CALL]
-            paths = dijkstra(graph, directed=False, indices=chunk, limit=limit)
-            lo, hi = pairs.indptr[chunk[0]], pairs.indptr[chunk[-1] + 1]
-            rows = np.repeat(np.arange(len(chunk)), np.diff(pairs.indptr)[chunk])
-            targets = pairs.indices[lo:hi].astype(np.int64)
-            detour = paths[rows, targets] - pairs.data[lo:hi]
-            blocked = ~(detour <= NEAR * self.radius)
-            keys.append(chunk[rows[blocked]].astype(np.int64) * self.count + targets[blocked])
-            factors.append(path_factor(detour[blocked] / self.radius))
-        self.keys, self.factors = np.concatenate(keys), np.concatenate(factors)
+            chosen = np.zeros(self.count, dtype=bool)
+            chosen[np.asarray(corners, dtype=np.int64)] = True
+            wanted &= chosen
+        search = _Search(vertices, graph, reach, self.radius, progress)
+        found = _search_by_sample(search, np.flatnonzero(wanted))
+        keys = np.concatenate([part.keys for part in found])
+        order = np.argsort(keys, kind="stable")
+        self.keys, self.factors = keys[order], np.concatenate([part.factors for part in found])[order]
+        self.searches, self.reached = search.searches, search.reached
         self.has_blocked = np.zeros(self.count, dtype=bool)
         self.has_blocked[self.keys // max(self.count, 1)] = True
+        # Each blocked pair's place in ``factors``, plus 1, at (corner, vertex): a lookup by binary search in the
+        # corner's row, shorter than one over every key.
+        self._places = sp.csr_array((np.arange(1, len(self.keys) + 1, dtype=float),
+                                     (self.keys // max(self.count, 1), self.keys % max(self.count, 1))),
+                                    shape=(self.count, self.count))
 
     def factors_of(self, linear, distances):
         """Each stored pair's factor (0 to 1) in ``distances``: the points' (rows of ``linear``, their barycentric
@@ -100,21 +116,26 @@ class DomainPaths:
         if not len(self.keys):
             return factor
         linear = sp.csr_matrix(linear)
-        corner_rows = np.repeat(np.arange(linear.shape[0]), np.diff(linear.indptr))
-        touched = np.unique(corner_rows[self.has_blocked[linear.indices]])
+        corners, shares = _corners(linear)
+        blocked = self.has_blocked[np.maximum(corners, 0)] & (corners >= 0)
+        touched = np.flatnonzero(blocked.any(axis=1))
         if not len(touched):
             return factor
-        counts = np.diff(distances.indptr)
-        owner = np.repeat(np.arange(distances.shape[0]), counts)
-        pairs = np.flatnonzero(np.isin(owner, touched))
-        factor[pairs] = 0.0
+        # The pairs of the points a blocked corner touches, and each one's point (its row in ``touched``).
+        counts = np.diff(distances.indptr)[touched]
+        owner = np.repeat(np.arange(len(touched)), counts)
+        pairs = np.repeat(distances.indptr[touched] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
         targets = distances.indices[pairs].astype(np.int64)
-        for corner_slot in range(int(np.diff(linear.indptr).max())):
-            corner, share = _corner(linear, owner[pairs], corner_slot)
-            key = corner * self.count + targets
-            at = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
-            found = self.keys[at] == key
-            factor[pairs] += share * np.where(found, self.factors[at], 1.0)
+        total = np.zeros(len(pairs))
+        for slot in range(corners.shape[1]):
+            # A corner without blocked pairs adds its share times 1, as a search that finds nothing would.
+            value = np.ones(len(pairs))
+            look = np.flatnonzero(blocked[touched, slot][owner])
+            if len(look):
+                place = np.asarray(self._places[corners[touched, slot][owner[look]], targets[look]], dtype=np.int64)
+                value[look] = np.where(place > 0, self.factors[place - 1], 1.0)
+            total += shares[touched, slot][owner] * value
+        factor[pairs] = total
         return factor
 
 
@@ -125,26 +146,117 @@ def path_factor(detours):
     return np.clip(1.0 - t ** 3 * (t * (6.0 * t - 15.0) + 10.0), 0.0, 1.0)
 
 
-def _corner(linear, rows, slot):
-    """The ``slot``-th corner of each row in ``rows`` of the barycentric CSR ``linear`` and its weight (-1 and 0 for a
-    row with fewer corners)."""
-    counts = np.diff(linear.indptr)[rows]
-    has = counts > slot
-    at = linear.indptr[rows] + np.minimum(slot, np.maximum(counts - 1, 0))
-    corner = np.where(has, linear.indices[at], -1).astype(np.int64)
-    share = np.where(has, linear.data[at], 0.0)
-    return corner, share
+def _corners(linear):
+    """Each row's corners and their weights, (k, c) each, in the order of the barycentric CSR ``linear``'s rows (-1
+    and 0 where a row has fewer corners)."""
+    counts = np.diff(linear.indptr)
+    slots = np.arange(int(counts.max(initial=0)))
+    has = slots[None, :] < counts[:, None]
+    if not len(linear.indices):
+        return np.full(has.shape, -1, dtype=np.int64), np.zeros(has.shape)
+    at = np.minimum(linear.indptr[:-1, None] + slots[None, :], len(linear.indices) - 1)
+    return np.where(has, linear.indices[at], -1).astype(np.int64), np.where(has, linear.data[at], 0.0)
+
+
+def _search_by_sample(search, sources):
+    """Every source's blocked pairs, as :class:`_Found` parts: a sample of the sources searched up to NEAR first
+    tells where gaps lie; a source whose nearest sampled one needed FAR is searched up to FAR at once (a choice of
+    bound, not of results), the others up to NEAR and again up to FAR if that left a factor undecided."""
+    sampled = np.zeros(len(sources), dtype=bool)
+    sampled[::_SAMPLE_EVERY] = True
+    sample = search.run(sources[sampled], NEAR)
+    by_gap = np.isin(sources, sample.unresolved)
+    predicted = np.zeros(len(sources), dtype=bool)
+    if sampled.any():
+        _, nearest = cKDTree(search.vertices[sources[sampled]]).query(search.vertices[sources])
+        predicted = by_gap[np.flatnonzero(sampled)[nearest]] & ~sampled
+    rest = search.run(sources[~sampled & ~predicted], NEAR)
+    far = search.run(np.concatenate([sources[predicted], sample.unresolved, rest.unresolved]), FAR)
+    return sample, rest, far
+
+
+class _Found(NamedTuple):
+    """What a round of searches found: the blocked pairs' keys and factors, and the sources it left undecided."""
+
+    keys: np.ndarray
+    factors: np.ndarray
+    unresolved: np.ndarray
+
+
+class _Search:
+    """Dijkstra searches from the corners of a domain's edge graph, a chunk of sources per call, each call bounded by
+    its sources' farthest reach plus a detour: the shortest paths within the bound are exact (the same lengths
+    whatever the bound), so a pair's factor is the same as that of an unbounded search wherever the bound decides it.
+
+    Parameters
+    ----------
+    vertices : (N, d) float array
+    graph : (N, N) CSR, symmetric
+        The edges weighted by length (:func:`_edge_graph`).
+    reach : (N,) float array
+        Each vertex's reach: the fit's radius plus its longest edge.
+    radius : float
+    progress : Progress
+    """
+
+    def __init__(self, vertices, graph, reach, radius, progress):
+        self.vertices, self.graph, self.reach, self.radius, self.progress = vertices, graph, reach, radius, progress
+        self.tree = cKDTree(vertices)
+        # The longest search any pair needs: beyond it every factor is 0.
+        self.longest = reach.max(initial=0.0) + FAR * radius
+        self.searches = self.reached = 0
+
+    def run(self, sources, detour):
+        """Search from ``sources`` up to their reach plus ``detour`` radii (:data:`NEAR` or :data:`FAR`): a _Found
+        with the blocked pairs of the sources it decided, and those it left undecided (a pair unreached within a
+        bound too short to show its factor 0)."""
+        count = len(self.vertices)
+        sources = sources[np.argsort(self.reach[sources], kind="stable")]  # alike bounds in one call
+        size = max(1, min(_SOURCES_PER_CALL, _ENTRIES_PER_CALL // max(count, 1)))
+        keys, factors, unresolved = [np.zeros(0, dtype=np.int64)], [np.zeros(0)], [np.zeros(0, dtype=np.int64)]
+        for start in range(0, len(sources), size):
+            self.progress.check()
+            chunk = sources[start:start + size]
+            limit = min(self.longest, (self.reach[chunk].max() + detour * self.radius) * (1.0 + _MARGIN))
+            paths = dijkstra(self.graph, indices=chunk, limit=limit)
+            self.searches += len(chunk)
+            self.reached += int(np.isfinite(paths).sum())
+            rows, targets, straight = self._pairs(chunk)
+            detours = paths[rows, targets] - straight
+            blocked = ~(detours <= NEAR * self.radius)
+            # Unreached: longer than the limit; its factor is 0 if the limit is FAR radii past the straight line.
+            undecided = np.isinf(detours) & (limit < self.longest) & (limit - straight < FAR * self.radius *
+                                                                      (1.0 + _MARGIN))
+            left = np.zeros(len(chunk), dtype=bool)
+            left[rows[undecided]] = True
+            kept = blocked & ~left[rows]
+            keys.append(chunk[rows[kept]].astype(np.int64) * count + targets[kept])
+            factors.append(path_factor(detours[kept] / self.radius))
+            unresolved.append(chunk[left])
+        return _Found(np.concatenate(keys), np.concatenate(factors), np.concatenate(unresolved))
+
+    def _pairs(self, chunk):
+        """The pairs (row in ``chunk``, vertex) within each source's reach: rows, vertices, and their straight
+        distances (a tiny one for a vertex and itself)."""
+        reach = self.reach[chunk]
+        near = cKDTree(self.vertices[chunk]).sparse_distance_matrix(self.tree, reach.max(), output_type="coo_matrix")
+        close = near.data < reach[near.row]
+        return (near.row[close], near.col[close].astype(np.int64),
+                np.maximum(near.data[close], np.finfo(float).tiny))
 
 
 def _edge_graph(vertices, cells):
     """The domain's edges as a symmetric sparse graph weighted by length, and each vertex's longest edge."""
     corners = cells.shape[1]
-    pairs = np.concatenate([cells[:, [a, b]] for a in range(corners) for b in range(a + 1, corners)])
-    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
-    length = np.linalg.norm(vertices[pairs[:, 0]] - vertices[pairs[:, 1]], axis=1)
     n = len(vertices)
-    graph = sp.csr_matrix((length, (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    ends = np.concatenate([cells[:, [a, b]] for a in range(corners) for b in range(a + 1, corners)])
+    # Each edge once, as one number (low * n + high): np.unique over numbers is several times faster than over rows.
+    key = np.unique(row_keys(np.sort(ends, axis=1), max(n, 1)))
+    low, high = key // max(n, 1), key % max(n, 1)
+    length = np.linalg.norm(vertices[low] - vertices[high], axis=1)
+    graph = sp.csr_matrix((np.concatenate([length, length]), (np.concatenate([low, high]),
+                                                              np.concatenate([high, low]))), shape=(n, n))
     longest = np.zeros(n)
-    np.maximum.at(longest, pairs[:, 0], length)
-    np.maximum.at(longest, pairs[:, 1], length)
+    np.maximum.at(longest, low, length)
+    np.maximum.at(longest, high, length)
     return graph, longest

@@ -110,9 +110,9 @@ class SmoothInterpolation:
         self.tree = cKDTree(self.vertices)
         # The fade follows each point's own distance to the cage. The corners' distances bound it from below (it is
         # 1-Lipschitz), so only the points that bound leaves within the fade are searched. A widening fit needs every
-        # vertex's (radius_at); else the corners' suffice (at most N searches).
+        # vertex's (radius_at); else the corners' suffice (at most N searches), the fit through the domain's too.
         self.boundary = FacetSearch(self.vertices, np.asarray(cells))
-        needed = (np.arange(len(self.vertices)) if self.deep_radius > self.radius or through_domain
+        needed = (np.arange(len(self.vertices)) if self.deep_radius > self.radius
                   else np.unique(self.located.indices))
         self.vertex_depth = np.zeros(len(self.vertices))
         self.vertex_depth[needed] = np.sqrt(self.boundary.closest(self.vertices[needed], self.progress.check).squared)
