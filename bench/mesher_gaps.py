@@ -6,7 +6,9 @@ longest silence of the progress messages.
 
 A CAGE is a name below or a path to a cage file (OBJ / OFF): ``hand`` (tests/data/cages-3d/hand), ``hand-gap-P``
 (that hand's cage made again by make_hand.py with slots P % of the diagonal wide), ``arm``, ``L08`` ... ``L16`` (the
-gargoyle's cages), ``prism-G`` (the corpus test's slotted prism, slot G), ``corpus`` (every corpus cage as made).
+gargoyle's cages), ``prism-G`` (the corpus test's slotted prism, slot G), ``notch-A`` (tests/test_meshing.py's block
+with a V notch whose walls meet at A degrees), ``corpus`` (every corpus cage as made). ``told`` is the meshing time
+the forecast tells on an idle machine (trees without ``sizing.wedge_work``: per cell alone).
 Each (tree, cage, cells) runs in a process of its own, the trees interleaved; the figures are medians of the repeats.
 """
 
@@ -38,6 +40,10 @@ def load_cage(spec):
         return hand_with_gap(float(spec.split("-")[-1]))
     if spec.startswith("prism-"):
         return slotted_prism(float(spec.split("-", 1)[1]))
+    if spec.startswith("notch-"):
+        from test_meshing import notched_block
+
+        return notched_block(float(spec.split("-", 1)[1]))
     if spec.startswith("corpus:"):
         from helpers import cage_corpus
 
@@ -97,6 +103,11 @@ def child(spec, cells):
         print(json.dumps({"error": str(error)[:80], "seconds": time.perf_counter() - wall, **counts}))
         return
     seconds, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    from lbc_core.meshing import sizing
+    from lbc_core.solve.forecast import MESHING_SECONDS_PER_CELL
+
+    work = sizing.wedge_work(cage.surface_vertices, cage.facets) if hasattr(sizing, "wedge_work") else 1.0
+    counts["told"] = MESHING_SECONDS_PER_CELL * cells * work
     ratios = radius_ratios(mesh.vertices, mesh.cells)
     print(json.dumps({"cells": len(mesh.cells), "seconds": seconds, "cpu": cpu, **counts,
                       "least": float(ratios.min()), "p1": float(np.percentile(ratios, 1)),

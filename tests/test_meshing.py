@@ -514,6 +514,35 @@ def test_3d_sizing_counts_towards_the_target_within_its_bounds():
     assert target.near(target.candidate(0.04, 0, 8000 / sizing.CELLS_PER_SAMPLE))
 
 
+def notched_block(angle_degrees):
+    """Two boxes joined by a web: a block with a V notch cut down to a crease, its two walls meeting there at
+    ``angle_degrees`` and facing each other (the web between two fingers)."""
+    half_width = 0.8 * np.tan(np.radians(angle_degrees) / 2.0)
+    profile = np.array([[0, 0], [2, 0], [2, 1], [1 + half_width, 1], [1, 0.2], [1 - half_width, 1], [0, 1]])
+    n = len(profile)
+    vertices = np.concatenate([np.c_[profile, np.zeros(n)], np.c_[profile, np.ones(n)]])
+    faces = [list(range(n))[::-1], list(range(n, 2 * n))] + [[i, (i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
+    return vertices, faces
+
+
+def test_3d_forecast_tells_the_work_of_narrow_wedges():
+    """Walls meeting at a small angle and facing each other (a finger web) make meshing refine round after round: the
+    time told before a bind counts them (pgc_hand: 7 s of meshing told as under 1 s before), and no other cage's."""
+    from lbc_core.binding.options import BindOptions
+    from lbc_core.binding.pipeline import check_request
+
+    cages = {angle: make_cage(*notched_block(angle)) for angle in (1.0, 2.0, 30.0)}
+    work = {angle: sizing.wedge_work(cage.surface_vertices, cage.facets) for angle, cage in cages.items()}
+    assert work[30.0] == 1.0 and work[1.0] > work[2.0] > 1.0
+    cube = cube_cage()
+    assert sizing.wedge_work(cube.surface_vertices, cube.facets) == 1.0
+    told = []
+    vertices, faces = notched_block(1.0)
+    check_request(vertices, faces, np.array([[0.5, 0.5, 0.5]]), BindOptions(),
+                  progress=lambda fraction, message: told.append(message))
+    assert told[0].startswith("meshing roughly ") and " s, then solving" in told[0]
+
+
 def test_3d_meshing_reads_no_clock(monkeypatch):
     """Meshing's budgets are counts of work: a clock that runs a thousand seconds between two readings (a machine
     under heavy load) gives the same mesh, bit for bit. A deadline used to end the refinement along the hand's slots,

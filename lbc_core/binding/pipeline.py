@@ -26,6 +26,7 @@ from ..kernel.frame import UnitFrame, principal_aspect
 from ..kernel.parallel import busy_factor, counted_in_load
 from ..kernel.progress import Laps, Progress
 from ..meshing import mesh_domain, simplex_domain
+from ..meshing.sizing import wedge_work
 from ..solve.boundary import boundary_weights
 from ..solve.forecast import bind_seconds, check_memory, solve_forecast, solves_stretched
 from ..solve.geodesics import geodesic_distances, tv_weights
@@ -338,9 +339,10 @@ def check_request(cage_vertices, cage_faces, points, options, progress=None):
     busy = 1.0 if progress is None else busy_factor()  # the bar's shares are ratios: the load cancels
     shape = (cage.n_control_points, n_cells, cage.dim, solves_stretched(cage.vertices, options.epsilon),
              principal_aspect(cage.vertices), busy, len(points))
+    work = wedge_work(cage.surface_vertices, cage.facets) if cage.dim == 3 else 1.0
     if progress is not None:
-        progress(0.0, solve_forecast(*shape, meshing=True, convexity=convexity))
-    return cage, points, bind_seconds(*shape, convexity=convexity)
+        progress(0.0, solve_forecast(*shape, meshing=True, convexity=convexity, meshing_work=work))
+    return cage, points, bind_seconds(*shape, convexity=convexity, meshing_work=work)
 
 
 def check_cage_and_points(cage_vertices, cage_faces, points, options=None):

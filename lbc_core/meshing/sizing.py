@@ -14,6 +14,9 @@ many at 2000 cells, and then a whole second tetrahedralisation to correct it.
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+
+from ..kernel.geometry import triangle_normals, unit
 
 # Tetrahedra per lattice point and per surface sample (the samples before refinement): fitted on the first and
 # second tries of the corpus, gargoyle, hand and arm cages at 2000 and 8000 cells (bench/RESULTS.md, "Meshing cages
@@ -29,6 +32,10 @@ MOST_SIDE_CHANGE = 1.25
 # The points meshing may hand to the tetrahedraliser, summed over every refinement round, try and attempt: per
 # target cell and a constant. The valid cages measured took at most 13.3 per cell (bench/RESULTS.md, same section).
 WORK_PER_CELL, WORK_BASE = 60, 100_000
+# Facets sharing a vertex and facing each other at below WEDGE_ANGLE (radians) make a narrow wedge; each pair adds
+# WEDGE_WORK × (WEDGE_ANGLE / angle − 1) to the meshing's work (bench/RESULTS.md, "Faces meeting at small angles").
+WEDGE_ANGLE = np.radians(5.0)
+WEDGE_WORK = 0.55
 
 
 @dataclass(frozen=True)
@@ -103,3 +110,31 @@ class WorkBudget:
             return False
         self.left -= points
         return True
+
+
+def wedge_work(vertices, facets):
+    """How many times an ordinary cage's meshing work (for as many cells) a 3D cage's takes, from its narrow wedges
+    (:data:`WEDGE_ANGLE`, :data:`WEDGE_WORK`): 1 for a cage without any; counted before meshing, for the forecast.
+
+    Where two faces meet at a small angle θ and face each other (the web between two fingers), the gap between them
+    shrinks to nothing: the tetrahedra follow them only once their samples are about as fine as the gap, some 1 / θ
+    of them per octave of distance from where they meet, which refinement adds round after round.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float array
+    facets : (F, 3) int array, outward triangles
+
+    Returns
+    -------
+    float, at least 1
+    """
+    facets = np.asarray(facets)
+    incidence = sp.csr_matrix((np.ones(facets.size), (np.repeat(np.arange(len(facets)), 3), facets.ravel())),
+                              shape=(len(facets), len(vertices)))
+    sharing = sp.triu(incidence @ incidence.T, k=1).tocoo()  # facet pairs with a vertex in common
+    normals = unit(triangle_normals(np.asarray(vertices, float)[facets]))
+    facing = -np.einsum("ij,ij->i", normals[sharing.row], normals[sharing.col])
+    angle = np.arccos(np.clip(facing, -1.0, 1.0))  # between the two planes, where the normals are opposite
+    narrow = np.maximum(angle[angle < WEDGE_ANGLE], 1e-3 * WEDGE_ANGLE)
+    return 1.0 + WEDGE_WORK * float(np.sum(WEDGE_ANGLE / narrow - 1.0))

@@ -127,6 +127,7 @@ def _attempts(cage, side, split, sizing, work, steps):
     before the test saw the refinement grow).
     """
     plans = [(sizing, 1.0, 0)] + [(replace(sizing, rounds=1), 1.5**attempt, attempt) for attempt in range(_ATTEMPTS)]
+    tried_side = None  # the side the sized attempt failed at
     for number, (plan, coarsening, seed) in enumerate(plans):
         if number == 1 and tried_side == side:
             continue  # the sized attempt failed at this side already

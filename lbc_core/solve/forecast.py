@@ -125,7 +125,8 @@ class BindSeconds:
     points: float  # the work after the solve: the smooth fit, the reduction, the thinning
 
 
-def bind_seconds(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0, convexity=0.0):
+def bind_seconds(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0, convexity=0.0,
+                 meshing_work=1.0):
     """The time of a bind's meshing, solve and points, told before it starts; the arguments as for
     :func:`solve_forecast`.
 
@@ -143,7 +144,8 @@ def bind_seconds(n_control_points, n_cells, dim, stretched=False, aspect=1.0, bu
         iterations = forecast_iterations(n_control_points, dim, stretched, aspect, n_cells, convexity)
         step = working_sets_step_seconds(n_control_points, n_cells, dim, convexity)
     solve = step * iterations * busy * (STRETCHED_STEP_COST if stretched else 1.0)
-    return BindSeconds(MESHING_SECONDS_PER_CELL * n_cells * busy, solve, SECONDS_PER_POINT * n_points * busy)
+    meshing = MESHING_SECONDS_PER_CELL * n_cells * meshing_work * busy
+    return BindSeconds(meshing, solve, SECONDS_PER_POINT * n_points * busy)
 
 
 def working_sets_step_seconds(n_control_points, n_cells, dim, convexity=0.0):
@@ -189,7 +191,7 @@ def dense_tolerance_share(n_control_points, dim, convexity=0.0):
 
 
 def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, busy=1.0, n_points=0,
-                   meshing=False, convexity=0.0):
+                   meshing=False, convexity=0.0, meshing_work=1.0):
     """What a solve will take, told before it starts: its memory and roughly its time.
 
     Parameters
@@ -208,12 +210,15 @@ def solve_forecast(n_control_points, n_cells, dim, stretched=False, aspect=1.0, 
         Whether the bind meshes the cage first (its time is told before the solve's).
     convexity : float
         :attr:`Cage.convexity` (0 when unknown): a convex cage's coordinates spread wider (:func:`spreads_wide`).
+    meshing_work : float
+        The meshing's work relative to an ordinary cage's of as many cells (a cage with narrow wedges takes more:
+        :func:`lbc_core.meshing.sizing.wedge_work`).
 
     Returns
     -------
     str, e.g. "solving 106 control points on about 8000 cells: about 128 MB of memory for the solve and roughly 3 s"
     """
-    told = bind_seconds(n_control_points, n_cells, dim, stretched, aspect, busy, n_points, convexity)
+    told = bind_seconds(n_control_points, n_cells, dim, stretched, aspect, busy, n_points, convexity, meshing_work)
     seconds = told.solve
     text = ""
     if meshing:
