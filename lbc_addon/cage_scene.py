@@ -150,7 +150,7 @@ def select_for_bind(meshes, cage):
     """Select ``meshes`` and ``cage`` alone, the cage active: what Bind binds (in this view layer)."""
     layer = bpy.context.view_layer
     for obj in layer.objects:
-        if obj.select_get():
+        if obj is not None and obj.select_get():  # None: an object a script removed, until the layer updates
             obj.select_set(False)
     for obj in list(meshes) + [cage]:
         if obj.name in layer.objects:

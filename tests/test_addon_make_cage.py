@@ -89,6 +89,9 @@ def test_a_vertex_group_gives_a_partial_cage_around_its_faces_from_a_script(caps
     group = cube.vertex_groups.new(name="Top")
     top = [vertex.index for vertex in cube.data.vertices if vertex.co.z > 0.3]
     group.add(top, 1.0, "REPLACE")
+    gone = mesh_object("Gone", [(0, 0, 0)], [])
+    bpy.context.view_layer.update()
+    bpy.data.objects.remove(gone)  # a script's removal leaves a gap in the view layer until it updates again
     made = api.make_cage(cube, vertices=VERTICES, vertex_group="Top")
     printed = capsys.readouterr().out
     assert "LBC cage: 100% cage made" in printed and "LBC cage:   0% " in printed
@@ -100,8 +103,16 @@ def test_a_vertex_group_gives_a_partial_cage_around_its_faces_from_a_script(caps
     assert z.min() > 0.2 and z.max() > 1.0
 
 
+def _refuse_work(vertices, faces, **options):
+    """lbc_core's generate_cage where no work may start: its own first checks, then a failure."""
+    from lbc_core.cage_generator.mesh_input import input_mesh
+
+    input_mesh(vertices, faces)
+    raise AssertionError("the cage would have been made")
+
+
 def test_a_missing_or_empty_group_a_non_mesh_and_edit_mode_are_refused_before_any_work(monkeypatch):
-    monkeypatch.setattr(cage_maker.cage_job, "generate_cage", None)  # any work would fail on this
+    monkeypatch.setattr(cage_maker.cage_job, "generate_cage", _refuse_work)
     cube = cube_scene()
     cube.vertex_groups.new(name="Empty")
     corners = cube.vertex_groups.new(name="Corners")
@@ -126,6 +137,10 @@ def test_a_missing_or_empty_group_a_non_mesh_and_edit_mode_are_refused_before_an
             bpy.ops.object.lbc_make_cage()
         bpy.ops.object.mode_set(mode="OBJECT")
     bpy.data.objects.remove(handle)
+    plane = mesh_object("Plane", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)])
+    with pytest.raises(api.CageError, match=r"the mesh is flat \(all of it in one plane\)"):
+        api.make_cage(plane)
+    bpy.data.meshes.remove(plane.data)
     assert _scene_state() == before
 
 
@@ -193,6 +208,20 @@ def test_esc_while_a_cage_is_made_leaves_the_scene_unchanged():
     assert harness.run(cancel_in="LBC cage") == {"CANCELLED"}
     assert ({"WARNING"}, "Make Cage cancelled: nothing changed") in harness.reports
     assert _scene_state() == before and not running and harness.status[-1] is None
+
+
+def test_a_mesh_moved_while_its_cage_is_made_gets_no_cage_and_is_told_why():
+    cube = cube_scene()
+    _selecting([cube])
+    harness = _ModalHarness()
+    assert harness.begin(harness.context) == {"RUNNING_MODAL"}
+    cube.location.x += 1.0  # the UI stays usable meanwhile
+    before = _scene_state()
+    harness._worker._thread.join()
+    assert harness.modal(harness.context, _Event("TIMER")) == {"CANCELLED"}
+    assert harness.reports == [({"ERROR"}, "'Cube' was moved or edited while its cage was made: nothing was made; "
+                                           "make the cage again")]
+    assert _scene_state() == before and not running
 
 
 def test_esc_during_the_bind_of_make_cage_and_bind_takes_the_cage_out_again():
