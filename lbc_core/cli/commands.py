@@ -12,7 +12,6 @@ from ..errors import CageError
 from .output import SUMMARY_COLUMNS, ProgressBar, print_json, table, warn
 
 DEFAULT_TABLE1_DATA = Path(__file__).resolve().parents[2] / "tests" / "data" / "cages-3d"
-
 TABLE1_COLUMNS = [
     ("model", "cage", "{}"),
     ("control_points", "n", "{}"),

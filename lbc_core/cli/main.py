@@ -26,11 +26,7 @@ from ..version import __version__
 from .commands import bind_options, run_bind, run_cage, run_compare, run_deform, run_stats, run_table1
 
 SCHEMES = ("lbc", "mvc", "harmonic", "bbw")
-
-
 EXIT_BAD_INPUT = 2
-
-
 EXIT_CANCELLED = 130
 
 
