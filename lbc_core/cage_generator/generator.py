@@ -13,6 +13,7 @@ from ..errors import CageError
 from ..kernel.progress import Progress
 from .check import checked_cage, enclosure
 from .extraction import iso_surface, signed_volume
+from .guard import MeshGuard
 from .hull import ProgressiveHull
 from .mesh_input import input_mesh
 from .simplification import quadric_simplified
@@ -27,8 +28,8 @@ GRID_CELLS = 128
 CLOSING_VOXELS = 2.5
 # The hull starts from this many times the vertices asked (at least START_LEAST), so that its collapses, which
 # enclose, do the shaping (bench/RESULTS.md, "Cage generator").
-START_FACTOR = 4.0
-START_LEAST = 400
+START_FACTOR = 2.5
+START_LEAST = 250
 # A cage within this share of the vertices asked is accepted.
 COUNT_SLACK = 0.15
 # Vertex counts a cage may be asked for.
@@ -185,10 +186,11 @@ def _try(mesh, attempt, steps):
     surface = iso_surface(solid)
     steps(0.35, "simplifying the surface")
     witnesses = witness_points(mesh.vertices, attempt.spacing)
-    start = quadric_simplified(*surface, attempt.start, witnesses, 0.25 * attempt.margin, zero)
+    start = quadric_simplified(*surface, attempt.start, mesh, 0.25 * attempt.margin, attempt.spacing, zero,
+                               steps.check)
     if start is None:
         return None, "the simplified surface did not enclose the mesh"
-    hull = ProgressiveHull(*start, zero, witnesses)
+    hull = ProgressiveHull(*start, zero, witnesses, guard=MeshGuard(mesh.vertices, mesh.triangles))
     collapses = max(1, len(hull.points) - attempt.target)
     hull_steps = steps.part(0.45, 0.9)
     left = hull.simplify(attempt.target, lambda: hull_steps(hull.collapses / collapses, "shaping the cage"))
