@@ -142,6 +142,10 @@ def _add_cage_command(parser, commands, common):
                       "for the mesh)")
     cage.add_argument("--margin", type=float, help="space between mesh and cage, a share of the mesh's "
                       "bounding-box diagonal (default 0.01)")
+    cage.add_argument("--symmetry", choices=("x", "y", "z"), help="make the cage mirror-symmetric about the plane "
+                      "normal to this axis through the middle of the mesh's bounding box (for X-mirror editing)")
+    cage.add_argument("--triangles", action="store_true", help="triangles only (default: pairs of triangles that "
+                      "make good quads merged)")
     cage.set_defaults(command=_run_cage)
     return parser
 
@@ -223,19 +227,22 @@ def _run_cage(args):
     vertices, faces = read_mesh(args.mesh)
     with _Progress("cage", args.quiet) as progress:
         started = time.perf_counter()
-        made = generate_cage(vertices, faces, n_vertices=args.vertices, margin=args.margin, progress=progress)
+        made = generate_cage(vertices, faces, n_vertices=args.vertices, margin=args.margin, symmetry=args.symmetry,
+                             quads=not args.triangles, progress=progress)
         seconds = time.perf_counter() - started
     write_mesh(args.output, made.vertices, made.faces)
     figures = {"output": str(args.output), "vertices": made.vertex_count, "asked_vertices": made.asked_vertices,
-               "faces": int(len(made.faces)), "volume": made.volume, "clearance": made.clearance,
-               "mean_distance": made.mean_distance, "margin": made.margin, "attempts": made.attempts,
+               "faces": int(len(made.faces)), "quads": int(sum(len(face) == 4 for face in made.faces)),
+               "symmetry": made.symmetry, "mirror_error": made.mirror_error, "volume": made.volume,
+               "clearance": made.clearance, "mean_distance": made.mean_distance, "margin": made.margin, "attempts": made.attempts,
                "seconds": seconds, "warnings": list(made.warnings)}
     _warn(made.warnings, args.quiet)
     if args.json:
         _print_json(figures)
     else:
-        print(f"made a cage of {made.vertex_count} vertices and {len(made.faces)} faces around {len(vertices)} "
-              f"vertices, about {made.clearance:.4g} to {made.mean_distance:.4g} from the mesh, in {seconds:.2f} s; "
+        mirrored = f", mirror-symmetric in {made.symmetry}" if made.symmetry else ""
+        print(f"made a cage of {made.vertex_count} vertices and {len(made.faces)} faces ({figures['quads']} quads"
+              f"{mirrored}) around {len(vertices)} vertices, about {made.clearance:.4g} to {made.mean_distance:.4g} from the mesh, in {seconds:.2f} s; "
               f"wrote {args.output}")
     return 0
 

@@ -74,6 +74,9 @@ class ProgressiveHull(HullTests):
         self.pushes = 0
         self.plans = 0
         self.refusals = 0
+        self.volume = _volume(self.points[self.faces], self.points.mean(axis=0))
+        self.volume_limit = np.inf
+        self.full = False  # the last move tried would have taken the volume past its limit
 
     # ------------------------------------------------------------------------------------------------ the surface
 
@@ -154,13 +157,15 @@ class ProgressiveHull(HullTests):
 
     # ------------------------------------------------------------------------------------------------ the queue
 
-    def simplify(self, target, check=None):
-        """Make the cheapest moves until ``target`` vertices are left or none can be made; returns the count.
+    def simplify(self, target, check=None, volume_limit=np.inf):
+        """Make the cheapest moves until ``target`` vertices are left, none can be made, or the next would take the
+        enclosed volume past ``volume_limit``; returns the count.
 
         A move planned before its neighbourhood changed is planned again when it comes to the top of the queue,
         together with the others that come up stale before the next valid one (one batch instead of one each)."""
+        self.volume_limit = volume_limit
         made = None
-        while self.vertex_count > target and made != self.collapses:
+        while self.vertex_count > target and made != self.collapses and not self.full:
             # Every edge planned: at the start, and again when the queue runs dry, since a move refused for what
             # lay near it (not its own ring) may pass now (clothing stopped at 26 vertices for 18 asked).
             made = self.collapses
@@ -177,7 +182,7 @@ class ProgressiveHull(HullTests):
     def _run(self, target, check):
         """Make moves from the queue until ``target`` vertices are left or the queue runs dry."""
         stale = []
-        while self.vertex_count > target and self.queue:
+        while self.vertex_count > target and self.queue and not self.full:
             if check is not None:
                 check()
             entry = heapq.heappop(self.queue)
@@ -228,6 +233,13 @@ class ProgressiveHull(HullTests):
         if not self.passes(changed_faces, before, old_corners, old_normals, relaxed):
             self._undo(undo)
             return None
+        added = _volume(self.points[self.faces[np.asarray(before)[self.alive_faces[before]]]], old_corners[0, 0]) \
+            - _volume(old_corners, old_corners[0, 0])
+        if self.volume + added > self.volume_limit:
+            self._undo(undo)
+            self.full = True
+            return None
+        self.volume += added
         self.collapses += len(collapses)
         return sorted(set(kept).union(*(self.neighbours(a) for a in kept)))
 
@@ -235,6 +247,12 @@ class ProgressiveHull(HullTests):
         image = point.copy()
         image[self.axis] = -image[self.axis]
         return image
+
+
+def _volume(corners, origin):
+    """The signed volume triangles (k, 3, 3) enclose with ``origin`` (that of a closed surface, for any origin)."""
+    a, b, c = corners[:, 0] - origin, corners[:, 1] - origin, corners[:, 2] - origin
+    return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
 
 
 def _stacked(limits):

@@ -10,7 +10,8 @@ from scipy.spatial import cKDTree
 from ..cage import edge_pairing
 from ..kernel.geometry import closest_on_triangles
 from ..kernel.intersections import intersecting_triangles
-from .extraction import compact, signed_volume
+from .extraction import compact, mirrored_whole, signed_volume
+from .hull_tests import mirror_map
 from .check import CageSamples, edges_crossing, mesh_edges
 from .inside import inside_surface
 
@@ -86,6 +87,51 @@ def quadric_simplified(vertices, triangles, target, mesh, clearance, spacing, ze
     return None
 
 
+def symmetric_simplified(half_vertices, half_triangles, target, mesh, clearance, spacing, zero, axis, check=None):
+    """As :func:`quadric_simplified`, exactly symmetric about the plane through 0 normal to ``axis``: the half
+    surface beyond the plane (its boundary in the plane) simplified, welded to its mirror image and pushed out
+    symmetrically. Quadric collapses along an open boundary keep its vertices on it (its ends or its middle) but may
+    leave it a handful of vertices, or one; then the boundary is kept whole, and the hull brings its vertices down.
+    ``mesh`` holds the mesh and its mirror image."""
+    for keep_boundary in (False, True):
+        for factor in TARGET_FACTORS:
+            count = int(round(target * factor))  # the half's triangles: about twice its vertices, half the whole's
+            found = _symmetric_start(half_vertices, half_triangles, count, keep_boundary, axis, zero)
+            if found is None:
+                continue
+            points = pushed_out(*found, mesh, clearance, spacing, check, axis=axis)
+            if points is not None and is_surface(points, found[1], zero):
+                return points, found[1]
+    return None
+
+
+def _symmetric_start(half_vertices, half_triangles, count, keep_boundary, axis, zero):
+    """The half simplified to ``count`` triangles and welded to its image, or None when that is no surface."""
+    import fast_simplification
+
+    if count >= len(half_triangles):
+        points, faces = half_vertices, half_triangles
+    else:
+        points, faces = fast_simplification.simplify(half_vertices.astype(np.float64), half_triangles.astype(np.int64),
+                                                     target_count=count, preserve_border=keep_boundary)
+        points, faces = compact(*without_doubled_faces(np.asarray(points, dtype=float),
+                                                       np.asarray(faces, dtype=np.int64)))
+    if np.any(points[:, axis] < 0.0) or np.any((points[:, axis] == 0.0) & ~_on_boundary(faces, len(points))):
+        return None
+    points, faces = mirrored_whole(points, faces, axis)
+    return (points, faces) if is_surface(points, faces, zero) else None
+
+
+def _on_boundary(triangles, count):
+    """(count,) bool: the vertices on an open surface's boundary (an edge of one triangle only)."""
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    keys, counts = np.unique(edges[:, 0] * count + edges[:, 1], return_counts=True)
+    found = np.zeros(count, dtype=bool)
+    found[keys[counts == 1] // count] = True
+    found[keys[counts == 1] % count] = True
+    return found
+
+
 def without_doubled_faces(vertices, triangles):
     """The triangles without those whose three corners another triangle has too (both copies): quadric collapses
     flatten a thin pocket into two such triangles back to back, whose edges then have four triangles each."""
@@ -111,12 +157,14 @@ def vertex_normals(vertices, triangles):
     return normals / np.maximum(np.linalg.norm(normals, axis=1), 1e-300)[:, None]
 
 
-def pushed_out(vertices, triangles, mesh, clearance, spacing, check=None, rounds=PUSH_ROUNDS):
+def pushed_out(vertices, triangles, mesh, clearance, spacing, check=None, rounds=PUSH_ROUNDS, axis=None):
     """The vertices moved out until every vertex of the InputMesh ``mesh`` is inside and none of its edges crosses
     the surface: the corners of the triangle nearest a vertex outside, or of a triangle an edge crosses, go out along
     that triangle's normal past the vertex (the edge's ends) by ``clearance`` (the nearest vertex may lie on another
     sheet of a thin part); None after ``rounds`` tries. The surface is sampled ``spacing`` apart to find the mesh's
-    edges near it; after the first round only the mesh near the triangles that moved is tested again."""
+    edges near it; after the first round only the mesh near the triangles that moved is tested again. With a mirror
+    ``axis`` (a surface and mesh symmetric about the plane through 0 normal to it) the pushes are made symmetric:
+    of each vertex and its image the longer push, mirrored, and none across the plane for a vertex on it."""
     check = check or (lambda: None)
     vertices = vertices.copy()
     inside = inside_surface(vertices, triangles, mesh.vertices)
@@ -124,6 +172,7 @@ def pushed_out(vertices, triangles, mesh, clearance, spacing, check=None, rounds
     edges = mesh_edges(mesh.triangles)
     crossing, crossed = edges_crossing(mesh.vertices, edges, vertices, triangles, samples, samples.lower(mesh.vertices)[0])
     tree = cKDTree(mesh.vertices)
+    mirror = None if axis is None else mirror_map(vertices, axis)
     reach = float(np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]], axis=1).max())
     left = []
     for _ in range(rounds):
@@ -134,8 +183,8 @@ def pushed_out(vertices, triangles, mesh, clearance, spacing, check=None, rounds
         if len(left) >= 3 and left[-1] >= left[-3]:
             return None
         before = vertices.copy()
-        vertices += _pushes(vertices, triangles, mesh.vertices[~inside], mesh.vertices[edges[crossing]], crossed,
-                            clearance)
+        push = _pushes(vertices, triangles, mesh.vertices[~inside], mesh.vertices[edges[crossing]], crossed, clearance)
+        vertices += push if axis is None else _symmetric(push, mirror, axis)
         moved = np.flatnonzero(np.any(np.any(vertices != before, axis=1)[triangles], axis=1))
         near = _near_moved(tree, before[triangles[moved]], vertices[triangles[moved]], reach)
         inside[near] = inside_surface(vertices, triangles, mesh.vertices[near])
@@ -145,6 +194,22 @@ def pushed_out(vertices, triangles, mesh, clearance, spacing, check=None, rounds
         crossing, crossed = edges_crossing(mesh.vertices, edges, vertices, triangles[moved], moved_samples, lower)
         crossed = moved[crossed]
     return None
+
+
+def _symmetric(push, mirror, axis):
+    """The pushes (n, 3) made exactly symmetric: each vertex takes the longer of its own and its image's mirrored."""
+    image = push[mirror].copy()
+    image[:, axis] = -image[:, axis]
+    own = np.einsum("ij,ij->i", push, push) >= np.einsum("ij,ij->i", image, image)
+    chosen = np.where(own[:, None], push, image)
+    on_plane = mirror == np.arange(len(mirror))
+    chosen[on_plane, axis] = 0.0
+    # A tie between a vertex and its image must resolve the same way for both: the lower index's choice wins.
+    first = np.arange(len(mirror)) < mirror
+    result = chosen.copy()
+    result[mirror[first]] = chosen[first]
+    result[mirror[first], axis] = -chosen[first, axis]
+    return result
 
 
 def _near_moved(tree, old, new, reach):
