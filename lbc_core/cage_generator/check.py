@@ -16,6 +16,8 @@ from scipy.spatial import cKDTree
 from ..cage import make_cage
 from ..kernel.geometry import closest_on_triangles, winding_numbers
 
+# Mesh edges longer than this many sample spacings are tested against the cage's triangles by their boxes.
+LONG_EDGE = 8.0
 # Mesh vertices whose exact distance to the cage is computed at a time, nearest first, for the clearance.
 CLEARANCE_CHUNK = 256
 
@@ -141,12 +143,17 @@ def edges_crossing(mesh_vertices, edges, cage_vertices, cage_triangles, samples,
     ``samples``, a CageSamples) within half the edge's length and the sampling's spacing of the edge's middle."""
     starts, ends = mesh_vertices[edges[:, 0]], mesh_vertices[edges[:, 1]]
     lengths = np.linalg.norm(ends - starts, axis=1)
-    close = np.flatnonzero(np.minimum(lower[edges[:, 0]], lower[edges[:, 1]]) <= 0.5 * lengths)
+    close = np.minimum(lower[edges[:, 0]], lower[edges[:, 1]]) <= 0.5 * lengths
+    # A long edge has too many samples within its reach (their count grows with its length squared): it is tested
+    # against every triangle whose box its box overlaps instead.
+    long = np.flatnonzero(close & (lengths > LONG_EDGE * samples.spacing))
+    close = np.flatnonzero(close & (lengths <= LONG_EDGE * samples.spacing))
     i, j = samples.triangles_near(0.5 * (starts[close] + ends[close]), 0.5 * lengths[close])
     corners = cage_vertices[cage_triangles[j]]
     i = close[i]
     meet = segments_meet_triangles(starts[i], ends[i], corners[:, 0], corners[:, 1], corners[:, 2])
-    return i[meet], j[meet]
+    long_i, long_j = pairs_meeting(starts[long], ends[long], cage_vertices[cage_triangles], lambda: None)
+    return np.concatenate([i[meet], long[long_i]]), np.concatenate([j[meet], long_j])
 
 
 def parts_outside(mesh_vertices, mesh_triangles, cage_vertices, cage_triangles, check):
