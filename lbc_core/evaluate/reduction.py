@@ -59,32 +59,40 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     full_domain = sp.csr_matrix(domain_weights)
     linear = getattr(located, "linear", located)
     outside = getattr(located, "outside", None)
+    # An interpolation that computes its rows by blocks of nearby points offers an order keeping them together, and
+    # its rows' products without the rows (lbc_core.evaluate.smoothing.SmoothInterpolation).
+    order = getattr(located, "order", None)
     progress = Progress.of(progress, cancel)
 
+    def products(rows):
+        if hasattr(located, "products"):
+            return located.products(rows, sparse_domain, domain_vertices)
+        block = located[rows]
+        return block @ sparse_domain, block @ domain_vertices
+
     def reduce_chunk(rows):
-        block = located[rows]  # once: a smooth interpolation computes its rows on demand
-        barycentric = linear[rows]
-        positions = block @ domain_vertices
-        extrapolated = np.zeros(block.shape[0], dtype=bool) if outside is None else outside[rows]
-        inner = np.flatnonzero(~extrapolated)
-        reduced = _reduce_inside(block[inner], barycentric[inner], positions[inner])
-        if len(inner) == block.shape[0]:
+        rows = np.arange(located.shape[0])[rows] if order is None else order[rows]
+        extrapolated = np.zeros(len(rows), dtype=bool) if outside is None else outside[rows]
+        inner, outer = np.flatnonzero(~extrapolated), np.flatnonzero(extrapolated)
+        full, positions = products(rows[inner])
+        reduced = _reduce_inside(full, linear[rows[inner]], positions)
+        if not len(outer):
             return reduced
-        outer = np.flatnonzero(extrapolated)
-        full, targets = _bounded_lever(block[outer], barycentric[outer], positions[outer], full_domain,
+        block = located[rows[outer]]
+        full, targets = _bounded_lever(block, linear[rows[outer]], block @ domain_vertices, full_domain,
                                        domain_vertices)
         signed, met = _reduce_signed(full, controls, targets, threshold, tolerance)
         if not met.all():
             # An extrapolation from too few or one-sided vertices (far outside a thin cage): the point follows its
             # closest point inside, reduced as a point inside.
-            closest = barycentric[outer[~met]]
+            closest = linear[rows[outer[~met]]]
             signed = scatter_rows(sp.diags(met.astype(float)) @ signed, np.flatnonzero(~met),
-                                  _reduce_inside(closest, closest, closest @ domain_vertices))
-        return scatter_rows(scatter_rows(sp.csr_matrix((block.shape[0], controls.shape[0])), inner, reduced), outer,
+                                  _reduce_inside(closest @ sparse_domain, closest, closest @ domain_vertices))
+        return scatter_rows(scatter_rows(sp.csr_matrix((len(rows), controls.shape[0])), inner, reduced), outer,
                             signed)
 
-    def _reduce_inside(block, fallback, positions):
-        reduced, met = _reduce_rows(block @ sparse_domain, controls, positions, threshold, tolerance, progress.check)
+    def _reduce_inside(full, fallback, positions):
+        reduced, met = _reduce_rows(full, controls, positions, threshold, tolerance, progress.check)
         if met.all():
             return reduced
         # A smooth fit from few, one-sided vertices (coarse cells beside a fine cage) can overshoot so far that no
@@ -97,7 +105,8 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         kept.eliminate_zeros()
         return scatter_rows(kept, failed, again)
 
-    return _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
+    weights = _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
+    return weights if order is None else weights[np.argsort(order)]
 
 
 def _bounded_lever(extrapolating, closest, positions, domain_weights, domain_vertices):
