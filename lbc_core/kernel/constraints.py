@@ -255,9 +255,47 @@ def padded_rows(matrix):
 
 
 def csr_from_padded(values, columns, n):
-    """The (m, n) CSR matrix of padded rows (:func:`padded_rows`); zeros are dropped."""
+    """The (m, n) CSR matrix of padded rows (:func:`padded_rows`); zeros are dropped. A row's columns are distinct
+    where its values are not 0, so the rows are read off directly (no sum of duplicates), then sorted."""
     m, K = values.shape
-    rows = np.repeat(np.arange(m), K)
-    matrix = sp.csr_matrix((values.ravel(), (rows, columns.ravel())), shape=(m, n))
-    matrix.eliminate_zeros()
+    present = values != 0
+    indptr = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(np.count_nonzero(present, axis=1), out=indptr[1:])
+    matrix = sp.csr_matrix((values[present], columns[present], indptr), shape=(m, n))
+    matrix.sort_indices()
     return matrix
+
+
+def solve_symmetric(matrices, vectors):
+    """x with A x = b for each small symmetric positive definite A: an LDLᵀ factorisation without pivoting,
+    vectorised over the batch (a few dozen array operations, not one LAPACK call per matrix: several times as fast
+    for 4 × 4 matrices); a matrix with a pivot that is not positive is solved by ``np.linalg.solve`` instead.
+
+    Parameters
+    ----------
+    matrices : (m, D, D) float array
+    vectors : (m, D) float array
+
+    Returns
+    -------
+    (m, D) float array
+    """
+    m, size, _ = matrices.shape
+    entries = np.moveaxis(matrices, 0, -1)  # (D, D, m): each entry one contiguous-enough vector over the batch
+    lower = np.zeros((size, size, m))
+    pivots = np.empty((size, m))
+    for j in range(size):
+        pivots[j] = entries[j, j] - sum(lower[j, k] ** 2 * pivots[k] for k in range(j))
+        for i in range(j + 1, size):
+            lower[i, j] = (entries[i, j] - sum(lower[i, k] * lower[j, k] * pivots[k] for k in range(j))) / pivots[j]
+    solution = np.empty((size, m))
+    for i in range(size):
+        solution[i] = vectors[:, i] - sum(lower[i, k] * solution[k] for k in range(i))
+    solution /= pivots
+    for i in reversed(range(size)):
+        solution[i] -= sum(lower[k, i] * solution[k] for k in range(i + 1, size))
+    solution = solution.T.copy()
+    failed = np.flatnonzero(~(pivots > 0).all(axis=0) | ~np.isfinite(solution).all(axis=1))
+    if len(failed):
+        solution[failed] = np.linalg.solve(matrices[failed], vectors[failed][:, :, None])[:, :, 0]
+    return solution
