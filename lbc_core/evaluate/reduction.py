@@ -9,7 +9,8 @@ where even that cannot (a smooth fit that overshoots, below), the point is reduc
 import numpy as np
 import scipy.sparse as sp
 
-from ..kernel.constraints import csr_from_padded, grow_support, padded_rows, restore_and_check, scatter_rows
+from ..kernel.constraints import (alike_lengths, csr_from_padded, grow_support, padded_rows, restore_and_check,
+                                  scatter_rows)
 from ..kernel.parallel import map_row_chunks
 from ..kernel.progress import Progress
 
@@ -20,6 +21,8 @@ ROWS_PER_CHUNK = 16_384
 # the most its extrapolation's weights may sum to in magnitude, so that no cage vertex moves an outside point much
 # more than itself (bench/RESULTS.md, "Points outside the cage extrapolate in every bind").
 UNITY_TOLERANCE, EXTRAPOLATION_GAIN = 1e-12, 2.0
+# Rows of alike lengths restored together at the fewest (bench/RESULTS.md, "The bind outside the solve, cheaper").
+FEWEST_ALIKE = 512
 
 
 def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance, progress=None,
@@ -173,13 +176,19 @@ def _reduce_rows(full, controls, positions, threshold, tolerance, check):
     kept = full.copy()
     kept.data[kept.data < threshold] = 0.0
     kept.eliminate_zeros()
-    # Most rows reproduce on their kept support: correct them all at once on short padded rows.
-    values, columns = padded_rows(kept)
-    corrected, done = restore_and_check(values, columns, controls, positions, tolerance, check)
+    # Most rows reproduce on their kept support: correct them all at once on short padded rows, rows of alike lengths
+    # together (padded to a chunk's longest, a third of the entries were zeros).
+    done = np.zeros(full.shape[0], dtype=bool)
+    parts, order = [], []
+    for alike in alike_lengths(np.diff(kept.indptr), FEWEST_ALIKE):
+        values, columns = padded_rows(kept[alike])
+        corrected, done[alike] = restore_and_check(values, columns, controls, positions[alike], tolerance, check)
+        parts.append(csr_from_padded(np.where(done[alike][:, None], corrected, 0.0), columns, n))
+        order.append(alike)
+    reduced = (sp.vstack(parts, format="csr")[np.argsort(np.concatenate(order))] if parts
+               else sp.csr_matrix(full.shape))
     if done.all():
-        return csr_from_padded(corrected, columns, n), done
-    reduced = scatter_rows(sp.csr_matrix(full.shape), np.flatnonzero(done),
-                           csr_from_padded(corrected[done], columns[done], n))
+        return reduced, done
     pending = np.flatnonzero(~done)
     grown, done[pending] = grow_support(full[pending], controls, positions[pending], np.diff(kept.indptr)[pending],
                                         tolerance, check)

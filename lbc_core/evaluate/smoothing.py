@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from ..kernel.constraints import solve_symmetric
 from ..kernel.progress import Progress
 from .groups import PointGroups
 from .interpolation import FacetSearch
@@ -49,7 +50,7 @@ _CHUNK = 1 << 14  # points fitted at a time: bounds the (point, vertex) pairs he
 # The side of the cubes whose points are fitted as one block, in median cell edges: smaller cubes search fewer
 # vertices beyond each point's reach, larger ones make fewer, larger blocks (1: a third of the time of 0.5 or 2 on
 # the demo; bench/RESULTS.md, "The bind outside the solve, cheaper").
-CUBE_EDGES = 1.0
+CUBE_EDGES = 2.0
 
 
 class SmoothInterpolation:
@@ -223,10 +224,9 @@ class SmoothInterpolation:
         centre, ratio = np.zeros((len(indices), d)), np.ones(len(indices))
         blocks = []
         for block, cube in self.groups.blocks(indices):
-            candidates = self.groups.candidates(cube)
             origin = self.groups.centres[cube]
-            near = (self.vertices[candidates] - origin) / self.scale
             centre[block] = (self.positions[indices[block]] - origin) / self.scale
+            candidates, near = self._candidates(cube, origin, centre[block])
             weight, ratio[block] = self._kernel_block(centre[block], near, candidates)
             if touched[block].any():
                 weight *= self.paths.block_factors(corners[block], shares[block], candidates)
@@ -236,6 +236,15 @@ class SmoothInterpolation:
         for block, candidates, near, weight in blocks:
             weight *= constants[block] + slopes[block, :, 0] @ near.T
             yield block, candidates, weight, fits[block]
+
+    def _candidates(self, cube, origin, centre):
+        """The cube's candidate vertices within the fit's reach of the box around the block's points (``centre``,
+        scaled): most blocks lie on a surface, flatter than their cube. Returns them and their scaled positions."""
+        candidates = self.groups.candidates(cube)
+        near = (self.vertices[candidates] - origin) / self.scale
+        outside_box = np.maximum(centre.min(axis=0) - near, 0.0) + np.maximum(near - centre.max(axis=0), 0.0)
+        kept = np.einsum("ja,ja->j", outside_box, outside_box) <= 1.0 + 1e-9  # the reach is the scale
+        return candidates[kept], near[kept]
 
     def _kernel_block(self, centre, near, candidates):
         """The kernel's weights (g, C) of a block's points (``centre``, scaled) for its candidates (``near``,
@@ -463,8 +472,9 @@ def fit_coefficients(sums, centre, ratio, terms):
     fits = well_conditioned(moments)
     # Coefficient t of the fit = e_tᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e_t (M is symmetric), an
     # affine function of the vertex, c_t + g_t · local_j, whose c_t and g_t are the point's.
-    solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
-                             np.broadcast_to(np.eye(d + 1)[:, terms], (k, d + 1, len(terms))))
+    usable = np.where(fits[:, None, None], moments, np.eye(d + 1))
+    solved = np.stack([solve_symmetric(usable, np.broadcast_to(np.eye(d + 1)[term], (k, d + 1)))
+                       for term in terms], axis=2)
     slopes = solved[:, 1:] * (ratio * fits)[:, None, None]
     constants = solved[:, 0] * fits[:, None] - np.einsum("ka,kat->kt", centre, slopes)
     return constants, slopes, fits

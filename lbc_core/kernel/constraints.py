@@ -294,6 +294,27 @@ def csr_from_padded(values, columns, n):
     return matrix
 
 
+def alike_lengths(counts, fewest):
+    """Rows (indices into ``counts``, their lengths) in groups of alike lengths, to pad each group to its own
+    longest row, not every row to the longest: up to 8, then up to a third more than the group before (12, 16, 21,
+    28, ...); a group of fewer than ``fewest`` rows joins the next longer one.
+
+    >>> [rows.tolist() for rows in alike_lengths(np.array([3, 20, 5, 9]), 1)]
+    [[0, 2], [3], [1]]
+    """
+    bounds = [8]
+    while bounds[-1] < counts.max(initial=0):
+        bounds.append(bounds[-1] + max(bounds[-1] // 3, 4))
+    group = np.searchsorted(bounds, counts)
+    groups, pending = [], np.zeros(0, dtype=np.int64)
+    for number in range(len(bounds)):
+        pending = np.concatenate([pending, np.flatnonzero(group == number)])
+        if len(pending) >= fewest or number == len(bounds) - 1:
+            groups.append(pending)
+            pending = np.zeros(0, dtype=np.int64)
+    return [rows for rows in groups if len(rows)]
+
+
 def solve_symmetric(matrices, vectors):
     """x with A x = b for each small symmetric positive definite A: an LDLᵀ factorisation without pivoting,
     vectorised over the batch (a few dozen array operations, not one LAPACK call per matrix: several times as fast
