@@ -1,9 +1,11 @@
 """The demo's bind in Blender stage by stage, against Mesh Deform's in the same process; two versions interleaved.
 
-    PYTHONPATH=. .venv/bin/python bench/bind_stages.py [--rounds 3] [--base DIR] [--frames 21] [--cage L10]
+    PYTHONPATH=. .venv/bin/python bench/bind_stages.py [--rounds 3] [--version DIR[+PATH]]... [--frames 21]
+                                                       [--cage L10]
 
-Each round runs one child process per version (this checkout, and ``--base``: another checkout of the repository,
-e.g. ``git archive <commit> | tar -x -C DIR``), in a rotating order. A child builds the demo scene (demo_blender.py's
+Each round runs one child process per version (``--version``, repeated: a checkout of the repository, e.g.
+``git archive <commit> | tar -x -C DIR``, with an optional folder of extra modules on its path after a +, e.g. one
+holding threadpoolctl; default: this checkout), in a rotating order. A child builds the demo scene (demo_blender.py's
 gargoyle, Catmull-Clark subdivided twice: 64,130 vertices, in cage L10), binds a small scene first (so that no
 version pays the imports in the measured bind), then binds the demo through the operator as a user does and Mesh
 Deform (precision 5) on the same mesh, in an order that alternates with the round. Each stage is timed in wall and
@@ -149,9 +151,12 @@ def child(lbc_first, frame_count, cage_level):
           flush=True)
 
 
-def run_child(code, lbc_first, frame_count, cage_level):
-    """One child process on the checkout ``code``: its figures (the JSON the child prints)."""
-    environment = dict(os.environ, PYTHONPATH=os.pathsep.join([str(code), str(code / "tests"), str(HERE)]))
+def run_child(version, lbc_first, frame_count, cage_level):
+    """One child process on the checkout ``version`` (DIR[+PATH]): its figures (the JSON the child prints)."""
+    code, _, extra = version.partition("+")
+    code = Path(code).resolve()
+    paths = [str(code), str(code / "tests"), str(HERE)] + ([extra] if extra else [])
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(paths))
     command = [sys.executable, str(Path(__file__).resolve()), "--child", "--frames", str(frame_count),
                "--cage", cage_level] + (["--lbc-first"] if lbc_first else [])
     run = subprocess.run(command, capture_output=True, text=True, cwd=code, env=environment)
@@ -203,7 +208,7 @@ def summary(results):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--base", type=Path, help="another checkout to interleave with this one")
+    parser.add_argument("--version", action="append", help="a checkout DIR[+PATH of extra modules] (repeated)")
     parser.add_argument("--frames", type=int, default=21, help="frames timed per deformer (0: none)")
     parser.add_argument("--cage", default="L10")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
@@ -213,7 +218,7 @@ def main(argv=None):
         child(args.lbc_first, args.frames, args.cage)
         sys.stdout.flush()
         os._exit(0)  # the bpy module can deadlock in a static destructor at exit
-    versions = [HERE] + ([args.base.resolve()] if args.base else [])
+    versions = args.version or [str(HERE)]
     results = {str(version): [] for version in versions}
     for number in range(args.rounds):
         order = versions[number % len(versions):] + versions[:number % len(versions)]

@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 from ..kernel.constraints import (alike_lengths, csr_from_padded, grow_support, padded_rows, restore_and_check,
                                   scatter_rows)
-from ..kernel.parallel import map_row_chunks
+from ..kernel.parallel import map_row_chunks, one_blas_thread
 from ..kernel.progress import Progress
 
 # Rows reduced by one thread at a time: the padded (rows, K, d+1) work arrays of a million points would take
@@ -108,7 +108,8 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         kept.eliminate_zeros()
         return scatter_rows(kept, failed, again)
 
-    weights = _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
+    with one_blas_thread():
+        weights = _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
     return weights if order is None else weights[np.argsort(order)]
 
 

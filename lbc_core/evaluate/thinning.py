@@ -18,7 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..kernel.constraints import alike_lengths, csr_from_padded, padded_rows, scatter_rows, solve_symmetric
-from ..kernel.parallel import map_row_chunks
+from ..kernel.parallel import map_row_chunks, one_blas_thread
 from ..kernel.progress import Progress
 from .smoothing import DEFAULT_SMOOTHNESS
 
@@ -96,7 +96,8 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     def thin(rows):
         return _thin_rows(weights[rows], controls, positions[rows], floor, max_influences)
 
-    chunks = map_row_chunks(thin, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "thinning the weights"))
+    with one_blas_thread():
+        chunks = map_row_chunks(thin, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "thinning the weights"))
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
 
 
