@@ -228,10 +228,12 @@ class SmoothInterpolation:
             centre[block] = (self.positions[indices[block]] - origin) / self.scale
             candidates, near = self._candidates(cube, origin, centre[block])
             weight, ratio[block] = self._kernel_block(centre[block], near, candidates)
-            if touched[block].any():
-                weight *= self.paths.block_factors(corners[block], shares[block], candidates)
-            sums[block] = weight @ moment_basis(near)
             blocks.append((block, candidates, near, weight))
+        if touched.any():
+            self.paths.apply_factors([(block, candidates, weight) for block, candidates, _, weight in blocks],
+                                     corners, shares)
+        for block, _, near, weight in blocks:
+            sums[block] = weight @ moment_basis(near)
         constants, slopes, fits = fit_coefficients(sums, centre, ratio, [0])
         for block, candidates, near, weight in blocks:
             weight *= constants[block] + slopes[block, :, 0] @ near.T
