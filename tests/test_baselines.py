@@ -165,3 +165,15 @@ def test_baselines_bind_far_from_the_origin_in_the_unit_frame(scheme):
     for each in (binding, shared):
         error = np.abs(each.deform(cage * 1.5 + 3.0) - (points * 1.5 + 3.0)).max()
         assert error <= 8 * np.spacing(1.5e6 + 3.0)
+
+
+def test_a_domain_of_another_cage_is_refused_with_what_to_do():
+    """Comparing on an LBC binding's mesh only makes sense for the same cage: another cage's mesh is refused up front,
+    not met as an index error deep in the boundary values."""
+    import lbc_core
+
+    points = np.random.default_rng(4).uniform(0.2, 0.8, (20, 3))
+    other = lbc_core.bind(CUBE * 1.1 - 0.05, CUBE_QUADS, points, cells=300)
+    for bind_baseline in (lbc_core.bind_mvc, lbc_core.bind_harmonic):
+        with pytest.raises(lbc_core.CageError, match="mesh of another cage.*leave domain out"):
+            bind_baseline(CUBE, CUBE_QUADS, points, domain=other.domain)

@@ -351,6 +351,7 @@ def test_fuzz_lbc_with_damaged_binding_files(tmp_path, capsys, logo_binding, cut
 
 def test_a_flat_cage_with_faces_binds_in_2d_as_in_blender(tmp_path, capsys):
     from lbc_addon import jobs
+    from lbc_addon.options import AddonOptions
     from lbc_core.binding.files import load_binding
     from lbc_core.cage.planar import flatten
 
@@ -368,8 +369,7 @@ def test_a_flat_cage_with_faces_binds_in_2d_as_in_blender(tmp_path, capsys):
     # The add-on's solve of the same scene (the request geometry.snapshot makes, with every option at its default but
     # the add-on's own thinning, whose Threshold of 1e-12 keeps every weight).
     read_cage, read_points = read_mesh(tmp_path / "cage.obj")[0], read_mesh(tmp_path / "points.ply")[0]
-    options = {"cells": 0, "weighting": "quadratic", "epsilon": 0.0, "tolerance": 0.0, "thinning": 1e-12,
-               "influences": 0, "mode": "AUTO", "smoothness": 0.5}
+    options = AddonOptions(thinning=1e-12)
     flat = flatten(read_cage, quads, read_points)
     result = jobs.solve(jobs.BindRequest(1, 2, "Mesh", read_points, read_cage, quads, flat, options, "", ""))
     blender = np.zeros((len(points), len(cage)))

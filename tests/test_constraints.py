@@ -80,3 +80,26 @@ def test_projection_finds_the_weights_off_a_plane_its_candidates_all_lie_in():
     unity, reproduction = constraint_residuals(projected, controls, points)
     assert unity.max() < 1e-12 and reproduction.max() < 1e-12 and projected.min() >= 0
     assert projected[0, 3] == 0.0  # the nearest such weights: none on the point on the plane's far side
+
+
+def test_the_batched_symmetric_solve_agrees_with_lapack_and_takes_it_for_a_singular_matrix():
+    from lbc_core.kernel.constraints import solve_symmetric
+
+    rng = np.random.default_rng(3)
+    factors = rng.random((200, 4, 9))
+    matrices = factors @ np.swapaxes(factors, 1, 2) + 1e-3 * np.eye(4)
+    vectors = rng.random((200, 4))
+    matrices[5] = np.diag([1.0, -2.0, 3.0, 4.0])  # a negative pivot: LAPACK's answer
+    solved = solve_symmetric(matrices, vectors)
+    assert np.abs(solved - np.linalg.solve(matrices, vectors[:, :, None])[:, :, 0]).max() < 1e-9
+
+
+def test_rows_of_alike_lengths_are_grouped_each_once():
+    from lbc_core.kernel.constraints import alike_lengths
+
+    counts = np.random.default_rng(5).integers(0, 40, 3000)
+    groups = alike_lengths(counts, 100)
+    assert np.array_equal(np.sort(np.concatenate(groups)), np.arange(len(counts)))
+    assert all(len(rows) >= 100 for rows in groups[:-1])
+    longest = [counts[rows].max() for rows in groups]
+    assert longest == sorted(longest) and len(groups) > 2

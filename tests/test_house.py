@@ -183,3 +183,15 @@ def test_the_checker_looks_into_module_level_blocks_and_nested_functions():
         ''') + "".join(f"        z{k} = {k}\n" for k in range(MAX_BODY_LINES + 1))
     assert buried_constants(source) == [(6, ["LIMIT"], 4)]
     assert [name for _, name, _ in long_functions(source)] == ["outer", "outer.inner"]
+
+
+def test_no_merge_conflict_markers_are_left_in_the_tree():
+    """A merge once committed its conflict markers into the changelog unseen: no tracked text file may hold one."""
+    import subprocess
+
+    listed = subprocess.run(["git", "ls-files", "*.py", "*.md", "*.toml", "*.cfg", "Makefile"], cwd=ROOT,
+                            capture_output=True, text=True).stdout.split()
+    marked = [f"{path}:{number}" for path in listed if (ROOT / path).is_file()
+              for number, line in enumerate((ROOT / path).read_text(encoding="utf-8").splitlines(), 1)
+              if re.match(r"(<{7}|>{7}) |={7}$", line)]
+    assert not marked, f"merge conflict markers left in: {', '.join(marked)}"

@@ -313,3 +313,38 @@ def test_a_tentacle_tip_poking_out_of_its_cage_curls_with_it():
     extrapolated = capsule.kink_figures(mesh, mesh + binding.weights @ displacement, faces)  # the bind's own rows
     assert extrapolated["folded"] == 0 and extrapolated["flipped"] == 0, (extrapolated, nearest)
     assert extrapolated["max"] < 0.5 * nearest["max"], (extrapolated, nearest)
+
+
+def test_every_vertex_within_reach_of_a_point_is_a_candidate_of_its_cube():
+    """The fit's blocks search once per cube: every vertex within the reach of any of its points must be among the
+    cube's candidates, and the order keeps each cube's points together."""
+    from lbc_core.evaluate.groups import PointGroups
+
+    rng = np.random.default_rng(7)
+    vertices = rng.random((600, 3))
+    points = np.vstack([rng.random((900, 3)), vertices[:20]])  # some on a vertex, some on a cube's face
+    reach = 0.17
+    groups = PointGroups(points, vertices, cKDTree(vertices), 0.1, reach)
+    for point, cube in zip(points, groups.cube):
+        near = np.flatnonzero(np.linalg.norm(vertices - point, axis=1) <= reach)
+        assert set(near) <= set(groups.candidates(cube))
+    assert np.all(np.diff(groups.cube[groups.order]) >= 0)
+
+
+def test_the_rows_products_are_the_rows_times_the_values(scene):
+    """``products`` applies the fit block by block without forming the rows: the same as the rows times the values,
+    inside, on the cage, outside, and through the domain, for rows in any order."""
+    domain = scene["binding"].domain
+    points = np.vstack([scene["binding"].points, scene["cage"][:3] * 1.05])  # three points outside the cage
+    located, outside, _ = interpolation_matrix(domain.vertices, domain.cells, points)
+    smooth = SmoothInterpolation(domain.vertices, domain.cells, located, points=points, outside=outside)
+    weights = scene["binding"].domain_weights
+    import scipy.sparse as sp
+
+    rows = np.random.default_rng(1).permutation(len(points))[:700]
+    rows = np.concatenate([rows, np.flatnonzero(outside)])
+    full, positions = smooth.products(rows, sp.csr_matrix(weights), domain.vertices)
+    expected = smooth[rows]
+    assert abs(full - expected @ weights).max() < 1e-12
+    assert np.abs(positions - expected @ domain.vertices).max() < 1e-12
+    assert outside.sum() == 3

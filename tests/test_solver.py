@@ -509,14 +509,12 @@ def test_whole_working_sets_reach_the_dense_optimum():
     """A UV sphere spreads every coordinate over its 114 control points: on whole working sets the residuals fall
     long before the objective settles, so they stop at a fifth of the tolerance; within 0.1 % of the dense solver
     run tight (0.36 % above it at the plain tolerance). Progress says why the residual jumps there."""
-    from lbc_core.solve import dense as dense_solver
-
     problem = _corpus_problem("uv-sphere", cells=2000)
     messages = []
     result = solve_on_mesh(*problem, splitting="working sets",
                            progress=lambda fraction, message: messages.append(message))
     assert sum("a tighter stop" in message for message in messages) == 1
-    reference = dense_solver.solve_on_mesh(*problem, tolerance=1e-5, max_iterations=20000)
+    reference = solve_on_mesh(*problem, tolerance=1e-5, max_iterations=20000, splitting="dense")
     assert result.converged and reference.converged
     assert result.objective <= 1.001 * reference.objective
     assert_quality(problem[0], result.weights, problem[4], problem[2], problem[3])

@@ -272,7 +272,7 @@ def build(platforms, pythons, output, write_manifest):
     check_requirements(every_wheel)
     text = MANIFEST.read_text()
     listed = manifest_wheels(text)
-    expected = sorted(f"./wheels/{path.name}" for path in every_wheel)
+    expected = sorted({f"./wheels/{path.name}" for path in every_wheel})  # a pure-Python wheel serves every zip
     if set(platforms) == set(PLATFORM_TAGS) and set(pythons) == set(PYTHON_LINES) and listed != expected:
         if not write_manifest:
             missing = sorted(set(expected) - set(listed))

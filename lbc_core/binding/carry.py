@@ -31,14 +31,10 @@ from ..meshing.tetrahedra import polish
 # Share of its radius ratio a carried cell with a corner off the cage must keep (bench/RESULTS.md, "The warm re-bind
 # keeps a carried mesh whose squashed cells lie wholly on the cage").
 QUALITY_KEPT = 0.25
-
-
 # A carried boundary face may cross a cage face that the edit bent (a quad's diagonal, an n-gon's split) as a chord:
 # its corners stay on the cage, its inside leaves it. Up to this share of the median cell edge, the carried mesh is
 # kept: binds were measured as close to a bind from scratch as two binds from scratch are to each other.
 CHORD_KEPT = 0.5
-
-
 # A cage edge the edit bends is followed by splitting the mesh edges it crosses (following_bent_edges), except within
 # this share of a mesh edge's length from its ends: a split so near a corner would make a sliver, and the mesh
 # follows the cage edge there within that share already.

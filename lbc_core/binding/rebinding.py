@@ -68,13 +68,9 @@ from .record import WARM, BindOutcome, SolvedAgain
 # Rings of mesh vertices around the moved control points' supports solved again, room for a support to grow
 # (bench/RESULTS.md, "A Rebind's fixed costs, and one ring around the supports").
 FREE_RINGS = 1
-
-
 # Change (largest coordinate change plus move in median cell edges, Binding.stale) under which the points near a domain
 # vertex keep their rows (bench/RESULTS.md, "Points near small changes keep their rows").
 STALE = 1e-2
-
-
 # Largest moves over the diagonal, summed over warm re-binds since the last bind from scratch, past which a re-bind
 # binds from scratch (bench/RESULTS.md, "Warm re-binds that add up").
 CARRY_LIMIT = 0.08

@@ -47,25 +47,15 @@ from .topology import check_closed_manifold, check_self_intersection, orient_out
 from .triangulate import collapse_welded, face_list, fans, poke, report_degenerate, triangulate_faces
 
 DEFAULT_WELD_TOLERANCE = 1e-9  # relative to the bounding-box diagonal
-
-
 # A vertex a million times farther from the cage's middle than the rest of the cage is wide is no part of it: it would
 # set the welding tolerance (DEFAULT_WELD_TOLERANCE of the diagonal) and weld every other vertex into one.
 FAR_OFF = 1e6
-
-
 ZERO_LENGTH = 1e-9  # relative to the bounding-box diagonal
-
-
 # Control points at most: larger cages are refused before any work, as no machine would bind them in reasonable time
 # (bench/RESULTS.md, "The control-point limit"); pipeline.check_request refuses smaller ones that do not fit memory.
 MAX_CONTROL_POINTS = 2000
-
-
 # Closed triangle meshes have about 2 triangles per vertex; 4 leaves room for handles and unwelded input.
 _FACES_PER_CONTROL_POINT = 4
-
-
 # Unwelded triangle soups repeat each vertex about 6 times.
 _INPUT_VERTICES_PER_CONTROL_POINT = 8
 

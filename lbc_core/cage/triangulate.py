@@ -23,22 +23,14 @@ from .messages import NamesVertices, count_of, some_indices, some_items
 # Cylinder's 32-gon caps fanned out from one vertex, whose coordinate summed to 466 over the points inside against
 # 18-166 for the others (bench/RESULTS.md).
 POKE_SIDES = 5
-
-
 # Least distance of an n-gon's centre inside each side's line to poke it, a share of its largest distance to a vertex
 # (bench/RESULTS.md, "n-gons poked at their vertices' mean"); a convex n-gon's, less (bench/RESULTS.md, "A convex
 # poked n-gon's values").
 POKE_HEIGHT = 0.1
-
-
 POKE_HEIGHT_CONVEX = 0.02
-
-
 # n-gons from this many sides that could not be poked and whose ear clipping fans out from one vertex are named in the
 # cage's warnings.
 FAN_NOTICE_SIDES = 8
-
-
 # Share by which a quad's diagonals may differ and still split it from its first vertex, so that a small edit keeps
 # its split (bench/RESULTS.md, "Warm re-bind of Blender's quad cages").
 QUAD_SPLIT_TIE = 0.25

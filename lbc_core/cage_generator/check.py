@@ -1,9 +1,11 @@
-"""The last word on a generated cage: lbc's own cage checks (:func:`lbc_core.cage.make.make_cage`) and enclosure, exactly.
+"""The last word on a generated cage: lbc's own cage checks (:func:`lbc_core.cage.make.make_cage`) and enclosure,
+exactly.
 
 Enclosure is checked without assuming anything of the mesh: no mesh edge crosses or touches a cage triangle, no cage
 edge crosses or touches a mesh triangle, so each connected part of the mesh is wholly inside or wholly outside, and
-one vertex of each part (every loose vertex too) has winding number 1. A grid of cells the cage passes through finds
-the few edges and triangles near it, so the exact tests run on those only."""
+one vertex of each part (every loose vertex too) has winding number 1. The distance from each mesh vertex to samples
+of the cage bounds its distance to the cage from below, so the exact tests run only on the edges and triangles that
+could reach it (bench/RESULTS.md, "Cage generator")."""
 
 from dataclasses import dataclass
 
@@ -13,8 +15,12 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..cage import make_cage
-from ..kernel.geometry import winding_numbers
-from .voxels import surface_samples
+from ..kernel.geometry import closest_on_triangles, winding_numbers
+
+# Mesh edges longer than this many sample spacings are tested against the cage's triangles by their boxes.
+LONG_EDGE = 8.0
+# Mesh vertices whose exact distance to the cage is computed at a time, nearest first, for the clearance.
+CLEARANCE_CHUNK = 256
 
 
 @dataclass(frozen=True)
@@ -48,7 +54,8 @@ def segments_meet_triangles(p, q, a, b, c):
     """(P,) bool: segment p-q meets triangle a-b-c, touching included (each (P, 3))."""
     low = np.minimum(p, q)
     high = np.maximum(p, q)
-    boxes = np.all(low <= np.maximum(np.maximum(a, b), c), axis=1) & np.all(high >= np.minimum(np.minimum(a, b), c), axis=1)
+    boxes = (np.all(low <= np.maximum(np.maximum(a, b), c), axis=1)
+             & np.all(high >= np.minimum(np.minimum(a, b), c), axis=1))
     s1, s2 = orientation(p, a, b, c), orientation(q, a, b, c)
     t1, t2, t3 = orientation(p, q, a, b), orientation(p, q, b, c), orientation(p, q, c, a)
     sides = (s1 * s2 <= 0)
@@ -56,73 +63,100 @@ def segments_meet_triangles(p, q, a, b, c):
     return boxes & sides & around
 
 
-def _cell_keys(points, cell):
-    index = np.floor(points / cell).astype(np.int64) + (1 << 20)
-    return (index[:, 0] << 42) | (index[:, 1] << 21) | index[:, 2]
-
-
-def _near_cells(points, cell):
-    """Sorted keys of the cells holding ``points`` and of their 26 neighbours."""
-    index = np.unique(np.floor(points / cell).astype(np.int64), axis=0)
-    shifts = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij"), axis=-1).reshape(-1, 3)
-    around = (index[:, None, :] + shifts[None]).reshape(-1, 3)
-    return np.unique(_cell_keys((around + 0.5) * cell, cell))
-
-
-def _pairs_meeting(starts, ends, corners, check):
-    """Count of segments meeting triangles among all pairs whose boxes overlap (both sets small)."""
-    count = 0
+def pairs_meeting(starts, ends, corners, check):
+    """(i, j) index arrays of the segments and triangles that meet, among all pairs whose boxes overlap (both sets
+    small)."""
+    found_i, found_j = [np.empty(0, dtype=np.int64)], [np.empty(0, dtype=np.int64)]
     low, high = corners.min(axis=1), corners.max(axis=1)
     for chunk in np.array_split(np.arange(len(starts)), max(1, len(starts) * len(corners) // 2_000_000)):
         check()
         seg_low, seg_high = np.minimum(starts[chunk], ends[chunk]), np.maximum(starts[chunk], ends[chunk])
-        i, j = np.nonzero(np.all(seg_low[:, None] <= high[None], axis=2) & np.all(seg_high[:, None] >= low[None], axis=2))
+        i, j = np.nonzero(np.all(seg_low[:, None] <= high[None], axis=2)
+                          & np.all(seg_high[:, None] >= low[None], axis=2))
         i = chunk[i]
-        count += int(np.count_nonzero(segments_meet_triangles(starts[i], ends[i], corners[j, 0], corners[j, 1], corners[j, 2])))
-    return count
+        meet = segments_meet_triangles(starts[i], ends[i], corners[j, 0], corners[j, 1], corners[j, 2])
+        found_i.append(i[meet]), found_j.append(j[meet])
+    return np.concatenate(found_i), np.concatenate(found_j)
 
 
-def _edges(triangles):
+def mesh_edges(triangles):
+    """(E, 2) int array: each edge of the triangles once, lower index first."""
     edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    return np.unique(edges, axis=0)
+    base = int(triangles.max()) + 1
+    keys = np.unique(edges[:, 0].astype(np.int64) * base + edges[:, 1])
+    return np.stack([keys // base, keys % base], axis=1)
 
 
-def crossings(mesh_vertices, mesh_triangles, cage_vertices, cage_triangles, cell, check):
-    """Mesh edges meeting cage triangles plus cage edges meeting mesh triangles, tested exactly near the cage."""
-    near = _near_cells(surface_samples(cage_vertices, cage_triangles, cell / 2), cell)
-    edges = _edges(mesh_triangles)
-    lengths = np.linalg.norm(mesh_vertices[edges[:, 1]] - mesh_vertices[edges[:, 0]], axis=1)
-    steps = np.maximum(1, np.ceil(lengths / (cell / 2))).astype(np.int64)
-    owner = np.repeat(np.arange(len(edges)), steps + 1)
-    t = np.arange(len(owner)) - np.repeat(np.cumsum(steps + 1) - steps - 1, steps + 1)
-    t = t / np.repeat(steps, steps + 1)
-    samples = mesh_vertices[edges[owner, 0]] * (1 - t[:, None]) + mesh_vertices[edges[owner, 1]] * t[:, None]
-    close = np.unique(owner[np.isin(_cell_keys(samples, cell), near)])
-    cage_corners = cage_vertices[cage_triangles]
-    found = _pairs_meeting(mesh_vertices[edges[close, 0]], mesh_vertices[edges[close, 1]], cage_corners, check)
-    triangle_samples, triangle_owner = _triangle_samples(mesh_vertices, mesh_triangles, cell / 2)
-    close = np.unique(triangle_owner[np.isin(_cell_keys(triangle_samples, cell), near)])
-    cage_edges = _edges(cage_triangles)
-    found += _pairs_meeting(cage_vertices[cage_edges[:, 0]], cage_vertices[cage_edges[:, 1]],
-                            mesh_vertices[mesh_triangles[close]], check)
-    return found
+class CageSamples:
+    """Points on each cage triangle, no two neighbours farther apart than ``spacing`` (its corners and a barycentric
+    lattice), in a k-d tree: every point of a triangle lies within ``spacing`` of one of its own samples, which
+    bounds distances to the cage from below and finds the triangles near a point."""
+
+    def __init__(self, vertices, triangles, spacing):
+        corners = vertices[triangles]
+        longest = np.max(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2), axis=1)
+        steps = np.maximum(1, np.ceil(longest / spacing)).astype(np.int64)
+        points, owners = [], []
+        for k in np.unique(steps):
+            i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+            keep = i + j <= k
+            bary = np.stack([i[keep], j[keep], k - i[keep] - j[keep]], axis=1) / k
+            chosen = np.flatnonzero(steps == k)
+            points.append(np.einsum("sk,tkd->tsd", bary, corners[chosen]).reshape(-1, 3))
+            owners.append(np.repeat(chosen, len(bary)))
+        self.owners = np.concatenate(owners)
+        self.tree = cKDTree(np.concatenate(points))
+        self.spacing = float(spacing)
+
+    def lower(self, points):
+        """((P,) lower bounds of each point's distance to the cage, (P,) its distance to the nearest sample)."""
+        near, _ = self.tree.query(points)
+        return near - self.spacing, near
+
+    def triangles_near(self, points, radius):
+        """(i, j): the pairs of point i and cage triangle j with a sample within ``radius`` (P,) of the point."""
+        found = self.tree.query_ball_point(points, radius + self.spacing)
+        counts = np.array([len(items) for items in found], dtype=np.int64)
+        if not counts.sum():
+            return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+        owners = self.owners[np.concatenate(found).astype(np.int64)]
+        pairs = np.stack([np.repeat(np.arange(len(points)), counts), owners], axis=1)
+        pairs = np.unique(pairs, axis=0)
+        return pairs[:, 0], pairs[:, 1]
 
 
-def _triangle_samples(vertices, triangles, spacing):
-    """(points, owning triangle) with every triangle sampled no sparser than ``spacing`` (its corners at least)."""
-    corners = vertices[triangles]
-    longest = np.max(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2), axis=1)
-    big = np.flatnonzero(longest > spacing)
-    points = [corners.reshape(-1, 3)]
-    owners = [np.repeat(np.arange(len(triangles)), 3)]
-    if len(big):
-        points.append(surface_samples(vertices, triangles[big], spacing)[len(vertices):])
-        steps = np.maximum(1, np.ceil(longest[big] / spacing)).astype(np.int64)
-        counts = (steps + 1) * (steps + 2) // 2
-        # surface_samples lists the lattice points grouped by step count, in order of the steps' values.
-        order = np.argsort(steps, kind="stable")
-        owners.append(np.repeat(big[order], counts[order]))
-    return np.concatenate(points), np.concatenate(owners)
+def crossings(mesh_vertices, mesh_triangles, cage_vertices, cage_triangles, samples, lower, check):
+    """Mesh edges meeting cage triangles plus cage edges meeting mesh triangles, tested exactly on the mesh's edges
+    and triangles that can reach the cage: those with a point nearer their corners than the corners' ``lower``
+    bounds of their distance to the cage (any point of an edge lies within half its length of an end, any point of a
+    triangle within its longest edge of a corner)."""
+    edges = mesh_edges(mesh_triangles)
+    edge_hits, _ = edges_crossing(mesh_vertices, edges, cage_vertices, cage_triangles, samples, lower)
+    corners = mesh_vertices[mesh_triangles]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    close = np.flatnonzero(lower[mesh_triangles].min(axis=1) <= longest)
+    cage_edges = mesh_edges(cage_triangles)
+    hits, _ = pairs_meeting(cage_vertices[cage_edges[:, 0]], cage_vertices[cage_edges[:, 1]], corners[close], check)
+    return len(edge_hits) + len(hits)
+
+
+def edges_crossing(mesh_vertices, edges, cage_vertices, cage_triangles, samples, lower):
+    """(i, j): the pairs of mesh edge i (of ``edges``, (E, 2)) and cage triangle j that meet, among the edges that
+    can reach the cage (``lower``: bounds of the vertices' distances to it) and the triangles with a sample (of
+    ``samples``, a CageSamples) within half the edge's length and the sampling's spacing of the edge's middle."""
+    starts, ends = mesh_vertices[edges[:, 0]], mesh_vertices[edges[:, 1]]
+    lengths = np.linalg.norm(ends - starts, axis=1)
+    close = np.minimum(lower[edges[:, 0]], lower[edges[:, 1]]) <= 0.5 * lengths
+    # A long edge has too many samples within its reach (their count grows with its length squared): it is tested
+    # against every triangle whose box its box overlaps instead.
+    long = np.flatnonzero(close & (lengths > LONG_EDGE * samples.spacing))
+    close = np.flatnonzero(close & (lengths <= LONG_EDGE * samples.spacing))
+    i, j = samples.triangles_near(0.5 * (starts[close] + ends[close]), 0.5 * lengths[close])
+    corners = cage_vertices[cage_triangles[j]]
+    i = close[i]
+    meet = segments_meet_triangles(starts[i], ends[i], corners[:, 0], corners[:, 1], corners[:, 2])
+    long_i, long_j = pairs_meeting(starts[long], ends[long], cage_vertices[cage_triangles], lambda: None)
+    return np.concatenate([i[meet], long[long_i]]), np.concatenate([j[meet], long_j])
 
 
 def parts_outside(mesh_vertices, mesh_triangles, cage_vertices, cage_triangles, check):
@@ -137,22 +171,34 @@ def parts_outside(mesh_vertices, mesh_triangles, cage_vertices, cage_triangles, 
     return int(np.count_nonzero(winding < 0.5))
 
 
-def distances(mesh_vertices, cage_vertices, cage_triangles, spacing):
-    """(clearance, mean distance): about the least distance from a mesh vertex to the cage's surface, and the mean
-    distance from a cage vertex to the nearest mesh vertex."""
-    cage_points = surface_samples(cage_vertices, cage_triangles, spacing)
-    clearance = float(cKDTree(cage_points).query(mesh_vertices)[0].min())
+def distances(mesh_vertices, cage_vertices, cage_triangles, near, spacing):
+    """(clearance, mean distance): the least distance from a mesh vertex to the cage's surface (exact, among the
+    vertices whose distance ``near`` to the cage's samples ``spacing`` apart could make them the nearest), and the
+    mean distance from a cage vertex to the nearest mesh vertex."""
+    corners = cage_vertices[cage_triangles]
+    order = np.argsort(near, kind="stable")
+    best = np.inf
+    for start in range(0, len(order), CLEARANCE_CHUNK):
+        chosen = order[start:start + CLEARANCE_CHUNK]
+        if near[chosen[0]] - spacing > best:
+            break
+        repeated = np.repeat(mesh_vertices[chosen], len(corners), axis=0)
+        tiled = np.tile(corners, (len(chosen), 1, 1))
+        squared, _ = closest_on_triangles(repeated, tiled[:, 0], tiled[:, 1], tiled[:, 2])
+        best = min(best, float(np.sqrt(squared.min())))
     mean = float(cKDTree(mesh_vertices).query(cage_vertices)[0].mean())
-    return clearance, mean
+    return best, mean
 
 
 def enclosure(mesh, cage_vertices, cage_triangles, cell, check=None):
-    """An :class:`Enclosure` of the InputMesh ``mesh`` by the closed, outward cage, near-cage tests on a grid of
-    ``cell``."""
+    """An :class:`Enclosure` of the InputMesh ``mesh`` by the closed, outward cage; the cage sampled ``cell`` apart
+    to find the parts of the mesh near it."""
     check = check or (lambda: None)
-    crossed = crossings(mesh.vertices, mesh.triangles, cage_vertices, cage_triangles, cell, check)
+    samples = CageSamples(cage_vertices, cage_triangles, cell)
+    lower, near = samples.lower(mesh.vertices)
+    crossed = crossings(mesh.vertices, mesh.triangles, cage_vertices, cage_triangles, samples, lower, check)
     outside = parts_outside(mesh.vertices, mesh.triangles, cage_vertices, cage_triangles, check)
-    clearance, mean = distances(mesh.vertices, cage_vertices, cage_triangles, cell / 4)
+    clearance, mean = distances(mesh.vertices, cage_vertices, cage_triangles, near, cell)
     return Enclosure(crossed, outside, 0.0 if crossed else clearance, mean)
 
 

@@ -8,6 +8,8 @@ from itertools import permutations
 
 import numpy as np
 
+from .voxels import VoxelSolid
+
 # Grid values within this share of a voxel of the level are moved off it: a corner exactly on the level would put
 # several surface vertices at one place.
 OFF_LEVEL = 1e-4
@@ -103,3 +105,29 @@ def signed_volume(vertices, triangles):
     """The volume a closed triangle surface encloses, positive when it faces out."""
     a, b, c = (vertices[triangles[:, k]] for k in range(3))
     return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+
+
+def half_iso_surface(solid, axis):
+    """The level 0 of a field symmetric about the plane through 0 normal to ``axis`` (a VoxelSolid whose voxel layer
+    ``k`` lies on it, ``k`` voxels from each end) on the half beyond the plane: an open surface whose boundary lies
+    in the plane, its vertices there exactly on it. With its mirror image (:func:`mirrored_whole`) it is the whole
+    level, exactly symmetric: the Kuhn triangulation is not symmetric, but the mirror images of its faces in the
+    plane are those faces, so the halves meet edge to edge."""
+    k = solid.field.shape[axis] // 2
+    half = np.take(solid.field, np.arange(k, solid.field.shape[axis]), axis=axis)
+    origin = solid.origin.copy()
+    origin[axis] = 0.0
+    return iso_surface(VoxelSolid(half, origin, solid.spacing, solid.parts_joined))
+
+
+def mirrored_whole(vertices, triangles, axis):
+    """A surface with its boundary in the plane through 0 normal to ``axis`` (on the side x > 0 of it) and its mirror
+    image, as one closed surface: the vertices on the plane shared, the image's triangles turned to face out."""
+    on_plane = vertices[:, axis] == 0.0
+    image_index = np.arange(len(vertices))
+    image_index[~on_plane] = len(vertices) + np.arange(np.count_nonzero(~on_plane))
+    image = vertices[~on_plane].copy()
+    image[:, axis] = -image[:, axis]
+    whole = np.vstack([vertices, image])
+    return whole, np.vstack([triangles, image_index[triangles][:, ::-1]])
+

@@ -1,9 +1,10 @@
 """The cage generator's stages in order, and the ladder of retries that keeps a failing cage from ever coming out.
 
 voxels (the solid around the mesh) → extraction (its surface) → simplification (quadric, to the hull's start) →
-hull (enclosing collapses to the vertex count) → check (lbc's cage checks, exact enclosure). A stage that cannot do
-its part, or a cage that fails the check, sends the generator to its next attempt (a wider margin, a larger closing,
-a larger start); when none is left it raises :class:`CageGenerationFailed` saying what to try."""
+hull (enclosing collapses to the vertex count) → check (lbc's cage checks, exact enclosure). With a mirror plane
+every stage keeps the cage exactly symmetric (:mod:`lbc_core.cage_generator.symmetry`). A stage that cannot do its
+part, or a cage that fails the check, sends the generator to its next attempt (a wider margin, a larger closing, a
+larger start); when none is left it raises :class:`CageGenerationFailed` saying what to try."""
 
 from dataclasses import dataclass
 
@@ -12,10 +13,14 @@ import numpy as np
 from ..errors import CageError
 from ..kernel.progress import Progress
 from .check import checked_cage, enclosure
-from .extraction import iso_surface, signed_volume
+from .extraction import half_iso_surface, iso_surface, signed_volume
+from .guard import MeshGuard
 from .hull import ProgressiveHull
-from .mesh_input import input_mesh
-from .simplification import quadric_simplified
+from .hull_tests import mirror_map
+from .mesh_input import InputMesh, input_mesh
+from .quads import quad_faces
+from .simplification import quadric_simplified, symmetric_simplified
+from .symmetry import SYMMETRY_TOLERANCE, asymmetry, checked_axis, mirror_error, mirror_frame, with_image
 from .voxels import voxel_solid
 
 # The margin between the mesh and its cage when none is asked, a share of the mesh's bounding-box diagonal
@@ -27,8 +32,13 @@ GRID_CELLS = 128
 CLOSING_VOXELS = 2.5
 # The hull starts from this many times the vertices asked (at least START_LEAST), so that its collapses, which
 # enclose, do the shaping (bench/RESULTS.md, "Cage generator").
-START_FACTOR = 4.0
-START_LEAST = 400
+START_FACTOR = 2.5
+START_LEAST = 250
+# With no vertex count asked, the hull stops when the cage would enclose more than this many times the volume of
+# the surface it starts from: about the count hand-made cages of the same meshes have (bench/RESULTS.md,
+# "Cage generator", the default vertex count). It then starts from DEFAULT_START vertices.
+VOLUME_BUDGET = 2.0
+DEFAULT_START = 300
 # A cage within this share of the vertices asked is accepted.
 COUNT_SLACK = 0.15
 # Vertex counts a cage may be asked for.
@@ -48,29 +58,60 @@ class GeneratedCage:
     """A cage made for a mesh, checked by lbc's cage checks and for enclosure.
 
     vertices : (n, 3) float array, in the mesh's units
-    faces : (F, 3) int array, outward triangles
+    faces : list of tuples of int, the cage's faces facing out: quads where two triangles make a good one, else
+        triangles (what to give Blender or :func:`lbc_core.bind`)
+    triangles : (T, 3) int array, the faces split into triangles, as checked
     volume : float, what the cage encloses
     clearance : float, about the least distance from a mesh vertex to the cage
     mean_distance : float, about the mean distance from a cage vertex to the mesh
     margin : float, the margin it was made with, in the mesh's units
-    asked_vertices : int, the vertex count asked (or chosen for the mesh)
+    asked_vertices : int or None, the vertex count asked; None when the generator chose it (see VOLUME_BUDGET)
     attempts : int, how many attempts it took (1: the first)
+    symmetry : str or None, the axis normal to the mirror plane ("x", "y", "z"), or None
+    mirror_error : float or None, with a mirror plane: the largest distance from a cage vertex's mirror image to the
+        nearest cage vertex, in the mesh's units (rounding only)
+    asymmetry : float or None, with a mirror plane: how far the mesh is from its own mirror image, a share of its
+        bounding-box diagonal (see :func:`lbc_core.cage_generator.symmetry.asymmetry`)
     warnings : tuple of str, what the artist should know
     """
 
     vertices: np.ndarray
-    faces: np.ndarray
+    faces: list
+    triangles: np.ndarray
     volume: float
     clearance: float
     mean_distance: float
     margin: float
     asked_vertices: int
     attempts: int
+    symmetry: str = None
+    mirror_error: float = None
+    asymmetry: float = None
     warnings: tuple = ()
 
     @property
     def vertex_count(self):
         return len(self.vertices)
+
+    @property
+    def quad_share(self):
+        """The share of the faces that are quads."""
+        return sum(len(face) == 4 for face in self.faces) / max(len(self.faces), 1)
+
+
+@dataclass(frozen=True)
+class Job:
+    """What every attempt works on: the mesh in the frame the generator works in (its mirror plane through 0 when
+    it has one), the mesh a cage must enclose there (with its mirror image when symmetric), the mirror frame."""
+
+    mesh: InputMesh
+    enclosed: InputMesh
+    frame: object = None
+    asymmetry: float = None
+
+    @property
+    def axis(self):
+        return None if self.frame is None else self.frame.axis
 
 
 @dataclass(frozen=True)
@@ -84,7 +125,8 @@ class Attempt:
     target: int
 
 
-def generate_cage(vertices, faces, *, n_vertices=None, margin=None, progress=None, cancel=None):
+def generate_cage(vertices, faces, *, n_vertices=None, margin=None, symmetry=None, quads=True, progress=None,
+                  cancel=None):
     """A closed cage around a mesh, with about ``n_vertices`` vertices, that lbc binds.
 
     Parameters
@@ -96,6 +138,13 @@ def generate_cage(vertices, faces, *, n_vertices=None, margin=None, progress=Non
         The cage's vertex count, met within 15 %; by default one chosen for the mesh's shape.
     margin : float, optional
         The space between the mesh and the cage, a share of the mesh's bounding-box diagonal (0.01 by default).
+    symmetry : {None, "x", "y", "z"}, optional
+        Make the cage exactly mirror-symmetric about the plane normal to this axis through the middle of the mesh's
+        bounding box (for Blender's X-mirror editing). A mesh that is not symmetric about it gets a warning and a
+        cage around it and its mirror image.
+    quads : bool, optional
+        Merge pairs of the cage's triangles into quads where they make good ones (True by default); lbc binds the
+        same triangles either way.
     progress : callable(fraction, message), optional
     cancel : callable() -> bool, optional
         Returning True stops the work with :class:`lbc_core.Cancelled`.
@@ -121,22 +170,53 @@ def generate_cage(vertices, faces, *, n_vertices=None, margin=None, progress=Non
     """
     steps = Progress.of(progress, cancel)
     margin_share = _checked_margin(margin)
+    axis = checked_axis(symmetry)
     mesh = input_mesh(vertices, faces)
     target = None if n_vertices is None else _checked_count(n_vertices)
+    job, warnings = _job(mesh, axis, symmetry)
     failures = []
     for number, (margin_factor, closing_factor, start_factor) in enumerate(ATTEMPTS, start=1):
         part = steps.part(*ATTEMPT_SHARES[number - 1])
         attempt = _attempt(mesh, margin_share * margin_factor, closing_factor, start_factor, target)
-        made, why = _try(mesh, attempt, part)
+        made, why = _try(job, attempt, part)
         if made is not None:
-            vertices_out, triangles, report = made
             steps(1.0, "cage made")
-            return GeneratedCage(vertices_out, triangles, signed_volume(vertices_out, triangles), report.clearance,
-                                 report.mean_distance, attempt.margin, attempt.target, number, tuple(failures))
+            return _generated(job, attempt, made, number, warnings + tuple(failures), quads)
         failures.append(f"attempt {number} (margin {attempt.margin:.4g}): {why}")
     raise CageGenerationFailed(
         "no cage could be made that lbc accepts and that encloses the mesh (" + "; ".join(failures) + "): try more "
         "vertices, a wider margin, or cage the mesh's parts separately")
+
+
+def _job(mesh, axis, symmetry):
+    """(Job, warnings): the mesh in its mirror frame when symmetric, with its image; a warning when the mesh is not
+    symmetric about the plane."""
+    if axis is None:
+        return Job(mesh, mesh), ()
+    frame = mirror_frame(mesh, axis)
+    moved = InputMesh(frame.into(mesh.vertices), mesh.triangles, mesh.diagonal)
+    off = asymmetry(mesh, frame)
+    warnings = ()
+    if off > SYMMETRY_TOLERANCE:
+        warnings = (f"the mesh is not symmetric about the {symmetry} plane through its middle: its mirror image lies "
+                    f"up to {100 * off:.1f} % of its size away (2 % counts as symmetric); the cage is symmetric and "
+                    "encloses the mesh and its mirror image, so it is looser where they differ",)
+    return Job(moved, with_image(moved, axis), frame, off), warnings
+
+
+def _generated(job, attempt, made, number, warnings, quads):
+    """The GeneratedCage of an attempt's (vertices, triangles, Enclosure), back in the mesh's frame."""
+    vertices, triangles, report = made
+    symmetry, error, mirror = None, None, None
+    if job.frame is not None:
+        mirror = mirror_map(vertices, job.axis)
+        vertices = job.frame.out_of(vertices)
+        symmetry = "xyz"[job.axis]
+        error = mirror_error(vertices, job.axis, job.frame.centre)
+    faces = quad_faces(vertices, triangles, mirror) if quads else [tuple(face) for face in triangles.tolist()]
+    return GeneratedCage(vertices, faces, triangles, signed_volume(vertices, triangles), report.clearance,
+                         report.mean_distance, attempt.margin, attempt.target, number, symmetry, error, job.asymmetry,
+                         warnings)
 
 
 def _checked_margin(margin):
@@ -159,14 +239,9 @@ def _checked_count(n_vertices):
 def _attempt(mesh, margin_share, closing_factor, start_factor, target):
     sides = mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)
     spacing = float(sides.max()) / GRID_CELLS
-    count = target if target is not None else default_vertex_count(mesh)
-    start = int(max(START_LEAST, START_FACTOR * count) * start_factor)
-    return Attempt(margin_share * mesh.diagonal, CLOSING_VOXELS * closing_factor * spacing, spacing, start, count)
-
-
-def default_vertex_count(mesh):
-    """A vertex count for the mesh's cage when none is asked: 100 for now."""
-    return 100
+    start = DEFAULT_START if target is None else max(START_LEAST, START_FACTOR * target)
+    return Attempt(margin_share * mesh.diagonal, CLOSING_VOXELS * closing_factor * spacing, spacing,
+                   int(start * start_factor), target)
 
 
 def witness_points(vertices, spacing):
@@ -176,23 +251,22 @@ def witness_points(vertices, spacing):
     return vertices[np.sort(first)]
 
 
-def _try(mesh, attempt, steps):
+def _try(job, attempt, steps):
     """((vertices, triangles, Enclosure), None) or (None, why) for one attempt."""
-    zero = 1e-9 * mesh.diagonal
     steps(0.0, "voxelizing the mesh")
-    solid = voxel_solid(mesh.vertices, mesh.triangles, attempt.spacing, attempt.margin, attempt.closing, steps.check)
-    steps(0.25, "extracting the surface")
-    surface = iso_surface(solid)
-    steps(0.35, "simplifying the surface")
-    witnesses = witness_points(mesh.vertices, attempt.spacing)
-    start = quadric_simplified(*surface, attempt.start, witnesses, 0.25 * attempt.margin, zero)
+    mesh = job.mesh
+    solid = voxel_solid(mesh.vertices, mesh.triangles, attempt.spacing, attempt.margin, attempt.closing, steps.check,
+                        job.axis)
+    steps(0.25, "simplifying the surface")
+    start = _start(job, solid, attempt, steps.check)
     if start is None:
         return None, "the simplified surface did not enclose the mesh"
-    hull = ProgressiveHull(*start, zero, witnesses)
-    collapses = max(1, len(hull.points) - attempt.target)
-    hull_steps = steps.part(0.45, 0.9)
-    left = hull.simplify(attempt.target, lambda: hull_steps(hull.collapses / collapses, "shaping the cage"))
-    if left > attempt.target * (1.0 + COUNT_SLACK):
+    enclosed = job.enclosed
+    witnesses = witness_points(enclosed.vertices, attempt.spacing)
+    hull = ProgressiveHull(*start, 1e-9 * mesh.diagonal, witnesses, job.axis,
+                           MeshGuard(enclosed.vertices, enclosed.triangles))
+    left = _shaped(hull, attempt, steps.part(0.45, 0.9))
+    if attempt.target is not None and left > attempt.target * (1.0 + COUNT_SLACK):
         return None, f"the cage kept {left} vertices, more than {attempt.target} asked"
     cage_vertices, cage_triangles = hull.result()
     steps(0.9, "checking the cage")
@@ -204,3 +278,26 @@ def _try(mesh, attempt, steps):
     if not report.encloses:
         return None, f"the cage left {report.parts_outside} parts outside and crossed {report.crossings} edges"
     return (cage_vertices, cage_triangles, report), None
+
+
+def _shaped(hull, attempt, steps):
+    """The hull brought down to the count asked, or with none asked until its volume reaches the budget; returns
+    its vertex count."""
+    if attempt.target is not None:
+        collapses = max(1, len(hull.points) - attempt.target)
+        return hull.simplify(attempt.target, lambda: steps(hull.collapses / collapses, "shaping the cage"))
+    start = hull.volume
+    limit = VOLUME_BUDGET * start
+    return hull.simplify(FEWEST_VERTICES, lambda: steps(min(1.0, (hull.volume - start) / (limit - start)),
+                                                        "shaping the cage"), limit)
+
+
+def _start(job, solid, attempt, check):
+    """The hull's start: the solid's surface simplified and pushed out of the mesh (its mirror image too), or None."""
+    zero = 1e-9 * job.mesh.diagonal
+    clearance = 0.25 * attempt.margin
+    if job.axis is None:
+        return quadric_simplified(*iso_surface(solid), attempt.start, job.enclosed, clearance, attempt.spacing,
+                                  zero, check)
+    return symmetric_simplified(*half_iso_surface(solid, job.axis), attempt.start, job.enclosed, clearance,
+                                attempt.spacing, zero, job.axis, check)

@@ -5,17 +5,25 @@ its vertices pushed out along their normals past the mesh's witness points it le
 are tried before giving up (None), so the caller can start from a larger surface."""
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..cage import edge_pairing
-from ..kernel.geometry import closest_on_triangles, winding_numbers
+from ..kernel.geometry import closest_on_triangles
 from ..kernel.intersections import intersecting_triangles
-from .extraction import compact, signed_volume
+from .extraction import compact, mirrored_whole, signed_volume
+from .hull_tests import mirror_map
+from .check import CageSamples, edges_crossing, mesh_edges
+from .inside import inside_surface
 
-# Targets tried, as factors of the vertex count asked, when a result fails its checks (bench/RESULTS.md,
+# Targets tried, as factors of the vertex count asked, when a result fails its checks: a thin shell (clothing) needs
+# more vertices than the hull's start asks for its surface to be pushed out of the mesh (bench/RESULTS.md,
 # "Cage generator").
-TARGET_FACTORS = (1.0, 1.07, 1.15, 1.25)
-# Rounds of pushing vertices out past the witness points the simplification left outside.
-PUSH_ROUNDS = 6
+TARGET_FACTORS = (1.0, 1.5, 2.25)
+# Rounds of pushing vertices out past the mesh's vertices and edges the simplification left outside, at most; it
+# stops sooner when two rounds in a row leave no fewer.
+PUSH_ROUNDS = 8
+# Sweeps that reconcile the pushes several triangles ask of one vertex.
+PUSH_SWEEPS = 4
 
 
 def is_closed_manifold(triangles):
@@ -57,10 +65,10 @@ def _fans_single(triangles, directed, n):
     return bool(np.all(cycles[np.unique(triangles)] == 1))
 
 
-def quadric_simplified(vertices, triangles, target, witnesses, clearance, zero):
+def quadric_simplified(vertices, triangles, target, mesh, clearance, spacing, zero, check=None):
     """(vertices, triangles) of about ``target`` vertices: closed, manifold, outward, not self-intersecting, with
-    every witness point inside (vertices pushed out where the simplification cut into the mesh); or None when no
-    target tried gives one."""
+    every vertex of the InputMesh ``mesh`` inside and none of its edges crossing (vertices pushed out where the
+    simplification cut into the mesh); or None when no target tried gives one."""
     import fast_simplification
 
     for factor in TARGET_FACTORS:
@@ -69,13 +77,67 @@ def quadric_simplified(vertices, triangles, target, witnesses, clearance, zero):
             return vertices, triangles
         points, faces = fast_simplification.simplify(vertices.astype(np.float64), triangles.astype(np.int64),
                                                      target_count=count)
-        points, faces = compact(np.asarray(points, dtype=float), np.asarray(faces, dtype=np.int64))
+        points, faces = compact(*without_doubled_faces(np.asarray(points, dtype=float),
+                                                       np.asarray(faces, dtype=np.int64)))
         if not is_surface(points, faces, zero):
             continue
-        points = pushed_out(points, faces, witnesses, clearance)
+        points = pushed_out(points, faces, mesh, clearance, spacing, check)
         if points is not None and is_surface(points, faces, zero):
             return points, faces
     return None
+
+
+def symmetric_simplified(half_vertices, half_triangles, target, mesh, clearance, spacing, zero, axis, check=None):
+    """As :func:`quadric_simplified`, exactly symmetric about the plane through 0 normal to ``axis``: the half
+    surface beyond the plane (its boundary in the plane) simplified, welded to its mirror image and pushed out
+    symmetrically. Quadric collapses along an open boundary keep its vertices on it (its ends or its middle) but may
+    leave it a handful of vertices, or one; then the boundary is kept whole, and the hull brings its vertices down.
+    ``mesh`` holds the mesh and its mirror image."""
+    for keep_boundary in (False, True):
+        for factor in TARGET_FACTORS:
+            count = int(round(target * factor))  # the half's triangles: about twice its vertices, half the whole's
+            found = _symmetric_start(half_vertices, half_triangles, count, keep_boundary, axis, zero)
+            if found is None:
+                continue
+            points = pushed_out(*found, mesh, clearance, spacing, check, axis=axis)
+            if points is not None and is_surface(points, found[1], zero):
+                return points, found[1]
+    return None
+
+
+def _symmetric_start(half_vertices, half_triangles, count, keep_boundary, axis, zero):
+    """The half simplified to ``count`` triangles and welded to its image, or None when that is no surface."""
+    import fast_simplification
+
+    if count >= len(half_triangles):
+        points, faces = half_vertices, half_triangles
+    else:
+        points, faces = fast_simplification.simplify(half_vertices.astype(np.float64), half_triangles.astype(np.int64),
+                                                     target_count=count, preserve_border=keep_boundary)
+        points, faces = compact(*without_doubled_faces(np.asarray(points, dtype=float),
+                                                       np.asarray(faces, dtype=np.int64)))
+    if np.any(points[:, axis] < 0.0) or np.any((points[:, axis] == 0.0) & ~_on_boundary(faces, len(points))):
+        return None
+    points, faces = mirrored_whole(points, faces, axis)
+    return (points, faces) if is_surface(points, faces, zero) else None
+
+
+def _on_boundary(triangles, count):
+    """(count,) bool: the vertices on an open surface's boundary (an edge of one triangle only)."""
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    keys, counts = np.unique(edges[:, 0] * count + edges[:, 1], return_counts=True)
+    found = np.zeros(count, dtype=bool)
+    found[keys[counts == 1] // count] = True
+    found[keys[counts == 1] % count] = True
+    return found
+
+
+def without_doubled_faces(vertices, triangles):
+    """The triangles without those whose three corners another triangle has too (both copies): quadric collapses
+    flatten a thin pocket into two such triangles back to back, whose edges then have four triangles each."""
+    keys = np.sort(triangles, axis=1)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    return vertices, triangles[counts[inverse.ravel()] == 1]
 
 
 def is_surface(vertices, triangles, zero):
@@ -95,27 +157,94 @@ def vertex_normals(vertices, triangles):
     return normals / np.maximum(np.linalg.norm(normals, axis=1), 1e-300)[:, None]
 
 
-def pushed_out(vertices, triangles, witnesses, clearance, rounds=PUSH_ROUNDS):
-    """The vertices moved out until every witness is inside: the corners of the triangle nearest a witness outside
-    go out along that triangle's normal past it by ``clearance`` (the nearest vertex may lie on another sheet of a
-    thin part); None after ``rounds`` tries."""
+def pushed_out(vertices, triangles, mesh, clearance, spacing, check=None, rounds=PUSH_ROUNDS, axis=None):
+    """The vertices moved out until every vertex of the InputMesh ``mesh`` is inside and none of its edges crosses
+    the surface: the corners of the triangle nearest a vertex outside, or of a triangle an edge crosses, go out along
+    that triangle's normal past the vertex (the edge's ends) by ``clearance`` (the nearest vertex may lie on another
+    sheet of a thin part); None after ``rounds`` tries. The surface is sampled ``spacing`` apart to find the mesh's
+    edges near it; after the first round only the mesh near the triangles that moved is tested again. With a mirror
+    ``axis`` (a surface and mesh symmetric about the plane through 0 normal to it) the pushes are made symmetric:
+    of each vertex and its image the longer push, mirrored, and none across the plane for a vertex on it."""
+    check = check or (lambda: None)
     vertices = vertices.copy()
+    inside = inside_surface(vertices, triangles, mesh.vertices)
+    samples = CageSamples(vertices, triangles, spacing)
+    edges = mesh_edges(mesh.triangles)
+    crossing, crossed = edges_crossing(mesh.vertices, edges, vertices, triangles, samples,
+                                       samples.lower(mesh.vertices)[0])
+    tree = cKDTree(mesh.vertices)
+    mirror = None if axis is None else mirror_map(vertices, axis)
+    reach = float(np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]], axis=1).max())
+    left = []
     for _ in range(rounds):
-        outside = witnesses[winding_numbers(vertices, triangles, witnesses) <= 0.5]
-        if not len(outside):
+        check()
+        if inside.all() and not len(crossing):
             return vertices
-        corners = vertices[triangles]
-        nearest = _nearest_triangles(outside, corners)
-        normal = np.cross(corners[nearest, 1] - corners[nearest, 0], corners[nearest, 2] - corners[nearest, 0])
-        normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
-        lift = np.maximum(np.einsum("ij,ij->i", outside - corners[nearest, 0], normal), 0.0) + clearance
-        push = np.zeros((len(vertices), 3))
-        for k in range(3):  # each vertex goes as far as its farthest push asks, along that push's normal
-            moved = lift[:, None] * normal
-            order = np.argsort(lift)
-            push[triangles[nearest[order], k]] = moved[order]
-        vertices += push
+        left.append(np.count_nonzero(~inside) + len(crossing))
+        if len(left) >= 3 and left[-1] >= left[-3]:
+            return None
+        before = vertices.copy()
+        push = _pushes(vertices, triangles, mesh.vertices[~inside], mesh.vertices[edges[crossing]], crossed, clearance)
+        vertices += push if axis is None else _symmetric(push, mirror, axis)
+        moved = np.flatnonzero(np.any(np.any(vertices != before, axis=1)[triangles], axis=1))
+        near = _near_moved(tree, before[triangles[moved]], vertices[triangles[moved]], reach)
+        inside[near] = inside_surface(vertices, triangles, mesh.vertices[near])
+        moved_samples = CageSamples(vertices, triangles[moved], spacing)
+        lower = np.full(len(mesh.vertices), np.inf)
+        lower[near] = moved_samples.lower(mesh.vertices[near])[0]
+        crossing, crossed = edges_crossing(mesh.vertices, edges, vertices, triangles[moved], moved_samples, lower)
+        crossed = moved[crossed]
     return None
+
+
+def _symmetric(push, mirror, axis):
+    """The pushes (n, 3) made exactly symmetric: each vertex takes the longer of its own and its image's mirrored."""
+    image = push[mirror].copy()
+    image[:, axis] = -image[:, axis]
+    own = np.einsum("ij,ij->i", push, push) >= np.einsum("ij,ij->i", image, image)
+    chosen = np.where(own[:, None], push, image)
+    on_plane = mirror == np.arange(len(mirror))
+    chosen[on_plane, axis] = 0.0
+    # A tie between a vertex and its image must resolve the same way for both: the lower index's choice wins.
+    first = np.arange(len(mirror)) < mirror
+    result = chosen.copy()
+    result[mirror[first]] = chosen[first]
+    result[mirror[first], axis] = -chosen[first, axis]
+    return result
+
+
+def _near_moved(tree, old, new, reach):
+    """The mesh vertices (by index) within ``reach`` of the space the moved triangles (old and new corners (k, 3, 3))
+    swept: those whose inside status or edges can have changed."""
+    corners = np.concatenate([old, new], axis=1)
+    centre = corners.mean(axis=1)
+    radius = np.linalg.norm(corners - centre[:, None], axis=2).max(axis=1) + reach
+    found = tree.query_ball_point(centre, radius)
+    return np.unique(np.concatenate([np.asarray(items, dtype=np.int64) for items in found] + [np.empty(0, np.int64)]))
+
+
+def _pushes(vertices, triangles, outside, crossing, crossed, clearance):
+    """(n, 3): each vertex's push out: the triangle nearest each ``outside`` point, and each ``crossed`` triangle of
+    a crossing edge (its ends (k, 2, 3)), go out along their normals past the point (the edge's ends) by
+    ``clearance``. A vertex several pushes ask to move goes far enough along each of their normals: each round adds,
+    per vertex, the largest push still missing (a vertex moved along one normal only left the other triangles cut,
+    and the rounds of pushing out did not settle)."""
+    corners = vertices[triangles]
+    pushed = np.concatenate([_nearest_triangles(outside, corners), crossed, crossed])
+    points = np.concatenate([outside, crossing[:, 0], crossing[:, 1]])
+    normal = np.cross(corners[pushed, 1] - corners[pushed, 0], corners[pushed, 2] - corners[pushed, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    lift = np.maximum(np.einsum("ij,ij->i", points - corners[pushed, 0], normal), 0.0) + clearance
+    owner = triangles[pushed].ravel()  # one request per corner of each push
+    normal, lift = np.repeat(normal, 3, axis=0), np.repeat(lift, 3)
+    push = np.zeros((len(vertices), 3))
+    for _ in range(PUSH_SWEEPS):
+        missing = lift - np.einsum("ij,ij->i", push[owner], normal)
+        order = np.argsort(missing, kind="stable")
+        step = np.zeros((len(vertices), 3))
+        step[owner[order]] = np.maximum(missing[order], 0.0)[:, None] * normal[order]
+        push += step
+    return push
 
 
 def _nearest_triangles(points, corners):

@@ -53,7 +53,7 @@ def surface_samples(vertices, triangles, spacing):
     return np.concatenate(found)
 
 
-def voxel_solid(vertices, triangles, spacing, margin, closing, check=None):
+def voxel_solid(vertices, triangles, spacing, margin, closing, check=None, axis=None):
     """The solid around the mesh whose surface lies about ``margin`` from it, gaps narrower than twice ``closing``
     filled (a morphological closing), as a :class:`VoxelSolid`.
 
@@ -67,13 +67,25 @@ def voxel_solid(vertices, triangles, spacing, margin, closing, check=None):
         In the mesh's units; ``closing`` at least one voxel.
     check : callable() or None
         Polled between steps (a Progress's ``check``).
+    axis : int or None
+        Make the solid exactly symmetric about the plane through 0 normal to this axis: the grid symmetric about it
+        with a layer of voxels on it, the mesh and its mirror image voxelized, the field the larger of its value and
+        its mirror image's (after the bridges, so that those come in mirror pairs too).
     """
     check = check or (lambda: None)
+    if axis is not None:
+        image = vertices.copy()
+        image[:, axis] = -image[:, axis]
+        vertices, triangles = np.vstack([vertices, image]), np.vstack([triangles, triangles + len(vertices)])
     reach = margin + closing
     pad = int(np.ceil(reach / spacing)) + 3
     low = vertices.min(axis=0) - pad * spacing
-    shape = tuple(int(s) for s in np.ceil((vertices.max(axis=0) - low) / spacing).astype(np.int64) + pad + 1)
-    marked = np.zeros(shape, dtype=bool)
+    if axis is not None:  # voxel layer k on the plane: low = -k spacing
+        low[axis] = -(np.ceil(np.abs(vertices[:, axis]).max() / spacing) + pad) * spacing
+    shape = np.ceil((vertices.max(axis=0) - low) / spacing).astype(np.int64) + pad + 1
+    if axis is not None:
+        shape[axis] = 2 * int(round(-low[axis] / spacing)) + 1
+    marked = np.zeros(tuple(int(side) for side in shape), dtype=bool)
     cells = np.floor((surface_samples(vertices, triangles, spacing / SAMPLES_PER_VOXEL) - low) / spacing + 0.5)
     marked[tuple(cells.astype(np.int64).T)] = True
     check()
@@ -84,6 +96,8 @@ def voxel_solid(vertices, triangles, spacing, margin, closing, check=None):
     field = ndimage.distance_transform_edt(~outside) * spacing - closing
     check()
     field, bridges = join_parts(field, spacing)
+    if axis is not None:
+        field = np.maximum(field, np.flip(field, axis=axis))
     return VoxelSolid(field, low, float(spacing), bridges)
 
 

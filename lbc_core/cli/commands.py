@@ -12,7 +12,6 @@ from ..errors import CageError
 from .output import SUMMARY_COLUMNS, ProgressBar, print_json, table, warn
 
 DEFAULT_TABLE1_DATA = Path(__file__).resolve().parents[2] / "tests" / "data" / "cages-3d"
-
 TABLE1_COLUMNS = [
     ("model", "cage", "{}"),
     ("control_points", "n", "{}"),
@@ -93,20 +92,23 @@ def run_cage(args):
     vertices, faces = read_mesh(args.mesh)
     with ProgressBar("cage", args.quiet) as progress:
         started = time.perf_counter()
-        made = generate_cage(vertices, faces, n_vertices=args.vertices, margin=args.margin, progress=progress)
+        made = generate_cage(vertices, faces, n_vertices=args.vertices, margin=args.margin, symmetry=args.symmetry,
+                             quads=not args.triangles, progress=progress)
         seconds = time.perf_counter() - started
     write_mesh(args.output, made.vertices, made.faces)
     figures = {"output": str(args.output), "vertices": made.vertex_count, "asked_vertices": made.asked_vertices,
-               "faces": int(len(made.faces)), "volume": made.volume, "clearance": made.clearance,
-               "mean_distance": made.mean_distance, "margin": made.margin, "attempts": made.attempts,
-               "seconds": seconds, "warnings": list(made.warnings)}
+               "faces": int(len(made.faces)), "quads": int(sum(len(face) == 4 for face in made.faces)),
+               "symmetry": made.symmetry, "mirror_error": made.mirror_error, "volume": made.volume,
+               "clearance": made.clearance, "mean_distance": made.mean_distance, "margin": made.margin,
+               "attempts": made.attempts, "seconds": seconds, "warnings": list(made.warnings)}
     warn(made.warnings, args.quiet)
     if args.json:
         print_json(figures)
     else:
-        print(f"made a cage of {made.vertex_count} vertices and {len(made.faces)} faces around {len(vertices)} "
-              f"vertices, about {made.clearance:.4g} to {made.mean_distance:.4g} from the mesh, in {seconds:.2f} s; "
-              f"wrote {args.output}")
+        mirrored = f", mirror-symmetric in {made.symmetry}" if made.symmetry else ""
+        print(f"made a cage of {made.vertex_count} vertices and {len(made.faces)} faces ({figures['quads']} quads"
+              f"{mirrored}) around {len(vertices)} vertices, about {made.clearance:.4g} to {made.mean_distance:.4g} "
+              f"from the mesh, in {seconds:.2f} s; wrote {args.output}")
     return 0
 
 

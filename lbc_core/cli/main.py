@@ -26,11 +26,7 @@ from ..version import __version__
 from .commands import bind_options, run_bind, run_cage, run_compare, run_deform, run_stats, run_table1
 
 SCHEMES = ("lbc", "mvc", "harmonic", "bbw")
-
-
 EXIT_BAD_INPUT = 2
-
-
 EXIT_CANCELLED = 130
 
 
@@ -143,6 +139,10 @@ def _add_cage_command(parser, commands, common):
                       "for the mesh)")
     cage.add_argument("--margin", type=float, help="space between mesh and cage, a share of the mesh's "
                       "bounding-box diagonal (default 0.01)")
+    cage.add_argument("--symmetry", choices=("x", "y", "z"), help="make the cage mirror-symmetric about the plane "
+                      "normal to this axis through the middle of the mesh's bounding box (for X-mirror editing)")
+    cage.add_argument("--triangles", action="store_true", help="triangles only (default: pairs of triangles that "
+                      "make good quads merged)")
     cage.set_defaults(command=run_cage)
     return parser
 

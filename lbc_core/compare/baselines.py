@@ -20,6 +20,7 @@ import scipy.sparse.linalg as spla
 from ..binding.options import BindOptions
 from ..binding.pipeline import check_cage_and_points
 from ..binding.record import Binding, BindOutcome
+from ..errors import CageError
 from ..evaluate.interpolation import interpolation_matrix
 from ..kernel.fem import stiffness_matrix
 from ..kernel.frame import UnitFrame
@@ -266,6 +267,23 @@ def bbw_available():
     return True
 
 
+def _check_domain_of(domain, cage):
+    """A domain passed in must be a mesh of this very cage: its boundary indexes the cage's facets."""
+    control = np.asarray(domain.control_vertices)
+    boundary_facet = np.asarray(domain.boundary_facet)
+    same = (
+        domain.dim == cage.vertices.shape[1]
+        and len(control) == len(cage.vertices)
+        and (len(boundary_facet) == 0 or boundary_facet.max() < len(cage.facets))
+        and np.array_equal(np.asarray(domain.vertices)[control], cage.vertices)
+    )
+    if not same:
+        raise CageError(
+            f"the domain passed is a mesh of another cage (its control points are not this cage's "
+            f"{len(cage.vertices)} vertices); pass the domain of a binding made with this cage, or leave domain out"
+        )
+
+
 def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, progress, cancel):
     laps = Laps()
     progress = Progress.of(progress, cancel)
@@ -278,6 +296,7 @@ def _bind_baseline(scheme, cage_vertices, cage_faces, points, domain, cells, pro
         domain = frame.domain_from_unit(unit_domain, cage)
         laps.lap("meshing")
     else:
+        _check_domain_of(domain, cage)
         unit_domain = frame.domain_to_unit(domain)
     laps.restart()
     if scheme == "mvc":

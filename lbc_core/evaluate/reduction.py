@@ -9,8 +9,9 @@ where even that cannot (a smooth fit that overshoots, below), the point is reduc
 import numpy as np
 import scipy.sparse as sp
 
-from ..kernel.constraints import csr_from_padded, grow_support, padded_rows, restore_and_check, scatter_rows
-from ..kernel.parallel import map_row_chunks
+from ..kernel.constraints import (alike_lengths, csr_from_padded, grow_support, padded_rows, restore_and_check,
+                                  scatter_rows)
+from ..kernel.parallel import map_row_chunks, one_blas_thread
 from ..kernel.progress import Progress
 
 # Rows reduced by one thread at a time: the padded (rows, K, d+1) work arrays of a million points would take
@@ -20,6 +21,8 @@ ROWS_PER_CHUNK = 16_384
 # the most its extrapolation's weights may sum to in magnitude, so that no cage vertex moves an outside point much
 # more than itself (bench/RESULTS.md, "Points outside the cage extrapolate in every bind").
 UNITY_TOLERANCE, EXTRAPOLATION_GAIN = 1e-12, 2.0
+# Rows of alike lengths restored together at the fewest (bench/RESULTS.md, "The bind outside the solve, cheaper").
+FEWEST_ALIKE = 512
 
 
 def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, threshold, tolerance, progress=None,
@@ -59,32 +62,40 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
     full_domain = sp.csr_matrix(domain_weights)
     linear = getattr(located, "linear", located)
     outside = getattr(located, "outside", None)
+    # An interpolation that computes its rows by blocks of nearby points offers an order keeping them together, and
+    # its rows' products without the rows (lbc_core.evaluate.smoothing.SmoothInterpolation).
+    order = getattr(located, "order", None)
     progress = Progress.of(progress, cancel)
 
+    def products(rows):
+        if hasattr(located, "products"):
+            return located.products(rows, sparse_domain, domain_vertices)
+        block = located[rows]
+        return block @ sparse_domain, block @ domain_vertices
+
     def reduce_chunk(rows):
-        block = located[rows]  # once: a smooth interpolation computes its rows on demand
-        barycentric = linear[rows]
-        positions = block @ domain_vertices
-        extrapolated = np.zeros(block.shape[0], dtype=bool) if outside is None else outside[rows]
-        inner = np.flatnonzero(~extrapolated)
-        reduced = _reduce_inside(block[inner], barycentric[inner], positions[inner])
-        if len(inner) == block.shape[0]:
+        rows = np.arange(located.shape[0])[rows] if order is None else order[rows]
+        extrapolated = np.zeros(len(rows), dtype=bool) if outside is None else outside[rows]
+        inner, outer = np.flatnonzero(~extrapolated), np.flatnonzero(extrapolated)
+        full, positions = products(rows[inner])
+        reduced = _reduce_inside(full, linear[rows[inner]], positions)
+        if not len(outer):
             return reduced
-        outer = np.flatnonzero(extrapolated)
-        full, targets = _bounded_lever(block[outer], barycentric[outer], positions[outer], full_domain,
+        block = located[rows[outer]]
+        full, targets = _bounded_lever(block, linear[rows[outer]], block @ domain_vertices, full_domain,
                                        domain_vertices)
         signed, met = _reduce_signed(full, controls, targets, threshold, tolerance)
         if not met.all():
             # An extrapolation from too few or one-sided vertices (far outside a thin cage): the point follows its
             # closest point inside, reduced as a point inside.
-            closest = barycentric[outer[~met]]
+            closest = linear[rows[outer[~met]]]
             signed = scatter_rows(sp.diags(met.astype(float)) @ signed, np.flatnonzero(~met),
-                                  _reduce_inside(closest, closest, closest @ domain_vertices))
-        return scatter_rows(scatter_rows(sp.csr_matrix((block.shape[0], controls.shape[0])), inner, reduced), outer,
+                                  _reduce_inside(closest @ sparse_domain, closest, closest @ domain_vertices))
+        return scatter_rows(scatter_rows(sp.csr_matrix((len(rows), controls.shape[0])), inner, reduced), outer,
                             signed)
 
-    def _reduce_inside(block, fallback, positions):
-        reduced, met = _reduce_rows(block @ sparse_domain, controls, positions, threshold, tolerance, progress.check)
+    def _reduce_inside(full, fallback, positions):
+        reduced, met = _reduce_rows(full, controls, positions, threshold, tolerance, progress.check)
         if met.all():
             return reduced
         # A smooth fit from few, one-sided vertices (coarse cells beside a fine cage) can overshoot so far that no
@@ -97,7 +108,9 @@ def interpolate_and_reduce(located, domain_weights, controls, domain_vertices, t
         kept.eliminate_zeros()
         return scatter_rows(kept, failed, again)
 
-    return _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
+    with one_blas_thread():
+        weights = _by_chunks(located.shape[0], controls.shape[0], reduce_chunk, progress)
+    return weights if order is None else weights[np.argsort(order)]
 
 
 def _bounded_lever(extrapolating, closest, positions, domain_weights, domain_vertices):
@@ -164,13 +177,19 @@ def _reduce_rows(full, controls, positions, threshold, tolerance, check):
     kept = full.copy()
     kept.data[kept.data < threshold] = 0.0
     kept.eliminate_zeros()
-    # Most rows reproduce on their kept support: correct them all at once on short padded rows.
-    values, columns = padded_rows(kept)
-    corrected, done = restore_and_check(values, columns, controls, positions, tolerance, check)
+    # Most rows reproduce on their kept support: correct them all at once on short padded rows, rows of alike lengths
+    # together (padded to a chunk's longest, a third of the entries were zeros).
+    done = np.zeros(full.shape[0], dtype=bool)
+    parts, order = [], []
+    for alike in alike_lengths(np.diff(kept.indptr), FEWEST_ALIKE):
+        values, columns = padded_rows(kept[alike])
+        corrected, done[alike] = restore_and_check(values, columns, controls, positions[alike], tolerance, check)
+        parts.append(csr_from_padded(np.where(done[alike][:, None], corrected, 0.0), columns, n))
+        order.append(alike)
+    reduced = (sp.vstack(parts, format="csr")[np.argsort(np.concatenate(order))] if parts
+               else sp.csr_matrix(full.shape))
     if done.all():
-        return csr_from_padded(corrected, columns, n), done
-    reduced = scatter_rows(sp.csr_matrix(full.shape), np.flatnonzero(done),
-                           csr_from_padded(corrected[done], columns[done], n))
+        return reduced, done
     pending = np.flatnonzero(~done)
     grown, done[pending] = grow_support(full[pending], controls, positions[pending], np.diff(kept.indptr)[pending],
                                         tolerance, check)

@@ -18,9 +18,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from ..kernel.constraints import solve_symmetric
 from ..kernel.progress import Progress
+from .groups import PointGroups
 from .interpolation import FacetSearch
-from .reachability import DomainPaths
+from .reachability import DomainPaths, corners_of
 
 # Smooth ↔ local, 0 to 1: how wide the smooth evaluation's fit reaches (radius_for) and how much the
 # add-on's thinning keeps (lbc_core.evaluate.thinning.floor_for). 0.5 folds the joints of a real character less than
@@ -45,6 +47,10 @@ MAX_CONDITION = 1e8
 # its closest point (bench/RESULTS.md, "Points outside the cage extrapolate in every bind").
 EXTRAPOLATION_MISS = 1e-6
 _CHUNK = 1 << 14  # points fitted at a time: bounds the (point, vertex) pairs held
+# The side of the cubes whose points are fitted as one block, in median cell edges: smaller cubes search fewer
+# vertices beyond each point's reach, larger ones make fewer, larger blocks (1: a third of the time of 0.5 or 2 on
+# the demo; bench/RESULTS.md, "The bind outside the solve, cheaper").
+CUBE_EDGES = 2.0
 
 
 class SmoothInterpolation:
@@ -108,6 +114,7 @@ class SmoothInterpolation:
         self.depths = (depth_edges[0] * edge, depth_edges[1] * edge)
         self.fade = fade_edges * edge
         self.tree = cKDTree(self.vertices)
+        self.scale = self.deep_radius
         # The fade follows each point's own distance to the cage. The corners' distances bound it from below (it is
         # 1-Lipschitz), so only the points that bound leaves within the fade are searched. A widening fit needs every
         # vertex's (radius_at); else the corners' suffice (at most N searches), the fit through the domain's too.
@@ -118,6 +125,11 @@ class SmoothInterpolation:
         self.vertex_depth[needed] = np.sqrt(self.boundary.closest(self.vertices[needed], self.progress.check).squared)
         self.paths = (DomainPaths(self.vertices, cells, self.deep_radius, self.vertex_depth,
                                   np.unique(self.located.indices), self.progress) if through_domain else None)
+        # The fit is computed by blocks of nearby points (lbc_core.evaluate.groups), in the frame scaled by the
+        # largest radius; ``order`` keeps each cube's points together, for callers that take rows in chunks.
+        self.positions = self.located @ self.vertices
+        self.groups = PointGroups(self.positions, self.vertices, self.tree, CUBE_EDGES * edge, self.deep_radius)
+        self.order = self.groups.order
 
     @property
     def linear(self):
@@ -126,46 +138,177 @@ class SmoothInterpolation:
         return self.located
 
     def __getitem__(self, rows):
-        """Rows ``rows`` (a slice) of the matrix, as CSR."""
-        linear = self.located[rows]
-        first = rows.indices(self.shape[0])[0]
+        """Rows ``rows`` (a slice or an int array) of the matrix, as CSR."""
+        indices = self._indices(rows)
         blocks = []
-        for start in range(0, linear.shape[0], _CHUNK):
+        for start in range(0, len(indices), _CHUNK):
             self.progress.check()
-            blocks.append(self._rows(linear[start:start + _CHUNK], first + start))
-        return sp.vstack(blocks, format="csr") if blocks else linear
+            blocks.append(self._rows(indices[start:start + _CHUNK]))
+        return sp.vstack(blocks, format="csr") if blocks else self.located[indices]
 
-    def _rows(self, linear, first):
-        points = linear @ self.vertices
-        blend = fade_in(self.distance_to_cage(linear, points) / self.fade)
-        distances = neighbour_distances(self.tree, points, self.deep_radius)
-        factors = None if self.paths is None else self.paths.factors_of(linear, distances)
-        (fitted,), fits = _fit_rows(self.vertices, distances, points, self.radius_at(distances), [0], factors)
-        blend = np.where(fits, blend, 0.0)
-        rows = linear.copy()
-        rows.data *= np.repeat(1.0 - blend, np.diff(rows.indptr))
-        fitted.data *= np.repeat(blend, np.diff(fitted.indptr))
-        rows = (rows + fitted).tocsr()
-        if self.outside is None:
-            return rows
-        outside = np.flatnonzero(self.outside[first:first + linear.shape[0]])
+    def products(self, rows, weights, vertices):
+        """``(self[rows] @ weights, self[rows] @ vertices)`` without the rows: each block's fit applied to the
+        weights at its candidate vertices, a dense product (the rows' 125 pairs a point, held one by one, cost three
+        times as much; bench/RESULTS.md, "The bind outside the solve, cheaper").
+
+        Parameters
+        ----------
+        rows : slice or (k,) int array
+        weights : (N, n) scipy.sparse.csr_matrix
+        vertices : (N, d) float array
+
+        Returns
+        -------
+        (k, n) scipy.sparse.csr_matrix, (k, d) float array
+        """
+        indices = self._indices(rows)
+        parts = []
+        for start in range(0, len(indices), _CHUNK):
+            self.progress.check()
+            parts.append(self._products(indices[start:start + _CHUNK], sp.csr_matrix(weights), vertices))
+        if not parts:
+            return sp.csr_matrix((0, weights.shape[1])), np.zeros((0, np.shape(vertices)[1]))
+        return sp.vstack([part[0] for part in parts], format="csr"), np.vstack([part[1] for part in parts])
+
+    def _indices(self, rows):
+        if isinstance(rows, slice):
+            return np.arange(*rows.indices(self.shape[0]))
+        return np.asarray(rows, dtype=np.int64).ravel()
+
+    def _products(self, indices, weights, vertices):
+        linear = self.located[indices]
+        k, n = len(indices), weights.shape[1]
+        fitted = np.zeros((k, np.shape(vertices)[1]))
+        fits = np.zeros(k, dtype=bool)
+        entries = [(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0))]
+        for block, candidates, coefficients, fit in self._fit_blocks(indices, linear):
+            fits[block] = fit
+            near, used = _dense_rows(weights, candidates)
+            # The positions ride along as the last columns: one product.
+            product = coefficients @ np.hstack([near, vertices[candidates]])
+            fitted[block] = product[:, len(used):]
+            row, column = np.nonzero(product[:, :len(used)])
+            entries.append((block[row], used[column], product[row, column]))
+        blend = np.where(fits, self._blend(linear, indices), 0.0)
+        row, column, value = (np.concatenate(parts) for parts in zip(*entries))
+        full = (sp.diags(1.0 - blend) @ (linear @ weights)
+                + sp.csr_matrix((value * blend[row], (row, column)), shape=(k, n))).tocsr()
+        positions = (1.0 - blend)[:, None] * (linear @ vertices) + blend[:, None] * fitted
+        outside = self._outside_of(indices)
+        if outside.any():  # their rows extrapolate (rare): as rows
+            extrapolated = self._rows(indices[outside])
+            kept = sp.diags((~outside).astype(float)) @ full
+            kept.eliminate_zeros()
+            placement = sp.csr_matrix((np.ones(outside.sum()), (np.flatnonzero(outside), np.arange(outside.sum()))),
+                                      shape=(k, int(outside.sum())))
+            full = (kept + placement @ (extrapolated @ weights)).tocsr()
+            positions[outside] = extrapolated @ vertices
+        return full, positions
+
+    def _outside_of(self, indices):
+        return np.zeros(len(indices), dtype=bool) if self.outside is None else self.outside[indices]
+
+    def _blend(self, linear, indices):
+        """The fit's share of each row (before the fits that fail are left out): 0 on the cage to 1 at the fade."""
+        return fade_in(self.distance_to_cage(linear, self.positions[indices]) / self.fade)
+
+    def _fit_blocks(self, indices, linear):
+        """The fit's rows of the points ``indices`` (their barycentric rows ``linear``), block by block:
+        (positions in ``indices``, candidate vertices (C,), coefficients (g, C), fits (g,)) per block, the
+        coefficients applied to values at the candidates giving the fit's values at the points (0 rows where
+        there is no usable fit). The kernel's sums first, block by block, then every point's fit at once."""
+        corners, shares = corners_of(linear)
+        touched = np.zeros(len(indices), dtype=bool) if self.paths is None else self.paths.touched(corners)
+        d = self.vertices.shape[1]
+        sums = np.zeros((len(indices), 1 + d + d * (d + 1) // 2))
+        centre, ratio = np.zeros((len(indices), d)), np.ones(len(indices))
+        blocks = []
+        for block, cube in self.groups.blocks(indices):
+            origin = self.groups.centres[cube]
+            centre[block] = (self.positions[indices[block]] - origin) / self.scale
+            candidates, near = self._candidates(cube, origin, centre[block])
+            weight, ratio[block] = self._kernel_block(centre[block], near, candidates)
+            blocks.append((block, candidates, near, weight))
+        if touched.any():
+            self.paths.apply_factors([(block, candidates, weight) for block, candidates, _, weight in blocks],
+                                     corners, shares)
+        for block, _, near, weight in blocks:
+            sums[block] = weight @ moment_basis(near)
+        constants, slopes, fits = fit_coefficients(sums, centre, ratio, [0])
+        for block, candidates, near, weight in blocks:
+            weight *= constants[block] + slopes[block, :, 0] @ near.T
+            yield block, candidates, weight, fits[block]
+
+    def _candidates(self, cube, origin, centre):
+        """The cube's candidate vertices within the fit's reach of the box around the block's points (``centre``,
+        scaled): most blocks lie on a surface, flatter than their cube. Returns them and their scaled positions."""
+        candidates = self.groups.candidates(cube)
+        near = (self.vertices[candidates] - origin) / self.scale
+        outside_box = np.maximum(centre.min(axis=0) - near, 0.0) + np.maximum(near - centre.max(axis=0), 0.0)
+        kept = np.einsum("ja,ja->j", outside_box, outside_box) <= 1.0 + 1e-9  # the reach is the scale
+        return candidates[kept], near[kept]
+
+    def _kernel_block(self, centre, near, candidates):
+        """The kernel's weights (g, C) of a block's points (``centre``, scaled) for its candidates (``near``,
+        scaled), and each point's scale over its radius (g,)."""
+        # |p - v|² = |p|² - 2 p·v + |v|², one matrix product (the block's frame keeps every term about 1).
+        ones = np.ones((len(centre), 1))
+        squared = (np.hstack([centre, np.einsum("ka,ka->k", centre, centre)[:, None], ones])
+                   @ np.hstack([-2.0 * near, np.ones((len(near), 1)), np.einsum("ja,ja->j", near, near)[:, None]]).T)
+        np.maximum(squared, 0.0, out=squared)
+        ratio = self.scale / self._block_radius(squared, candidates)
+        if self.deep_radius != self.radius:
+            squared *= (ratio * ratio)[:, None]
+        np.minimum(squared, 1.0, out=squared)  # the kernel (1 - r²)², in place
+        np.subtract(1.0, squared, out=squared)
+        return np.square(squared, out=squared), ratio
+
+    def _block_radius(self, squared, candidates):
+        """:meth:`radius_at` for a block's points, from their squared distances to its candidates (scaled)."""
+        if self.deep_radius == self.radius:
+            return np.full(len(squared), self.radius)
+        near = squared_kernel(squared * (self.scale / self.radius) ** 2)
+        mass = near.sum(axis=1)
+        return self._widened((near @ self.vertex_depth[candidates]) / np.maximum(mass, np.finfo(float).tiny))
+
+    def _widened(self, depth):
+        low, high = self.depths
+        return self.radius + (self.deep_radius - self.radius) * fade_in((depth - low) / (high - low))
+
+    def _rows(self, indices):
+        linear = self.located[indices]
+        points = self.positions[indices]
+        k = len(indices)
+        fits = np.zeros(k, dtype=bool)
+        entries = [(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0))]
+        for block, candidates, coefficients, fit in self._fit_blocks(indices, linear):
+            fits[block] = fit
+            row, column = np.nonzero(coefficients)
+            entries.append((block[row], candidates[column], coefficients[row, column]))
+        blend = np.where(fits, self._blend(linear, indices), 0.0)
+        row, column, value = (np.concatenate(parts) for parts in zip(*entries))
+        fitted = sp.csr_matrix((value * blend[row], (row, column)), shape=(k, self.shape[1]))
+        rows = (sp.diags(1.0 - blend) @ linear + fitted).tocsr()
+        rows.eliminate_zeros()
+        outside = np.flatnonzero(self._outside_of(indices))
         if not len(outside):
             return rows
         # Outside: the bound point's row (P1 there, on the cage) plus the offset times the fit's gradient there.
-        offset = self.points[first + outside] - points[outside]
+        offset = self.points[indices[outside]] - points[outside]
         extrapolated = linear[outside]
         for axis, gradient in enumerate(fit_gradients(self.vertices, self.tree, points[outside], self.radius)):
             extrapolated = extrapolated + sp.diags(offset[:, axis]) @ gradient
         # Where the fit there is missing or too poorly conditioned to reproduce the point, it follows q alone.
-        missed = np.abs(extrapolated @ self.vertices - self.points[first + outside]).max(axis=1) > EXTRAPOLATION_MISS
+        missed = (np.abs(extrapolated @ self.vertices - self.points[indices[outside]]).max(axis=1)
+                  > EXTRAPOLATION_MISS)
         if missed.any():
             extrapolated = (sp.diags((~missed).astype(float)) @ extrapolated
                             + sp.diags(missed.astype(float)) @ linear[outside]).tocsr()
             extrapolated.eliminate_zeros()
-        inside = sp.diags(np.isin(np.arange(len(points)), outside, invert=True).astype(float)) @ rows
+        inside = sp.diags(np.isin(np.arange(k), outside, invert=True).astype(float)) @ rows
         inside.eliminate_zeros()
         placement = sp.csr_matrix((np.ones(len(outside)), (outside, np.arange(len(outside)))),
-                                  shape=(len(points), len(outside)))
+                                  shape=(k, len(outside)))
         return (inside + placement @ extrapolated).tocsr()
 
     def radius_at(self, distances):
@@ -179,9 +322,7 @@ class SmoothInterpolation:
         near = distances.copy()
         near.data = kernel(near.data / self.radius)
         mass = np.asarray(near.sum(axis=1)).ravel()
-        depth = (near @ self.vertex_depth) / np.maximum(mass, np.finfo(float).tiny)
-        low, high = self.depths
-        return self.radius + (self.deep_radius - self.radius) * fade_in((depth - low) / (high - low))
+        return self._widened((near @ self.vertex_depth) / np.maximum(mass, np.finfo(float).tiny))
 
     def distance_to_cage(self, linear, points):
         """Each point's distance to the cage where it is below the fade, else a lower bound of it at least the fade.
@@ -262,7 +403,7 @@ def fit_gradients(vertices, tree, points, radius):
     return rows
 
 
-def _fit_rows(vertices, distances, points, radius, terms, factors=None):
+def _fit_rows(vertices, distances, points, radius, terms):
     """Rows giving the fit's coefficients ``terms`` (0: the value at the point; 1 + a: the slope along axis a, per
     radius) at each point, from its :func:`neighbour_distances` within at least ``radius``: ([(k, N) CSR per term],
     fits (k,) bool)."""
@@ -270,16 +411,56 @@ def _fit_rows(vertices, distances, points, radius, terms, factors=None):
     radius = np.broadcast_to(np.asarray(radius, dtype=float), (k,))
     weight = distances.copy()
     weight.data = kernel(weight.data / radius[_row_of_each(weight)])
-    if factors is not None:  # each pair's share of the kernel (lbc_core.evaluate.reachability)
-        weight.data *= factors
     weight.eliminate_zeros()
     owner = _row_of_each(weight)
-    # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ, taken in
-    # the frame scaled by the largest radius and then rescaled per point.
+    # The kernel's sums in the frame scaled by the largest radius, then the coefficients rescaled per point.
     scale = radius.max()
     local, centre, ratio = vertices / scale, points / scale, scale / radius
+    constants, slopes, fits = fit_coefficients(weight @ moment_basis(local), centre, ratio, terms)
+    pair_local = [local[weight.indices, axis] for axis in range(d)]
+    result = []
+    for term in range(len(terms)):
+        factor = np.ascontiguousarray(constants[:, term])[owner]
+        for axis in range(d):
+            factor += np.ascontiguousarray(slopes[:, axis, term])[owner] * pair_local[axis]
+        # Its own index arrays: eliminate_zeros prunes them in place, and the next term needs the kernel's.
+        rows = sp.csr_matrix((weight.data * factor, weight.indices.copy(), weight.indptr.copy()), shape=weight.shape)
+        rows.eliminate_zeros()
+        result.append(rows)
+    return result, fits
+
+
+def moment_basis(local):
+    """(N, 1 + d + d(d+1)/2): 1, the coordinates and their products a ≤ b at each vertex (the fit's moments are
+    their kernel-weighted sums)."""
+    d = local.shape[1]
+    products = [local[:, a] * local[:, b] for a in range(d) for b in range(a, d)]
+    return np.column_stack([np.ones(len(local)), local] + products)
+
+
+def fit_coefficients(sums, centre, ratio, terms):
+    """The fit's coefficients at each point from its kernel-weighted sums of :func:`moment_basis` (scaled frame).
+
+    Parameters
+    ----------
+    sums : (k, 1 + d + d(d+1)/2) float array
+    centre : (k, d) float array
+        The points, in the frame of the sums.
+    ratio : (k,) float array
+        The frame's scale over each point's radius.
+    terms : list of int
+        0: the value at the point; 1 + a: the slope along axis a, per radius.
+
+    Returns
+    -------
+    constants : (k, T), slopes : (k, d, T)
+        Vertex j's factor for term t is ``constants[:, t] + slopes[:, :, t] · local_j`` (times its kernel weight).
+    fits : (k,) bool
+        Points whose moments are well conditioned (the others' coefficients are 0).
+    """
+    k, d = centre.shape
+    # Moments of the basis b = [1, (v - p) / radius] under the kernel, from sums of K, K v and K v vᵀ.
     upper = [(a, b) for a in range(d) for b in range(a, d)]
-    sums = weight @ np.c_[np.ones(len(vertices)), local, np.stack([local[:, a] * local[:, b] for a, b in upper], 1)]
     mass = sums[:, 0]
     first = (sums[:, 1:d + 1] - centre * sums[:, :1]) * ratio[:, None]  # Σ K (v - p) / r
     second = np.empty((k, d, d))
@@ -293,21 +474,26 @@ def _fit_rows(vertices, distances, points, radius, terms, factors=None):
     fits = well_conditioned(moments)
     # Coefficient t of the fit = e_tᵀ M⁻¹ Σ K b w: vertex j's factor is K_j b_j · M⁻¹ e_t (M is symmetric), an
     # affine function of the vertex, c_t + g_t · local_j, whose c_t and g_t are the point's.
-    solved = np.linalg.solve(np.where(fits[:, None, None], moments, np.eye(d + 1)),
-                             np.broadcast_to(np.eye(d + 1)[:, terms], (k, d + 1, len(terms))))
+    usable = np.where(fits[:, None, None], moments, np.eye(d + 1))
+    solved = np.stack([solve_symmetric(usable, np.broadcast_to(np.eye(d + 1)[term], (k, d + 1)))
+                       for term in terms], axis=2)
     slopes = solved[:, 1:] * (ratio * fits)[:, None, None]
     constants = solved[:, 0] * fits[:, None] - np.einsum("ka,kat->kt", centre, slopes)
-    pair_local = [local[weight.indices, axis] for axis in range(d)]
-    result = []
-    for term in range(len(terms)):
-        factor = np.ascontiguousarray(constants[:, term])[owner]
-        for axis in range(d):
-            factor += np.ascontiguousarray(slopes[:, axis, term])[owner] * pair_local[axis]
-        # Its own index arrays: eliminate_zeros prunes them in place, and the next term needs the kernel's.
-        rows = sp.csr_matrix((weight.data * factor, weight.indices.copy(), weight.indptr.copy()), shape=weight.shape)
-        rows.eliminate_zeros()
-        result.append(rows)
-    return result, fits
+    return constants, slopes, fits
+
+
+def _dense_rows(matrix, rows):
+    """Rows ``rows`` of a CSR matrix as a dense array over the columns they use: ((len(rows), u) array, (u,) columns)."""
+    starts = matrix.indptr[rows]
+    counts = matrix.indptr[rows + 1] - starts
+    position = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    columns = matrix.indices[position]
+    marked = np.zeros(matrix.shape[1], dtype=bool)
+    marked[columns] = True
+    used = np.flatnonzero(marked)
+    dense = np.zeros((len(rows), len(used)))
+    dense[np.repeat(np.arange(len(rows)), counts), np.searchsorted(used, columns)] = matrix.data[position]
+    return dense, used
 
 
 def _row_of_each(matrix):
@@ -353,6 +539,12 @@ def well_conditioned(matrices):
         eigenvalues = np.linalg.eigvalsh(matrices[doubtful])
         answer[doubtful] = eigenvalues[:, 0] > eigenvalues[:, -1] / MAX_CONDITION
     return answer
+
+
+def squared_kernel(t):
+    """:func:`kernel` at r = √t, from the squared ratio t (no square root)."""
+    t = np.clip(t, 0.0, 1.0)
+    return (1.0 - t) ** 2
 
 
 def kernel(r):

@@ -17,8 +17,8 @@ box cage, bench/RESULTS.md, "The floor's rise withdrawn").
 import numpy as np
 import scipy.sparse as sp
 
-from ..kernel.constraints import csr_from_padded, padded_rows, scatter_rows
-from ..kernel.parallel import map_row_chunks
+from ..kernel.constraints import alike_lengths, csr_from_padded, padded_rows, scatter_rows, solve_symmetric
+from ..kernel.parallel import map_row_chunks, one_blas_thread
 from ..kernel.progress import Progress
 from .smoothing import DEFAULT_SMOOTHNESS
 
@@ -39,6 +39,9 @@ ROWS_PER_CHUNK = 8192
 # The most of a point's weight the floor may take away, Σ_j min(w_j, τ); beyond it τ is lowered
 # (bench/RESULTS.md, "The floor never takes more than a tenth of a point's weight").
 MOST_REMOVED = 0.1
+
+# Rows of alike lengths tilted together at the fewest (bench/RESULTS.md, "The bind outside the solve, cheaper").
+FEWEST_ALIKE = 512
 
 # Times a point's threshold is relaxed (floor / 4; a cap raised by 1, 2, 4, ...) before it keeps its whole row
 # (bench/RESULTS.md, "Constants' notes").
@@ -93,7 +96,8 @@ def thin_weights(weights, controls, positions, floor=DEFAULT_FLOOR, max_influenc
     def thin(rows):
         return _thin_rows(weights[rows], controls, positions[rows], floor, max_influences)
 
-    chunks = map_row_chunks(thin, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "thinning the weights"))
+    with one_blas_thread():
+        chunks = map_row_chunks(thin, m, ROWS_PER_CHUNK, lambda start: progress(start / m, "thinning the weights"))
     return sp.vstack(chunks, format="csr") if chunks else sp.csr_matrix(weights.shape)
 
 
@@ -168,11 +172,17 @@ def _thin_rows(weights, controls, positions, floor, max_influences):
     def thin(rows):
         """Thin ``rows`` at their floors and caps into ``thinned`` where they then reproduce; which did."""
         prior = np.maximum(values[rows] - thresholds(values[rows], floors[rows], caps[rows])[:, None], 0.0)
-        # Rows are sorted, so the weights left are a prefix: the tilt (which keeps zeros at zero) skips the rest.
-        width = max(int(np.count_nonzero(prior, axis=1).max(initial=0)), 1)
-        tilted, done = tilt(prior[:, :width], slot_controls[rows, :width], positions[rows], extent)
-        thinned[rows[done]] = 0.0
-        thinned[rows[done], :width] = tilted[done]
+        # Rows are sorted, so the weights left are a prefix: the tilt (which keeps zeros at zero) skips the rest,
+        # rows of alike lengths together (padded to the longest of a chunk, the rows were half zeros).
+        counts = np.count_nonzero(prior, axis=1)
+        done = np.zeros(len(rows), dtype=bool)
+        for alike in alike_lengths(counts, FEWEST_ALIKE):
+            width = max(int(counts[alike].max(initial=0)), 1)
+            tilted, done[alike] = tilt(prior[alike, :width], slot_controls[rows[alike], :width], positions[rows[alike]],
+                                       extent)
+            settled = rows[alike[done[alike]]]
+            thinned[settled] = 0.0
+            thinned[settled, :width] = tilted[done[alike]]
         return done
 
     # A capped row that cannot reproduce its point raises its cap by 1, 2, 4, ... (one by one, a cap of 4 in Blender's
@@ -273,48 +283,104 @@ def tilt(prior, controls, positions, extent, iterations=40):
     m, K, d = controls.shape
     total = prior.sum(axis=1, keepdims=True)
     prior = np.divide(prior, total, out=np.zeros_like(prior), where=total > 0)
-    affine = np.concatenate([(controls - positions[:, None, :]) / extent, np.ones((m, K, 1))], axis=2)
+    # a_j's first d entries, one contiguous (m, K) array per axis (its last entry is the constant 1).
+    offsets = np.ascontiguousarray(np.moveaxis((controls - positions[:, None, :]) / extent, 2, 0))
     target = np.zeros(d + 1)
     target[d] = 1.0
     multipliers = np.zeros((m, d + 1))
     # The rows still iterating, gathered once and compacted as rows settle (not gathered again at every evaluation).
     active = np.flatnonzero(total[:, 0] > 0)
-    rows, kept, lam = affine[active], prior[active], multipliers[active]
-
-    def tilted(kept, rows, lam):
-        return kept * np.exp(np.clip((rows @ lam[:, :, None])[:, :, 0], -200.0, 200.0))
-
+    axes, kept, lam = offsets[:, active], prior[active], multipliers[active]
+    weights = kept.copy()  # tilted by λ = 0
+    final = np.zeros_like(prior)  # each row's weights where it settled
     for _ in range(iterations):
         if not len(active):
             break
-        weights = tilted(kept, rows, lam)
-        gradient = (weights[:, None, :] @ rows)[:, 0] - target
+        first = _first_moments(weights, axes)
+        gradient = first - target
         # A point outside the hull of its prior's support has no solution: λ runs off (weights grown e^50-fold).
         settled = (np.abs(gradient).max(axis=1) <= 1e-12) | ~(np.abs(lam).max(axis=1) < 50)
         if settled.any():
             multipliers[active[settled]] = lam[settled]
+            final[active[settled]] = weights[settled]
             going = ~settled
-            active, rows, kept, lam = active[going], rows[going], kept[going], lam[going]
-            weights, gradient = weights[going], gradient[going]
+            active, axes, kept, lam = active[going], axes[:, going], kept[going], lam[going]
+            weights, gradient, first = weights[going], gradient[going], first[going]
             if not len(active):
                 break
-        hessian = np.swapaxes(weights[:, :, None] * rows, 1, 2) @ rows
+        dual = first[:, d] - lam[:, d]
+        hessian = _moments(weights, axes, first)
         hessian += 1e-14 * np.eye(d + 1)
-        step = np.linalg.solve(hessian, gradient[:, :, None])[:, :, 0]
-        dual = weights.sum(axis=1) - lam[:, d]
-        scale = np.ones(len(active))
-        growing = np.arange(len(active))
-        for _ in range(30):  # halve the step where the dual would grow (a row that did not grow is done)
-            trial = lam[growing] - scale[growing, None] * step[growing]
-            grows = tilted(kept[growing], rows[growing], trial).sum(axis=1) - trial[:, d] > dual[growing] + 1e-14
-            growing = growing[grows]  # rounding is no growth
-            if not len(growing):
-                break
-            scale[growing] /= 2
-        lam = lam - scale[:, None] * step
+        step = solve_symmetric(hessian, gradient)
+        lam, weights = _damped_step(kept, axes, lam, step, dual)
     multipliers[active] = lam
-    weights = tilted(prior, affine, multipliers)
+    final[active] = weights
+    weights = final
     unity = np.abs(weights.sum(axis=1) - 1.0)
     reproduction = np.linalg.norm(np.einsum("mk,mkd->md", weights, controls) - positions, axis=1)
     done = (total[:, 0] > 0) & (unity <= TOLERANCE) & (reproduction <= TOLERANCE * extent)
     return weights, done
+
+
+def _tilted(kept, axes, lam):
+    """The prior ``kept`` (m, K) tilted by the multipliers ``lam`` (m, d+1): kept_j exp(λ · a_j), a_j's first d entries
+    ``axes`` (d, m, K) and its last 1."""
+    d = len(axes)
+    exponent = np.repeat(lam[:, d:], kept.shape[1], axis=1)
+    for axis in range(d):
+        exponent += axes[axis] * lam[:, axis, None]
+    return kept * np.exp(np.clip(exponent, -200.0, 200.0, out=exponent), out=exponent)
+
+
+def _first_moments(weights, axes):
+    """Σ_j w_j a_j per row, (m, d+1), a_j's first d entries ``axes`` (d, m, K) and its last 1: the dual's gradient
+    plus the target."""
+    d = len(axes)
+    first = np.empty((len(weights), d + 1))
+    for a in range(d):
+        first[:, a] = np.einsum("mk,mk->m", weights, axes[a])
+    first[:, d] = weights.sum(axis=1)
+    return first
+
+
+def _moments(weights, axes, first):
+    """Σ_j w_j a_j a_jᵀ per row, (m, d+1, d+1), from its last row ``first`` (:func:`_first_moments`): the dual's
+    Hessian (six sums of products in 3D, not a batched product of (m, K, d+1) arrays: twice as fast)."""
+    d = len(axes)
+    moments = np.empty((len(weights), d + 1, d + 1))
+    moments[:, d] = moments[:, :, d] = first
+    for a in range(d):
+        weighted = weights * axes[a]
+        for b in range(a, d):
+            moments[:, a, b] = moments[:, b, a] = np.einsum("mk,mk->m", weighted, axes[b])
+    return moments
+
+
+def _damped_step(kept, axes, lam, step, dual):
+    """Each row's λ − s step for the first s of 1, 1/2, 1/4, ... (30 at most) where the dual ``dual`` does not grow
+    (rounding is no growth), and the weights there: the last weights a row tried are its next iteration's, so each
+    Newton step evaluates the exponentials once, not twice (bench/RESULTS.md, "The bind outside the solve, cheaper").
+
+    Returns
+    -------
+    lam : (m, d+1) float array
+    weights : (m, K) float array
+    """
+    d = lam.shape[1] - 1
+    scale = np.ones(len(lam))
+    trial = lam - step  # the full step for every row first, without gathering them
+    weights = _tilted(kept, axes, trial)
+    growing = np.flatnonzero(weights.sum(axis=1) - trial[:, d] > dual + 1e-14)
+    for _ in range(29):
+        if not len(growing):
+            break
+        scale[growing] /= 2
+        trial = lam[growing] - scale[growing, None] * step[growing]
+        tried = _tilted(kept[growing], axes[:, growing], trial)
+        weights[growing] = tried
+        growing = growing[tried.sum(axis=1) - trial[:, d] > dual[growing] + 1e-14]
+    if len(growing):  # halved once more than tried
+        scale[growing] /= 2
+        weights[growing] = _tilted(kept[growing], axes[:, growing],
+                                   lam[growing] - scale[growing, None] * step[growing])
+    return lam - scale[:, None] * step, weights

@@ -130,17 +130,11 @@ def restore_constraints(weights, controls, positions, columns=None, rounds=20, c
 
         def spread(correction, support):
             return support * (correction @ affine_rows.T)
+
+        solve = _solve_each
     else:
-        affine = affine_rows[columns]  # (m, K, d+1)
-
-        def reproduced(w):
-            return (w[:, None, :] @ affine)[:, 0]
-
-        def gram_on(support):
-            return np.swapaxes(support[:, :, None] * affine, 1, 2) @ affine
-
-        def spread(correction, support):
-            return support * (affine @ correction[:, :, None])[:, :, 0]
+        reproduced, gram_on, spread = _slot_products(controls, columns)
+        solve = solve_symmetric
     target = np.c_[positions, np.ones(m)]
     support = weights > 0
     weights = np.where(support, weights, 0.0)
@@ -151,13 +145,47 @@ def restore_constraints(weights, controls, positions, columns=None, rounds=20, c
         gram = gram_on(support)
         # A tiny ridge keeps supports that cannot span the affine constraints from blowing up.
         ridge = 1e-14 * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(d + 1)
-        weights += spread(np.linalg.solve(gram + ridge, residual[:, :, None])[:, :, 0], support)
+        weights += spread(solve(gram + ridge, residual), support)
         negative = weights < 0
         if not negative.any():
             break
         support &= ~negative
         weights[negative] = 0.0
     return weights
+
+
+def _solve_each(matrices, vectors):
+    return np.linalg.solve(matrices, vectors[:, :, None])[:, :, 0]
+
+
+def _slot_products(controls, columns):
+    """:func:`restore_constraints`' products for points whose K slots hold the controls ``columns`` (m, K): sums of
+    products of one (m, K) array per axis, not batched products of (m, K, d+1) arrays (several times as fast;
+    bench/RESULTS.md, "The bind outside the solve, cheaper"). Returns (reproduced, gram_on, spread)."""
+    d = controls.shape[1]
+    axes = [np.ascontiguousarray(controls[:, a])[columns] for a in range(d)]  # each (m, K)
+
+    def reproduced(w):
+        return np.column_stack([np.einsum("mk,mk->m", w, axis) for axis in axes] + [w.sum(axis=1)])
+
+    def gram_on(support):
+        inside = support.astype(float)
+        gram = np.empty((len(inside), d + 1, d + 1))
+        gram[:, d, d] = inside.sum(axis=1)
+        for a in range(d):
+            weighted = inside * axes[a]
+            gram[:, a, d] = gram[:, d, a] = weighted.sum(axis=1)
+            for b in range(a, d):
+                gram[:, a, b] = gram[:, b, a] = np.einsum("mk,mk->m", weighted, axes[b])
+        return gram
+
+    def spread(correction, support):
+        change = np.repeat(correction[:, d:], support.shape[1], axis=1)
+        for a in range(d):
+            change += axes[a] * correction[:, a, None]
+        return support * change
+
+    return reproduced, gram_on, spread
 
 
 def constraint_residuals(weights, controls, positions, columns=None):
@@ -255,9 +283,68 @@ def padded_rows(matrix):
 
 
 def csr_from_padded(values, columns, n):
-    """The (m, n) CSR matrix of padded rows (:func:`padded_rows`); zeros are dropped."""
+    """The (m, n) CSR matrix of padded rows (:func:`padded_rows`); zeros are dropped. A row's columns are distinct
+    where its values are not 0, so the rows are read off directly (no sum of duplicates), then sorted."""
     m, K = values.shape
-    rows = np.repeat(np.arange(m), K)
-    matrix = sp.csr_matrix((values.ravel(), (rows, columns.ravel())), shape=(m, n))
-    matrix.eliminate_zeros()
+    present = values != 0
+    indptr = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(np.count_nonzero(present, axis=1), out=indptr[1:])
+    matrix = sp.csr_matrix((values[present], columns[present], indptr), shape=(m, n))
+    matrix.sort_indices()
     return matrix
+
+
+def alike_lengths(counts, fewest):
+    """Rows (indices into ``counts``, their lengths) in groups of alike lengths, to pad each group to its own
+    longest row, not every row to the longest: up to 8, then up to a third more than the group before (12, 16, 21,
+    28, ...); a group of fewer than ``fewest`` rows joins the next longer one.
+
+    >>> [rows.tolist() for rows in alike_lengths(np.array([3, 20, 5, 9]), 1)]
+    [[0, 2], [3], [1]]
+    """
+    bounds = [8]
+    while bounds[-1] < counts.max(initial=0):
+        bounds.append(bounds[-1] + max(bounds[-1] // 3, 4))
+    group = np.searchsorted(bounds, counts)
+    groups, pending = [], np.zeros(0, dtype=np.int64)
+    for number in range(len(bounds)):
+        pending = np.concatenate([pending, np.flatnonzero(group == number)])
+        if len(pending) >= fewest or number == len(bounds) - 1:
+            groups.append(pending)
+            pending = np.zeros(0, dtype=np.int64)
+    return [rows for rows in groups if len(rows)]
+
+
+def solve_symmetric(matrices, vectors):
+    """x with A x = b for each small symmetric positive definite A: an LDLᵀ factorisation without pivoting,
+    vectorised over the batch (a few dozen array operations, not one LAPACK call per matrix: several times as fast
+    for 4 × 4 matrices); a matrix with a pivot that is not positive is solved by ``np.linalg.solve`` instead.
+
+    Parameters
+    ----------
+    matrices : (m, D, D) float array
+    vectors : (m, D) float array
+
+    Returns
+    -------
+    (m, D) float array
+    """
+    m, size, _ = matrices.shape
+    entries = np.moveaxis(matrices, 0, -1)  # (D, D, m): each entry one contiguous-enough vector over the batch
+    lower = np.zeros((size, size, m))
+    pivots = np.empty((size, m))
+    for j in range(size):
+        pivots[j] = entries[j, j] - sum(lower[j, k] ** 2 * pivots[k] for k in range(j))
+        for i in range(j + 1, size):
+            lower[i, j] = (entries[i, j] - sum(lower[i, k] * lower[j, k] * pivots[k] for k in range(j))) / pivots[j]
+    solution = np.empty((size, m))
+    for i in range(size):
+        solution[i] = vectors[:, i] - sum(lower[i, k] * solution[k] for k in range(i))
+    solution /= pivots
+    for i in reversed(range(size)):
+        solution[i] -= sum(lower[k, i] * solution[k] for k in range(i + 1, size))
+    solution = solution.T.copy()
+    failed = np.flatnonzero(~(pivots > 0).all(axis=0) | ~np.isfinite(solution).all(axis=1))
+    if len(failed):
+        solution[failed] = np.linalg.solve(matrices[failed], vectors[failed][:, :, None])[:, :, 0]
+    return solution

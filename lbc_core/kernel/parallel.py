@@ -1,6 +1,7 @@
 """One shared thread pool for the work that numpy and scipy run without the GIL (ufuncs, sparse products), and how
 busy the machine is for it (the threads runnable now, else the load average)."""
 
+import contextlib
 import functools
 import math
 import os
@@ -8,6 +9,8 @@ import threading
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
+
+from threadpoolctl import threadpool_limits
 
 _POOL = None
 # The one-minute load average's time constant, in seconds (an exponential average of the runnable threads).
@@ -106,6 +109,15 @@ def counted_in_load(function):
             _COUNTING.active = False
 
     return counted
+
+
+@contextlib.contextmanager
+def one_blas_thread():
+    """BLAS on one thread inside (every thread of the process): for work whose many small products each of our
+    threads makes (the smooth fit's blocks, the thinning's): OpenBLAS's own threads on them took 1.7 times the CPU and
+    more wall time on a busy machine (bench/RESULTS.md, "The bind outside the solve, cheaper")."""
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
 
 
 def thread_map(function, items):

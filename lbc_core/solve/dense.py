@@ -29,11 +29,10 @@ Where this differs from the authors' reference, and why:
 """
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import CageError
 from ..kernel.constraints import project_onto_constraints
 from ..kernel.frame import UnitFrame, principal_aspect
 from ..kernel.progress import Laps, Progress
@@ -42,84 +41,33 @@ from .forecast import default_tolerance, forecast_iterations, format_remaining, 
 from .nullspace import NORM_SLICE, DenseProblem, DenseSplitting
 from .objective import tv_objective
 # The options record, checks, residuals and penalty are the working sets' solver's own (settings.py).
-from .settings import (SolveSettings, balancing_factor, check_problem, relative_residuals, residual_scale,
-                       starting_penalty)
+from .settings import SolveResult, balancing_factor, relative_residuals, residual_scale
 from .stretch import Stretch
 
 # Tuned on the unit-diagonal cage, per dimension (see bench/RESULTS.md): β weighs the W = Z block against the
 # gradient block; the best initial penalty falls with the number of control points n as c_d / n^(1/(d-1)).
 BETA = {2: 20.0, 3: 20.0}
-
-
 PENALTY_SCALE = {2: 1.3, 3: 1.3}
-
-
 # The dual residual is allowed this many times the primal tolerance: it lags, and the objective settles first.
 DUAL_TOLERANCE_FACTOR = 10.0
-
-
 # Anderson extrapolates the map of several steps: about as many steps in all as extrapolating every step (±10 %), at a
 # fraction of the history work per step; in 3D five steps take 5-20 % less time than three (see bench/RESULTS.md).
 ANDERSON_PERIOD = {2: 3, 3: 5}
-
-
 # Over-relaxation α of each step: in 3D 1.9 takes 8-12 % fewer iterations than 1.6 on cages of 18 control points and
 # more, as many on smaller ones, at the same objectives (2D keeps the α its packs were tuned with; bench/RESULTS.md).
 RELAXATION = {2: 1.6, 3: 1.9}
-
-
 # Penalty balancing up to iteration BALANCE_UNTIL, every BALANCE_SPACING iterations: doubled where the primal / dual
 # residual ratio passes BALANCE_HIGH[d], halved below BALANCE_LOW (bench/RESULTS.md, "The penalty balanced against the
 # residuals in the first iterations"; 3D's 0.6: "The penalty's band in 3D").
 BALANCE_UNTIL = 300
-
-
 BALANCE_HIGH, BALANCE_LOW = {2: 2.0, 3: 0.6}, 0.05
-
-
 BALANCE_SPACING = 30
 
 
 @dataclass
-class SolveResult:
-    """Result of :func:`solve_on_mesh`.
-
-    Attributes
-    ----------
-    weights : (N, n) float array
-        Coordinates at every mesh vertex.
-    iterations : int
-    converged : bool
-        Whether the stopping rule was met before ``max_iterations``.
-    objective : float
-        Σ_cells Σ_i ω A |∇w_i| of ``weights``, in the input's units (length^(d-1)).
-    tv_weights : (F, n) float array
-        The ω the solve was given.
-    history : list of dict
-        At each scheduled check (every ``check_every`` iterations) the iteration and the relative primal residual;
-        where the primal test passed, a full check adds the relative dual residual and the objective of the
-        iterate Z in the input's units (the output, W projected, is lower). Where the penalty was balanced, the
-        iteration and the new penalty.
-    seconds : dict
-        Time per stage.
-    state : SolverState or None
-        The solver's final state, to warm-start a solve on the same mesh carried onto an edited cage (None when
-        there was nothing to iterate).
-    """
-
-    weights: np.ndarray
-    iterations: int
-    converged: bool
-    objective: float
-    tv_weights: np.ndarray
-    history: list = field(default_factory=list)
-    seconds: dict = field(default_factory=dict)
-    state: "SolverState" = None
-
-
-@dataclass
 class SolverState:
-    """A solve's final Douglas-Rachford state and what gives its parts their meaning, for a warm start.
+    """A dense solve's final Douglas-Rachford state and what gives its parts their meaning, which the solver carries
+    onto working sets for a warm re-bind (:meth:`lbc_core.solve.state.SolverState.from_dense`).
 
     The state is in measure-scaled variables (see :class:`DenseProblem`): v_X = X̃ + Ũ per cell, v_W = W̃ + Ṽ per
     interior vertex. A solve on the same cells and interior vertices, moved, rescales each part by its own measure: the
@@ -147,32 +95,6 @@ class SolverState:
     interior: np.ndarray
     penalty: float = None
 
-    def restricted(self, cells, interior):
-        """The state of a sub-problem: the cells where ``cells`` (F,) is true and the interior vertices
-        ``interior`` (a subset of this state's, sorted), the others held fixed."""
-        v_x, v_w = self.parts()
-        rows = np.searchsorted(self.interior, interior)
-        return SolverState(np.concatenate([v_x[:, cells].ravel(), v_w[rows].ravel()]), self.thresholds[cells],
-                           self.sqrt_cell[cells], self.sqrt_mass[rows], interior, self.penalty)
-
-    def updated(self, sub, cells):
-        """This state with a sub-problem's final state (:meth:`restricted` with the same ``cells``) written in."""
-        v_x, v_w = self.parts()
-        rows = np.searchsorted(self.interior, sub.interior)
-        v_x, v_w = v_x.copy(), v_w.copy()
-        v_x[:, cells], v_w[rows] = sub.parts()
-        thresholds, sqrt_cell, sqrt_mass = self.thresholds.copy(), self.sqrt_cell.copy(), self.sqrt_mass.copy()
-        thresholds[cells], sqrt_cell[cells], sqrt_mass[rows] = sub.thresholds, sub.sqrt_cell, sub.sqrt_mass
-        return SolverState(np.concatenate([v_x.ravel(), v_w.ravel()]), thresholds, sqrt_cell, sqrt_mass,
-                           self.interior, sub.penalty)
-
-    def for_cells(self, source):
-        """This state on another list of cells, cell i taking cell ``source[i]``'s part (a warm start's guess where
-        a re-bind replaced cells)."""
-        v_x, v_w = self.parts()
-        return SolverState(np.concatenate([v_x[:, source].ravel(), v_w.ravel()]), self.thresholds[source],
-                           self.sqrt_cell[source], self.sqrt_mass, self.interior, self.penalty)
-
     def parts(self):
         """Views of the state as v_X (d, F, n) and v_W (N_in, n)."""
         F, n = self.thresholds.shape
@@ -186,110 +108,40 @@ class SolverState:
                                             self.interior))
 
 
-def solve_on_mesh(
-    vertices,
-    cells,
-    boundary_vertices,
-    boundary_weights,
-    control_points,
-    tv_weights,
-    *,
-    epsilon=0.0,
-    tolerance=None,
-    max_iterations=10000,
-    penalty=None,
-    relaxation=None,
-    check_every=10,
-    anderson_memory=5,
-    anderson_period=None,
-    single_precision=True,
-    start=None,
-    progress=None,
-    cancel=None,
-):
-    """Local barycentric coordinates on a given mesh of the cage's interior.
+def solve(problem, settings, penalty=None, progress=None):
+    """The LBC problem solved by the dense splitting, as :func:`lbc_core.solve.solver.solve_on_mesh` takes it where
+    its cost model says this splitting's iterations cost less (a cold 3D solve of a small or convex cage), or where
+    ``splitting="dense"`` asks for it (the reference a tight solve gives the tests and benchmarks).
 
     Parameters
     ----------
-    vertices : (N, d) float array
-    cells : (F, d+1) int array, triangles (d = 2) or tetrahedra (d = 3)
-    boundary_vertices : (B,) int array
-        Vertices whose weights are fixed (all vertices on the cage).
-    boundary_weights : (B, n) float array
-        Their weights; each row sums to 1 and reproduces the vertex's position.
-    control_points : (n, d) float array
-    tv_weights : (F, n) float array
-        ω per cell and coordinate (:func:`lbc_core.solve.geodesics.tv_weights` of the geodesic distances).
-    epsilon : float
-        C¹ relaxation width: |∇w| is replaced by its Huber smoothing (quadratic below ε, in 1/length units of the
-        unit-diagonal cage, linear above), which makes the coordinates smoother at the cost of some locality.
-        0 is the paper's plain total variation.
-    tolerance : float, optional
-        Relative primal residual tolerance of the stopping rule (the dual one is 10 times larger). The defaults
-        (:func:`default_tolerance`) stop within 0.02 % of the optimal objective on the paper's 2D cages, and in 3D
-        where the deformation stays within half of what remeshing alone changes.
-    max_iterations : int
+    problem : tuple
+        ``solve_on_mesh``'s six arrays, checked: vertices, cells, boundary vertices and weights, control points,
+        TV weights.
+    settings : SolveSettings
+        The options ``solve_on_mesh`` resolved (tolerance, relaxation, Anderson's memory and period, precision).
     penalty : float, optional
-        The starting ADMM penalty ρ on the unit-diagonal cage; None picks the one ``start`` ended with, else
-        c_d / n^(1/(d-1)). It is balanced against the residuals in the first BALANCE_UNTIL iterations.
-    relaxation : float, optional
-        Over-relaxation α in (0, 2); None picks RELAXATION[d].
-    check_every : int
-        Iterations between progress reports (cancel is checked within every iteration). The primal test runs after
-        every Anderson period (it costs one norm: a step's residual is α times its primal residual); the dual test
-        once the primal one passes.
-    anderson_memory : int
-        Extrapolations remembered by Anderson acceleration (0: plain ADMM).
-    anderson_period : int, optional
-        Douglas-Rachford steps per Anderson extrapolation: Anderson accelerates the map made of this many steps
-        (None: ANDERSON_PERIOD of the dimension).
-    single_precision : bool
-        Iterate in float32 (half the memory traffic); the result is corrected in float64, so the constraints hold
-        to round-off either way.
-    start : SolverState, optional
-        A previous solve's final state (``SolveResult.state``) on the same cells and interior vertices, whose
-        vertices may have moved (a mesh carried onto an edited cage, see :mod:`lbc_core.binding.rebinding`): the
-        iterations start there instead of from the harmonic coordinates.
-    progress : callable(fraction, message) or Progress, optional
-    cancel : callable() -> bool, optional
-        Polled between the steps of every stage (factorisation, each ADMM iteration, projection); when it
-        returns True the solve raises :class:`lbc_core.Cancelled`.
+        The starting ADMM penalty on the unit-diagonal cage; None: c_d / n^(1/(d-1)).
+    progress : Progress, optional
 
     Returns
     -------
     SolveResult
+        Its ``state`` (:class:`SolverState`) is the dense splitting's own, which the solver carries onto working sets.
     """
     timer = Laps()
-    progress = Progress.of(progress, cancel)
-    vertices = np.asarray(vertices, dtype=float)
-    cells = np.asarray(cells, dtype=np.int64)
-    boundary_vertices = np.asarray(boundary_vertices, dtype=np.int64)
-    boundary_weights = np.asarray(boundary_weights, dtype=float)
-    control_points = np.asarray(control_points, dtype=float)
+    progress = Progress.of(progress)
+    vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights = problem
     n_vertices, d = vertices.shape
     n = len(control_points)
-    check_problem(vertices, cells, boundary_vertices, boundary_weights, control_points, tv_weights)
-    if start is not None:
-        _check_start(start, cells, n, n_vertices - len(boundary_vertices))
-    settings = SolveSettings(epsilon, default_tolerance(d, n) if tolerance is None else tolerance, max_iterations,
-                         RELAXATION[d] if relaxation is None else relaxation, check_every, anderson_memory,
-                         ANDERSON_PERIOD[d] if anderson_period is None else anderson_period,
-                         np.float32 if single_precision else np.float64)
-    tv_weights = np.asarray(tv_weights, dtype=float)
-
     # Work on the mesh scaled to unit diagonal, so that penalty and tolerances are scale-free.
     frame = UnitFrame.exact(vertices)
     scale = frame.scale
     unit_vertices, unit_controls = frame.to_unit(vertices), frame.to_unit(control_points)
-
-    # A very thin 3D cage is meshed stretched (lbc_core.kernel.frame.MeshingFrame), so its cells are flat, and a
-    # splitting that treats their steep and flat directions alike takes thousands of iterations. Past
-    # STRETCHED_SOLVE_FROM the iterations run in the stretched frame, where the cells are round, the total variation's
-    # norm weighted per axis so that the problem stays the cage's own.
-    stretch = Stretch.of(unit_controls, epsilon)
+    # A very thin 3D cage is solved in its stretched frame, where its cells are round (lbc_core.solve.stretch).
+    stretch = Stretch.of(unit_controls, settings.epsilon)
     solve_vertices, solve_controls = (unit_vertices, unit_controls) if stretch is None else (
         stretch.apply(unit_vertices), stretch.apply(unit_controls))
-
     interior = np.setdiff1d(np.arange(n_vertices), boundary_vertices)
     weights = np.empty((n_vertices, n))
     weights[boundary_vertices] = boundary_weights
@@ -299,9 +151,9 @@ def solve_on_mesh(
         return SolveResult(weights, 0, True, objective, tv_weights, [], timer.seconds, None)
     progress(0.0, "factorising the solver's matrix")
     problem = DenseProblem(solve_vertices, cells, boundary_vertices, boundary_weights, solve_controls, interior, BETA[d],
-                       settings.dtype, progress, stretch)
+                           settings.dtype, progress, stretch)
     timer.lap("factorisation")
-    Z, W, iterations, converged, history, state = _iterate(problem, tv_weights, settings, penalty, start, stretch,
+    Z, W, iterations, converged, history, state = _iterate(problem, tv_weights, settings, penalty, stretch,
                                                            unit_controls, progress)
     for record in history:  # objectives in the input's units
         if "objective" in record:
@@ -313,18 +165,11 @@ def solve_on_mesh(
     # From the operators at hand, in float64: TV scales with length^(d-1).
     objective = problem.objective(weights[interior], tv_weights, progress.check) * scale ** (d - 1)
     progress(1.0, "solved")
-    return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds, state)
+    return SolveResult(weights, iterations, converged, objective, tv_weights, history, timer.seconds, state,
+                       splitting="dense")
 
 
-def _check_start(start, cells, n, n_interior):
-    """Refuse a warm start made on another mesh."""
-    if start.thresholds.shape != (len(cells), n) or len(start.interior) != n_interior:
-        raise CageError(f"the start state is for {start.thresholds.shape[0]} cells, {start.thresholds.shape[1]} "
-                        f"control points and {len(start.interior)} interior vertices, not {len(cells)}, {n} and "
-                        f"{n_interior}: start from a solve on this mesh")
-
-
-def _iterate(problem, tv_weights, settings, penalty, start, stretch, unit_controls, progress):
+def _iterate(problem, tv_weights, settings, penalty, stretch, unit_controls, progress):
     """Z and W at the interior vertices (float64, unscaled), the iterations, whether converged, the history and the
     final SolverState: ADMM (:class:`_Admm`), except on a simplex cage."""
     d, n = problem.d, len(unit_controls)
@@ -335,16 +180,14 @@ def _iterate(problem, tv_weights, settings, penalty, start, stretch, unit_contro
     # A cold solve at the default tolerance knows about how many iterations to expect, which bounds the time left it
     # tells early on, while its residual still falls slowly.
     expected = (forecast_iterations(n, d, stretch is not None, principal_aspect(unit_controls))
-                if start is None and settings.tolerance == default_tolerance(d, n) else None)
-    admm = _Admm(problem, tv_weights, settings, starting_penalty(penalty, start, _default_penalty(d, n)),
+                if settings.tolerance == default_tolerance(d, n) else None)
+    admm = _Admm(problem, tv_weights, settings, _default_penalty(d, n) if penalty is None else penalty,
                  progress.part(_FACTORISATION_END, _ADMM_END), expected)
-    return admm.solve(start)
+    return admm.solve()
 
 
 # Where each part of the solve ends on its progress range (the ADMM iterations take most of the time).
 _FACTORISATION_END, _ADMM_END = 0.06, 0.98
-
-
 
 
 def _default_penalty(d, n):
@@ -371,12 +214,12 @@ class _Admm:
         self.fraction, self.first_distance, self.checks, self.started = 0.0, None, [], None
         self.next_check = self.next_balance = settings.check_every  # the first check balances the penalty
 
-    def solve(self, start=None):
-        """Iterate from the harmonic coordinates, or from ``start`` (a SolverState), until the residuals pass the
-        tolerance or the iterations run out. Returns Z and W (float64, unscaled), the iterations, whether converged,
+    def solve(self):
+        """Iterate from the harmonic coordinates until the residuals pass the tolerance or the iterations run out. Returns Z and W (float64, unscaled), the iterations, whether converged,
         the history and the final SolverState."""
         self.started = time.perf_counter()
-        initial = self._initial_state(start)
+        self.progress(0.0, "ADMM: starting from the harmonic coordinates")
+        initial = self.step.initial_state()
         self.iteration = min(self.period, self.max_iterations)
         self.value, self.out, _, self.residual, self.residual_norm, _ = self._advance(initial, None, self.iteration)
         primal_scale, early_check_done = None, False  # the last scheduled check's scale; one early check per window
@@ -407,13 +250,6 @@ class _Admm:
         final = SolverState(self.value, self.step.thresholds, problem.sqrt_cell, problem.sqrt_mass, problem.interior,
                             self.step.penalty)
         return out.Z.astype(np.float64), W_unscaled, self.iteration, self.converged, self.history, final
-
-    def _initial_state(self, start):
-        if start is None:
-            self.progress(0.0, "ADMM: starting from the harmonic coordinates")
-            return self.step.initial_state()
-        self.progress(0.0, "ADMM: starting from the previous solve")
-        return self.step.carried_state(start)
 
     def _advance(self, start, last, count):
         """``count`` steps from ``start``. Returns the final state, the last two steps' :class:`Step`, the residual
@@ -524,6 +360,5 @@ def _difference(a, b, check, keep=True):
                             out=difference[start:start + NORM_SLICE] if keep else None)
         squares += float(np.linalg.norm(piece)) ** 2
     return difference, np.sqrt(squares)
-
 
 

@@ -174,26 +174,6 @@ class DenseSplitting:
         v_w[:] = p.sqrt_mass * np.clip(Z, 0.0, 1.0)
         return state
 
-    def carried_state(self, start):
-        """A previous solve's final state (:class:`SolverState`) rescaled to this mesh's measures and thresholds:
-        X̃ by the ratio of √|c|, Ũ by the ratio of the thresholds (so it stays as far inside or on their ball), v_W by
-        the ratio of √(β m_v)."""
-        p = self.p
-        state = np.array(start.state, dtype=p.G.dtype)
-        v_x, v_w = self.split(state)
-        cell_ratio = (p.sqrt_cell / start.sqrt_cell).astype(state.dtype)
-        threshold_ratio = np.divide(self.thresholds, start.thresholds, out=np.ones_like(self.thresholds),
-                                    where=start.thresholds > 0)
-
-        def rescale(chunk):
-            cells = chunk.cells
-            kept = self.shrink_factors(v_x[:, cells], start.thresholds[cells].astype(state.dtype))
-            v_x[:, cells] *= kept * cell_ratio[cells] + (1.0 - kept) * threshold_ratio[cells]
-
-        self.in_rounds(rescale)
-        v_w *= (p.sqrt_mass / start.sqrt_mass).astype(state.dtype)
-        return state
-
     def rescale_penalty(self, state, factor):
         """Change the penalty to ``factor`` times itself, in place on ``state``: the split variables stay, the
         scaled duals (v minus them) shrink by ``factor``, and so do the shrink thresholds. The Y-step's matrix does
@@ -325,17 +305,11 @@ class _Chunk:
 
 # Below this many entries in the X block, threads cost more than they save (2D problems of the paper's size).
 PARALLEL_MIN_ENTRIES = 500_000
-
-
 # At most this many entries of the X block per chunk: a chunk's share of a step then takes about 20-50 ms, and cancel
 # is checked between rounds of chunks (one step of 64k tetrahedra and 168 control points takes 0.6 s or more).
 ENTRIES_PER_CHUNK = 4_000_000
-
-
 # Right-hand sides per call of the Y-step's solve, and entries per slice of a state's norm: cancel is checked between.
 SOLVE_COLUMNS = 32
-
-
 NORM_SLICE = 4_000_000
 
 

@@ -15,18 +15,12 @@ from .projection import PADDING_VALUE, STEP_TOLERANCE, corner_products, project_
 
 # Newton steps of the projection within an iteration (bench/RESULTS.md, "The locality solver").
 STEP_NEWTON_STEPS = 3
-
-
 # Slots per factorisation at most: the least-squares matrix is factorised in groups of whole control points, so that
 # cancel is heard between them (bench/RESULTS.md, "The step").
 FACTOR_GROUP_SLOTS = 20000
-
-
 # Pairs per chunk of the gradient matrix's assembly, cancel checked between chunks (bench/RESULTS.md, "The locality
 # solver, third round").
 GRADIENT_CHUNK_PAIRS = 100_000
-
-
 # The largest violation of partition of unity or reproduction the solve's output keeps (unit-frame coordinates).
 EXACT = 1e-12
 # Row blocks of the gradient matrix, whatever the threads: Gᵀ sums one partial product per block, and a sum's

@@ -4,7 +4,7 @@
 cheaper one, and the dense splitting takes these from here, so that neither imports the other both ways.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,6 +27,46 @@ class SolveSettings:
     anderson_memory: int
     anderson_period: int
     dtype: type
+
+
+@dataclass
+class SolveResult:
+    """Result of :func:`lbc_core.solve.solver.solve_on_mesh`, by either splitting.
+
+    Attributes
+    ----------
+    weights : (N, n) float array
+        Coordinates at every mesh vertex.
+    iterations : int
+    converged : bool
+        Whether the stopping rule was met before ``max_iterations``.
+    objective : float
+        Σ_cells Σ_i ω A |∇w_i| of ``weights``, in the input's units (length^(d-1)).
+    tv_weights : (F, n) float array
+        The ω the solve was given.
+    history : list of dict
+        At each scheduled check the iteration and the relative primal residual; where the primal test passed, the
+        relative dual residual and the objective of the iterate (input's units). Where the penalty was balanced,
+        the iteration and the new penalty; where the working sets grew, the iteration and the slots.
+    seconds : dict
+        Time per stage.
+    state : SolverState or None
+        The solver's final state (:class:`lbc_core.solve.state.SolverState`; the dense splitting's own, which the
+        solver carries onto working sets), to warm-start a solve on the same mesh carried onto an edited cage (None
+        when there was nothing to iterate).
+    splitting : str
+        "working sets", or "dense" where the cost model took the dense splitting.
+    """
+
+    weights: np.ndarray
+    iterations: int
+    converged: bool
+    objective: float
+    tv_weights: np.ndarray
+    history: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+    state: object = None
+    splitting: str = "working sets"
 
 
 def balancing_factor(residuals, high):

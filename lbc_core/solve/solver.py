@@ -17,7 +17,7 @@ stretched frame it was meshed in (:mod:`lbc_core.solve.stretch`). Measurements: 
 """
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -30,25 +30,11 @@ from ..kernel.geometry import hull_share, signed_measures
 from ..kernel.progress import Laps, Progress
 from . import dense
 from .anderson import Anderson
-from .forecast import (
-    SMALL_CAGE,
-    default_tolerance,
-    dense_tolerance_share,
-    forecast_iterations,
-    format_remaining,
-    seconds_left,
-    takes_dense_splitting,
-)
+from .forecast import (SMALL_CAGE, default_tolerance, dense_tolerance_share, forecast_iterations, format_remaining,
+                       seconds_left, takes_dense_splitting)
 from .objective import tv_objective
-from .settings import (
-    SolveSettings,
-    balancing_factor,
-    check_affine,
-    check_problem,
-    relative_residuals,
-    residual_scale,
-    starting_penalty,
-)
+from .settings import (SolveResult, SolveSettings, balancing_factor, check_affine, check_problem, relative_residuals,
+                       residual_scale, starting_penalty)
 from .splitting import DouglasRachford
 from .state import SolverState
 from .stretch import Stretch
@@ -57,94 +43,33 @@ from .working_sets import MeshData, WorkingSets, feasible_working_sets, first_wo
 
 # β: the weight of the W = Z block against the gradient block, on the unit-diagonal cage.
 BETA = {2: 1280.0, 3: 1280.0}
-
-
 # The starting penalty c_d / n^(1/(d-1)) for n control points: c_d.
 PENALTY_SCALE = {2: 1.3, 3: 0.3}
-
-
 # The dual residual's tolerance as a multiple of the primal one (it lags; the objective settles first).
 DUAL_TOLERANCE_FACTOR = 10.0
-
-
 # Steps per Anderson extrapolation, and the over-relaxation α of each step.
 ANDERSON_PERIOD = {2: 3, 3: 5}
-
-
 RELAXATION = {2: 1.6, 3: 1.9}
-
-
 # Penalty balancing: up to BALANCE_UNTIL iterations, every BALANCE_SPACING, double the penalty when the primal
 # residual exceeds BALANCE_HIGH times the dual, halve it below BALANCE_LOW times (bench/RESULTS.md, "The penalty
 # balanced against the residuals in the first iterations").
 BALANCE_UNTIL, BALANCE_SPACING = 300, 30
-
-
 BALANCE_HIGH = {2: 2.0, 3: 0.6}  # BALANCE_LOW: settings.py
-
-
 # The working sets are reshaped to one ring of vertices around the weights above GROWTH_FLOOR at iterations
 # GROWTH_FIRST_CHECK, then each time GROWTH_SPACING times as many (bench/RESULTS.md, "Working sets: start, growth,
 # pruning").
 GROWTH_FIRST_CHECK, GROWTH_SPACING, GROWTH_FLOOR = 20, 3, 1e-3
-
-
 # A solve that meets its tolerance stops unless growing would add more than END_GROWTH_SHARE of its slots; it then
 # grows around the weights above END_GROWTH_FLOOR, a margin for the next check (same section).
 END_GROWTH_SHARE, END_GROWTH_FLOOR = 0.005, 1e-4
-
-
 # Whole working sets of cages above SMALL_CAGE control points (supports spread wide: a slow tail) stop at this
 # share of the tolerance (bench/RESULTS.md, "Whole working sets stop at a fifth of the tolerance").
 WHOLE_TOLERANCE_SHARE = 0.2
-
-
 # Where each part of the solve ends on its progress range.
 _SETUP_END, _ADMM_END = 0.06, 0.98
-
-
 # The iterations' progress until the tolerance is first met stops at this share: where the forecast's iterations
 # are too few, the rest and the end game's growth still move it (bench/RESULTS.md, "The time left in the end game").
 BEFORE_END_GAME_SHARE = 0.9
-
-
-@dataclass
-class SolveResult:
-    """Result of :func:`solve_on_mesh`.
-
-    Attributes
-    ----------
-    weights : (N, n) float array
-        Coordinates at every mesh vertex.
-    iterations : int
-    converged : bool
-        Whether the stopping rule was met before ``max_iterations``.
-    objective : float
-        Σ_cells Σ_i ω A |∇w_i| of ``weights``, in the input's units (length^(d-1)).
-    tv_weights : (F, n) float array
-        The ω the solve was given.
-    history : list of dict
-        At each scheduled check the iteration and the relative primal residual; where the primal test passed, the
-        relative dual residual and the objective of the iterate (input's units). Where the penalty was balanced,
-        the iteration and the new penalty; where the working sets grew, the iteration and the slots.
-    seconds : dict
-        Time per stage.
-    state : SolverState or None
-        The solver's final state, to warm-start a solve on the same mesh carried onto an edited cage (None when
-        there was nothing to iterate).
-    splitting : str
-        "working sets", or "dense" where the cost model took the dense splitting (:func:`_dense_solve`).
-    """
-
-    weights: np.ndarray
-    iterations: int
-    converged: bool
-    objective: float
-    tv_weights: np.ndarray
-    history: list = field(default_factory=list)
-    seconds: dict = field(default_factory=dict)
-    state: "SolverState" = None
-    splitting: str = "working sets"
 
 
 def solve_on_mesh(
@@ -287,11 +212,7 @@ def _dense_solve(mesh, problem, settings, penalty, progress):
     cost less (:func:`~lbc_core.solve.forecast.takes_dense_splitting`): the same problem, options and guarantees, its
     final state carried onto working sets for a warm re-bind. ``problem``: solve_on_mesh's six arrays."""
     vertices, control_points, tv_weights = problem[0], problem[4], problem[5]
-    result = dense.solve_on_mesh(
-        *problem, penalty=penalty, epsilon=settings.epsilon, tolerance=settings.tolerance,
-        max_iterations=settings.max_iterations,
-        relaxation=settings.relaxation, check_every=settings.check_every, anderson_memory=settings.anderson_memory,
-        anderson_period=settings.anderson_period, single_precision=settings.dtype == np.float32, progress=progress)
+    result = dense.solve(problem, settings, penalty, progress)
     state = None
     if result.state is not None:
         d, n = vertices.shape[1], len(control_points)
@@ -589,8 +510,6 @@ def _convexity(vertices, cells):
 def _default_penalty(d, n):
     """The starting penalty c_d / n^(1/(d-1)) (bench/RESULTS.md, "The starting penalty c_d / √n (3D)")."""
     return PENALTY_SCALE[d] / n ** (1.0 / (d - 1))
-
-
 
 
 def _check_start(start, cells, n, n_interior):

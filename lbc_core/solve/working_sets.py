@@ -27,8 +27,6 @@ from .projection import project_rows
 # The harmonic coordinates' largest entries a vertex's first working set takes, then twice as many until the vertex's
 # position lies in their control points' hull (bench/RESULTS.md, "The locality solver").
 FIRST_SET_SIZE = 12
-
-
 # Working sets holding more than this share of all (vertex, control point) slots are made whole: every control
 # point's block of the step's matrix is then the same, one factor for all (bench/RESULTS.md, "The locality solver,
 # third round").
