@@ -8,7 +8,6 @@ Nothing in the scene changes before step 3, so a failed or cancelled Make Cage l
 The modal operator runs step 2 in a :class:`lbc_addon.jobs.Worker` (``Worker([request], work=make)``).
 """
 
-import inspect
 import numbers
 import time
 from dataclasses import dataclass
@@ -44,7 +43,7 @@ class CageOptions:
     Examples
     --------
     >>> CageOptions(vertices=40).core_keywords()
-    {'n_vertices': 40, 'margin': None}
+    {'n_vertices': 40, 'margin': None, 'symmetry': None}
     >>> CageOptions(symmetry="w")
     Traceback (most recent call last):
     lbc_core.errors.CageError: symmetry must be None or one of 'x', 'y', 'z', not 'w'
@@ -75,13 +74,8 @@ class CageOptions:
 
     def core_keywords(self):
         """The keywords of ``lbc_core.generate_cage`` for these options: the one place the add-on's names and
-        defaults meet lbc_core's. ``symmetry`` is passed only when asked, so an lbc_core without it still runs."""
-        keywords = {"n_vertices": self.vertices or None, "margin": self.margin or None}
-        if self.symmetry is not None:
-            if "symmetry" not in inspect.signature(generate_cage).parameters:
-                raise CageError("this version of lbc cannot make symmetric cages yet: set Symmetry to None")
-            keywords["symmetry"] = self.symmetry
-        return keywords
+        defaults meet lbc_core's."""
+        return {"n_vertices": self.vertices or None, "margin": self.margin or None, "symmetry": self.symmetry}
 
 
 @dataclass

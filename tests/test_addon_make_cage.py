@@ -297,23 +297,24 @@ def test_make_cage_and_bind_refuses_shared_mesh_data_before_making_a_cage():
     assert "CubeCage" not in bpy.data.objects
 
 
-def test_the_symmetry_is_passed_to_lbc_core_only_when_asked(monkeypatch):
-    from lbc_addon.cage_job import CageOptions
-
-    assert CageOptions().core_keywords() == {"n_vertices": None, "margin": None}
-
-    def symmetric(vertices, faces, *, n_vertices=None, margin=None, symmetry=None, progress=None, cancel=None):
-        return symmetry
-
-    def plain(vertices, faces, *, n_vertices=None, margin=None, progress=None, cancel=None):
-        return None
-
-    monkeypatch.setattr(cage_maker.cage_job, "generate_cage", symmetric)
-    assert CageOptions(vertices=30, margin=0.02, symmetry="X").core_keywords() == {
-        "n_vertices": 30, "margin": 0.02, "symmetry": "x"}
-    monkeypatch.setattr(cage_maker.cage_job, "generate_cage", plain)
-    with pytest.raises(api.CageError, match="cannot make symmetric cages yet: set Symmetry to None"):
-        CageOptions(symmetry="y").core_keywords()
+def test_symmetry_x_makes_a_cage_that_is_its_own_mirror_image_in_the_mesh_s_frame():
+    """Symmetry X mirrors the cage across the plane through the mesh's bounding-box middle, normal to the mesh's own
+    x axis (not the world's): the cage of a rotated, off-centre mesh maps onto itself under that mirror."""
+    cube = cube_scene()
+    data = cube.data
+    for vertex in data.vertices:
+        if vertex.co.x > 0 and vertex.co.z > 0:
+            vertex.co.z += 0.3  # no longer symmetric about x itself: the cage is made around it and its mirror
+    cube.location = (2.0, -1.0, 0.5)
+    cube.rotation_euler = (0.3, 0.0, 0.7)
+    made = api.make_cage(cube, vertices=VERTICES, symmetry="x")
+    local = positions(made.cage.data)
+    low, high = positions(data).min(axis=0), positions(data).max(axis=0)
+    mirrored = local.copy()
+    mirrored[:, 0] = (low[0] + high[0]) - mirrored[:, 0]
+    nearest = np.linalg.norm(mirrored[:, None, :] - local[None, :, :], axis=2).min(axis=1)
+    assert nearest.max() < 1e-5 * diagonal(cube)  # Blender keeps positions in float32
+    assert not np.allclose(local[:, 2], local[:, 2].mean())  # a real cage, not a degenerate one
 
 
 def test_cage_job_makes_a_cage_without_bpy():

@@ -145,7 +145,7 @@ def main(argv=None):
         cage, wire = make(suzanne, vertices=vertices)
         render(out / f"cage-vertices-{vertices}.png")
         drop(wire, cage)
-    cage, wire = make(suzanne, margin=0.05)
+    cage, wire = make(suzanne, vertices=30, margin=0.05)  # beside the 30 vertices at the default margin
     render(out / "cage-margin-0.05.png")
     drop(wire, cage)
 
