@@ -8,15 +8,16 @@ Three parts: what reads Blender (``geometry``: the scene into a bind request), w
 the request, the solve on a worker thread, the result; importable and tested without Blender, so this file imports
 the Blender modules only when the add-on is registered), and what writes Blender (``writing``, ``storage``, the
 deformer: ``node_group``, ``deformer`` (its modifier), ``diagnosis``, ``handlers``; and ``influence``);
-``properties``, ``operators``, ``ui`` and ``api`` are the user's side.
+``properties``, ``operators``, ``ui`` and ``api`` are the user's side. Make Cage has its own three: ``cage_scene``
+(reads and writes Blender), ``cage_job`` (runs without ``bpy``) and ``cage_maker`` (its operators).
 """
 
 
 def _modules():
     """The modules with a register(), in registration order."""
-    from . import handlers, operators, properties, ui
+    from . import cage_maker, handlers, operators, properties, ui
 
-    return (properties, operators, ui, handlers)
+    return (properties, operators, cage_maker, ui, handlers)
 
 
 def register():

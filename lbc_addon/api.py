@@ -5,6 +5,7 @@ Example::
     import bpy
     from lbc_addon import api   # inside Blender with the extension enabled: from bl_ext.user_default.lbc import api
     summary = api.bind(bpy.data.objects["Body"], bpy.data.objects["Cage"], cells=20000)
+    # or, without a cage yet: made = api.make_cage([bpy.data.objects["Body"]]); api.bind(body, made.cage)
     print(summary.warnings)
     assert api.status(bpy.data.objects["Body"]).ok
     bpy.ops.wm.save_mainfile()
@@ -16,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import bpy
 
-from . import deformer, diagnosis, geometry, jobs, node_group, writing
+from . import cage_job, cage_scene, deformer, diagnosis, geometry, jobs, node_group, writing
 from .core import DEFAULT_SMOOTHNESS, CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
 from .diagnosis import Note, NoteKind  # noqa: F401  (for scripts: what Status.notes holds)
 from .options import DEFAULT_INFLUENCES, MESHER_NAMES, AddonOptions
@@ -188,13 +189,116 @@ def _bind_request(request, progress, cancel, solved=None):
     )
 
 
-def _tell(mesh_name, found, printing):
-    """Log a bind's warnings (a background script returns its summary, and nobody may read it), and print them when
-    ``printing``, among the progress lines."""
+def _tell(mesh_name, found, printing, label="LBC bind"):
+    """Log a bind's (or Make Cage's) warnings (a background script returns its summary, and nobody may read it), and
+    print them when ``printing``, among the progress lines that begin with ``label``."""
     for warning in found:
         logger.warning("%s: %s", mesh_name, warning)
         if printing:
-            print(f"LBC bind: warning: {mesh_name}: {warning}", flush=True)
+            print(f"{label}: warning: {mesh_name}: {warning}", flush=True)
+
+
+@dataclass(frozen=True)
+class CageSummary:
+    """What :func:`make_cage` made.
+
+    Lengths and the volume are in the cage object's own units, which are the first mesh's (the cage takes its world
+    transform: with a scale of 1, world units).
+
+    Attributes
+    ----------
+    cage : bpy.types.Object
+        The new cage object (a reference, valid as any until an undo or another file is loaded).
+    name : str
+        Its name, "<first mesh>Cage" (".001" added by Blender when that is taken).
+    meshes : tuple of str
+        The meshes it was made around, the first giving its frame, name and collections.
+    vertices : int
+        The cage's vertex count.
+    faces : int
+        Its faces.
+    asked_vertices : int
+        The vertex count asked, or the one chosen for the meshes (``vertices=0``).
+    volume : float
+        What it encloses.
+    clearance : float
+        About the least distance from a mesh vertex to the cage.
+    mean_distance : float
+        About the mean distance from a cage vertex to the meshes.
+    margin : float
+        The margin it was made with (wider than asked when the first attempts failed: see ``warnings``).
+    attempts : int
+        How many attempts it took (1: the first).
+    warnings : tuple of str
+        What the artist should know (e.g. why the first attempts failed).
+    seconds : float
+        The time to make it.
+
+    Examples
+    --------
+    >>> made = api.make_cage([bpy.data.objects["Suzanne"]], vertices=40)
+    >>> made.name, made.cage.display_type, abs(made.vertices - 40) <= 6
+    ('SuzanneCage', 'WIRE', True)
+    >>> api.bind(bpy.data.objects["Suzanne"], made.cage).outside
+    0
+    """
+
+    cage: object
+    name: str
+    meshes: tuple
+    vertices: int
+    faces: int
+    asked_vertices: int
+    volume: float
+    clearance: float
+    mean_distance: float
+    margin: float
+    attempts: int
+    warnings: tuple
+    seconds: float
+
+
+def make_cage(mesh_objs, *, vertices=0, margin=0.0, symmetry=None, vertex_group="", progress=None, cancel=None):
+    """Make a closed cage around ``mesh_objs`` (one mesh object or several: one cage around them all) and add it to
+    the scene, as the Make Cage button does: a new object "<first mesh>Cage" drawn as a wire, hidden in renders,
+    with the first mesh's world transform, in its collections; the meshes selected and the cage active.
+
+    Parameters are those of the Make Cage operator: ``vertices`` (0: chosen for the meshes' shape), ``margin`` (a
+    share of their bounding-box diagonal; 0: lbc's default), ``symmetry`` (None, "x", "y" or "z": mirror-symmetric
+    across that axis of the first mesh), ``vertex_group`` (a partial cage around the faces of this group of each
+    mesh; "": the whole meshes). ``progress(fraction, message)`` and ``cancel() -> bool`` are passed to lbc_core.
+    Nothing in the scene changes unless the cage is made. Bind the meshes to it with :func:`bind`.
+
+    Returns
+    -------
+    CageSummary
+        With no ``progress`` in background mode, progress lines are printed ("LBC cage: 42% shaping the cage"), and
+        the warnings after them; the warnings are also logged, as :func:`bind`'s are.
+
+    Raises
+    ------
+    CageError
+        For what cannot be caged (not a mesh, in Edit Mode, a vertex group missing or empty, flat, bad options), at
+        once; or when lbc_core could make no valid cage (``CageGenerationFailed``), saying what to try.
+    Cancelled
+        When ``cancel()`` turned true.
+    RuntimeError
+        When the extension is installed but not enabled (before any work).
+    """
+    _require_enabled()
+    options = cage_job.CageOptions(vertices=vertices, margin=margin, symmetry=symmetry, vertex_group=vertex_group)
+    request = cage_scene.snapshot(mesh_objs, options)
+    printing = progress is None and bpy.app.background
+    if printing:
+        progress = jobs.printed_progress(label="LBC cage")
+    result = cage_job.make(request, progress, cancel)
+    cage = cage_scene.write(request, result)
+    made = result.cage
+    _tell(cage.name, made.warnings, printing, "LBC cage")
+    return CageSummary(cage=cage, name=cage.name, meshes=request.mesh_names, vertices=made.vertex_count,
+                       faces=len(made.faces), asked_vertices=made.asked_vertices, volume=made.volume,
+                       clearance=made.clearance, mean_distance=made.mean_distance, margin=made.margin,
+                       attempts=made.attempts, warnings=tuple(made.warnings), seconds=result.seconds)
 
 
 def unbind(mesh_obj):

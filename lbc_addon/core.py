@@ -17,8 +17,11 @@ else:  # the project's tree: lbc_core the top-level package beside lbc_addon
 
 BindOptions = _api.BindOptions
 CageError = _api.CageError
+CageGenerationFailed = _api.CageGenerationFailed
 CageVertexError = _api.CageVertexError
 Cancelled = _api.Cancelled
+GeneratedCage = _api.GeneratedCage
+NothingToCage = _api.NothingToCage
 PointsOutside = _api.PointsOutside
 DEFAULT_CELLS = _api.DEFAULT_CELLS
 DEFAULT_FLOOR = _api.DEFAULT_FLOOR
@@ -33,6 +36,7 @@ bind = _api.bind
 flatten = _api.flatten
 floor_for = _api.floor_for
 format_size = _api.format_size
+generate_cage = _api.generate_cage
 make_cage = _api.make_cage
 method_names = _api.method_names
 rebind = _api.rebind

@@ -151,15 +151,16 @@ def read_welded(welded):
     return np.array([pair.split(":") for pair in welded.split(",") if pair], dtype=np.int64).reshape(-1, 2)
 
 
-def printed_progress(interval=1.0):
-    """A progress callback printing "LBC bind: 42% message" lines (background mode has no status bar): a line when
+def printed_progress(interval=1.0, label="LBC bind"):
+    """A progress callback printing "LBC bind: 42% message" lines (``label`` first; background mode has no status
+    bar): a line when
     the message says something new, else at most one per ``interval`` seconds. A message that differs from the last
     only in its numbers says nothing new: a stage's own counts can change dozens of times a second (a new user's
     5 s bind printed 65 lines, 21 of them geodesic counts within 0.08 s)."""
     last = {"words": None, "line": None, "time": -float("inf")}
 
     def progress(fraction, message):
-        line = f"LBC bind: {100 * fraction:3.0f}% {message}"
+        line = f"{label}: {100 * fraction:3.0f}% {message}"
         words = re.sub(r"[\d.]+", "#", message)
         now = time.perf_counter()
         if line != last["line"] and (words != last["words"] or now - last["time"] >= interval):
@@ -469,17 +470,21 @@ class Worker:
     """Solves bind requests one after the other in a thread, reporting progress and obeying a cancel flag.
 
     Read ``fraction``, ``message``, ``done`` from the main thread; results and errors are collected in ``results``
-    (pairs of request and result) and ``error`` (the first exception, after which the worker stops).
+    (pairs of request and result) and ``error`` (the first exception, after which the worker stops). ``work`` is what
+    runs for each request, as :func:`solve` (its default) takes it: Make Cage runs ``cage_job.make`` so. ``activity``
+    says what runs, for the message of a button that waits for it ("a bind is already running").
     """
 
-    def __init__(self, requests):
+    def __init__(self, requests, work=None, activity="a bind"):
         self.requests = list(requests)
+        self.work = solve if work is None else work
+        self.activity = activity
         self.results = []
         self.error = None
         self.fraction = 0.0
         self.message = "starting"
         self._cancel = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="lbc-bind", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"lbc {activity}", daemon=True)
 
     def start(self):
         self._thread.start()
@@ -507,6 +512,6 @@ class Worker:
                     self.fraction = (number + fraction) / count
                     self.message = f"{request.mesh_name}: {message}"
 
-                self.results.append((request, solve(request, progress, self._cancel.is_set, self.results)))
+                self.results.append((request, self.work(request, progress, self._cancel.is_set, self.results)))
         except Exception as error:  # handed to the main thread, which reports it
             self.error = error

@@ -19,7 +19,8 @@ from . import deformer, diagnosis, geometry, influence, jobs, writing
 from .core import CageError, Cancelled
 from .properties import OPTION_NAMES, BindOptionProperties, bound_to, is_bound
 
-_running = []  # the Worker of the bind in progress: one at a time, so two binds never write the same mesh
+# The Worker of the bind (or of Make Cage) in progress: one at a time, so two binds never write the same mesh.
+running = []
 
 
 def _selection(context):
@@ -61,7 +62,7 @@ def _bound_summary(bound, named=5):
     return "Bound " + "; ".join(parts)
 
 
-def _apply_all(operator, pairs):
+def apply_all(operator, pairs):
     """Write every solved binding; returns the bound objects. Reports what could not be written, what was bound, and
     the bindings' warnings last: Blender's status bar shows only the last report, and "Bound" over a warning hid it."""
     bound = []
@@ -83,7 +84,7 @@ def _apply_all(operator, pairs):
     return bound
 
 
-def _solve_printing(requests):
+def solve_printing(requests):
     """Solve in this thread, printing progress lines (background mode has no status bar): one percentage for all the
     meshes, each mesh's lines beginning with its name when there are several (a new user saw the percentage reach
     100 % "bound" and start again for the second mesh)."""
@@ -134,14 +135,14 @@ class _Binder:
 
     def execute(self, context):
         try:
-            pairs = _solve_printing(self.snapshot(context))
+            pairs = solve_printing(self.snapshot(context))
         except Cancelled:
             self.report({"WARNING"}, "Bind cancelled: nothing changed")
             return {"CANCELLED"}
         except CageError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        return {"FINISHED"} if _apply_all(self, pairs) else {"CANCELLED"}
+        return {"FINISHED"} if apply_all(self, pairs) else {"CANCELLED"}
 
     def invoke(self, context, event):
         if bpy.app.background:
@@ -152,7 +153,7 @@ class _Binder:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         worker = jobs.Worker(requests)
-        _running.append(worker)
+        running.append(worker)
         worker.start()
         self._worker = worker
         self._timer = context.window_manager.event_timer_add(0.1, window=context.window)
@@ -185,7 +186,7 @@ class _Binder:
         if worker.error is not None:
             self.report({"ERROR"}, str(worker.error))
             return {"CANCELLED"}
-        return {"FINISHED"} if _apply_all(self, worker.results) else {"CANCELLED"}
+        return {"FINISHED"} if apply_all(self, worker.results) else {"CANCELLED"}
 
     def cancel(self, context):
         """Blender ends the modal operator itself (its window closed, another file opened): stop the solve and let
@@ -196,19 +197,20 @@ class _Binder:
     def _finish(self, context):
         context.window_manager.event_timer_remove(self._timer)
         context.workspace.status_text_set(None)
-        _running.remove(self._worker)
+        running.remove(self._worker)
 
 
-def _busy_message(context, label):
-    """Why no bind labelled ``label`` can start now (another runs, or not in Object Mode), or None."""
-    if _running:
-        return "A bind is already running (Esc cancels it)"
+def busy_message(context, label):
+    """Why no bind (or Make Cage) labelled ``label`` can start now (another runs, or not in Object Mode), or None."""
+    if running:
+        activity = running[0].activity
+        return f"{activity[:1].upper()}{activity[1:]} is already running (Esc cancels it)"
     if context.mode != "OBJECT":
         return f"{label} works in Object Mode"
     return None
 
 
-def _allowed(operator_class, message):
+def allowed(operator_class, message):
     """A poll() result: True when ``message`` (why the operator cannot run) is None, else False with the message
     shown on the greyed-out button."""
     if message:
@@ -218,7 +220,7 @@ def _allowed(operator_class, message):
 
 def _bind_poll_message(context):
     """Why Bind cannot run now, or None when it can."""
-    busy = _busy_message(context, "Bind")
+    busy = busy_message(context, "Bind")
     if busy:
         return busy
     cage = context.active_object
@@ -244,7 +246,7 @@ class OBJECT_OT_lbc_bind(_Binder, BindOptionProperties, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return _allowed(cls, _bind_poll_message(context))
+        return allowed(cls, _bind_poll_message(context))
 
     def targets(self, context):
         cage = context.active_object
@@ -268,13 +270,13 @@ class OBJECT_OT_lbc_rebind(_Binder, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        message = _busy_message(context, cls.bl_label)
+        message = busy_message(context, cls.bl_label)
         selection = _bound_selection(context)
         if message is None and not selection:
             message = "Select a bound mesh"
         elif message is None and all(obj.lbc.cage is None for obj in selection):
             message = "The cage was deleted: select the mesh, then a cage (active), and Bind"
-        return _allowed(cls, message)
+        return allowed(cls, message)
 
     def targets(self, context):
         triples = []
@@ -295,11 +297,11 @@ class OBJECT_OT_lbc_rebind_all(_Binder, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        message = _busy_message(context, cls.bl_label)
+        message = busy_message(context, cls.bl_label)
         if message is None and (context.active_object is None
                                 or not bound_to(context.active_object, context.scene.objects)):
             message = "Make a cage with bound meshes active"
-        return _allowed(cls, message)
+        return allowed(cls, message)
 
     def targets(self, context):
         return deformer.rebind_all_targets(context.active_object, context.scene.objects)
@@ -315,10 +317,10 @@ class OBJECT_OT_lbc_unbind(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        message = "Wait for the running bind, or cancel it with Esc" if _running else None
+        message = "Wait for the running bind, or cancel it with Esc" if running else None
         if message is None and not _bound_selection(context) and not _leftover_selection(context):
             message = "Select a bound mesh"
-        return _allowed(cls, message)
+        return allowed(cls, message)
 
     def execute(self, context):
         objects, leftovers = [], []
@@ -363,7 +365,7 @@ class OBJECT_OT_lbc_show_influence(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return _allowed(cls, None if _influence_targets(context) else "Make a bound mesh or its cage active")
+        return allowed(cls, None if _influence_targets(context) else "Make a bound mesh or its cage active")
 
     def execute(self, context):
         shown = 0
@@ -392,7 +394,7 @@ class OBJECT_OT_lbc_hide_influence(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         shown = any(obj.lbc.show_influence for obj in _influence_targets(context))
-        return _allowed(cls, None if shown else "No influence is shown")
+        return allowed(cls, None if shown else "No influence is shown")
 
     def execute(self, context):
         for mesh_obj in _influence_targets(context):
@@ -412,8 +414,8 @@ class OBJECT_OT_lbc_save_shape_key(bpy.types.Operator):
     def poll(cls, context):
         obj = context.active_object
         if obj is None or not is_bound(obj):
-            return _allowed(cls, "Make a bound mesh active")
-        return _allowed(cls, geometry.not_editable_here(obj))
+            return allowed(cls, "Make a bound mesh active")
+        return allowed(cls, geometry.not_editable_here(obj))
 
     def execute(self, context):
         mesh_obj = context.active_object

@@ -4,7 +4,7 @@ import textwrap
 
 import bpy
 
-from . import deformer, diagnosis, geometry, storage
+from . import cage_scene, deformer, diagnosis, geometry, storage
 from .core import format_size
 from .diagnosis import NoteKind, edited_since_bind
 from .properties import bound_to, is_bound
@@ -123,6 +123,7 @@ def draw(layout, context):
     obj = context.active_object
     if obj is None:
         layout.label(text="Select the mesh(es), then the cage (active)")
+        draw_make_cage(layout, context)
         return
     if is_bound(obj):
         draw_binding(layout, obj)
@@ -158,6 +159,23 @@ def draw(layout, context):
         layout.label(text=f"Bind {len(to_bind)} selected mesh(es) to '{obj.name}':" if to_bind
                      else "Select the mesh(es), then the cage (active)")
     layout.operator("object.lbc_bind", icon="MOD_MESHDEFORM")
+    if not meshes and not swapped:  # the active object is no cage of bound meshes, nor a mesh in its cage's place
+        draw_make_cage(layout, context)
+
+
+def draw_make_cage(layout, context):
+    """Make Cage and Make Cage and Bind, for the selected meshes (none selected: nothing)."""
+    meshes = cage_scene.cage_targets(context)
+    if not meshes:
+        return
+    box = layout.box()
+    if len(meshes) == 1:
+        box.label(text=f"No cage yet? Make one around '{meshes[0].name}':", icon="MESH_ICOSPHERE")
+    else:
+        box.label(text=f"Or make one cage around the {len(meshes)} selected meshes:", icon="MESH_ICOSPHERE")
+    row = box.row(align=True)
+    row.operator("object.lbc_make_cage", icon="MESH_ICOSPHERE")
+    row.operator("object.lbc_make_cage_and_bind", icon="MOD_MESHDEFORM")
 
 
 class OBJECT_PT_lbc(bpy.types.Panel):

@@ -13,6 +13,7 @@ from .binding.rebinding import rebind
 from .binding.record import Start
 from .cage import MAX_CONTROL_POINTS, POSED_APART, make_cage, some_indices
 from .cage.planar import flatten, reframed
+from .cage_generator import CageGenerationFailed, GeneratedCage, NothingToCage, generate_cage
 from .errors import CageError, CageVertexError, Cancelled, PointsOutside
 from .evaluate.smoothing import DEFAULT_SMOOTHNESS
 from .evaluate.thinning import DEFAULT_FLOOR, floor_for, thin_changed_rows, thin_weights
@@ -22,11 +23,11 @@ from .solve.forecast import format_size
 from .version import __version__
 
 __all__ = [
-    "BindOptions", "CageError", "CageVertexError", "Cancelled", "DEFAULT_CELLS", "DEFAULT_FLOOR", "DEFAULT_SMOOTHNESS",
-    "DEFAULT_TOLERANCE", "FEW_CELLS_PER_CONTROL_POINT", "MAX_CONTROL_POINTS", "MESHERS", "POSED_APART", "PointsOutside",
-    "__version__", "bind", "flatten", "floor_for", "format_size", "make_cage", "method_names", "rebind",
-    "rebind_report", "reframed", "solved_again", "some_indices", "thin_changed_rows", "thin_weights",
-    "too_small_warning",
+    "BindOptions", "CageError", "CageGenerationFailed", "CageVertexError", "Cancelled", "DEFAULT_CELLS",
+    "DEFAULT_FLOOR", "DEFAULT_SMOOTHNESS", "DEFAULT_TOLERANCE", "FEW_CELLS_PER_CONTROL_POINT", "GeneratedCage",
+    "MAX_CONTROL_POINTS", "MESHERS", "NothingToCage", "POSED_APART", "PointsOutside", "__version__", "bind",
+    "flatten", "floor_for", "format_size", "generate_cage", "make_cage", "method_names", "rebind", "rebind_report",
+    "reframed", "solved_again", "some_indices", "thin_changed_rows", "thin_weights", "too_small_warning",
 ]
 
 DEFAULT_CELLS = options.DEFAULT_CELLS

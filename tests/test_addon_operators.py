@@ -341,12 +341,12 @@ class _ModalHarness:
 
     def __init__(self, requests):
         from lbc_addon import jobs
-        from lbc_addon.operators import _running
+        from lbc_addon.operators import running
 
         self.reports, self.status = [], []
         self._worker = jobs.Worker(requests)
         self._timer = object()
-        _running.append(self._worker)
+        running.append(self._worker)
         self._worker.start()
         manager = type("WindowManager", (), {"event_timer_remove": lambda _self, timer: None})()
         workspace = type("Workspace", (), {"status_text_set": lambda _self, text: self.status.append(text)})()
@@ -428,13 +428,13 @@ def test_esc_during_a_modal_bind_cancels_it_and_changes_nothing():
 
 def test_a_modal_bind_blender_ends_itself_is_cancelled_and_lets_later_binds_run():
     """Blender calls cancel() when it removes a modal handler (its window closed, another file opened)."""
-    from lbc_addon.operators import OBJECT_OT_lbc_bind, _running
+    from lbc_addon.operators import OBJECT_OT_lbc_bind, running
 
     mesh, cage = sphere_in_box_scene()
     harness = _ModalHarness(_requests(mesh, cage))
     OBJECT_OT_lbc_bind.cancel(harness, harness.context)
     harness._worker._thread.join(60)
-    assert harness._worker.cancelled and not _running and harness.status[-1] is None
+    assert harness._worker.cancelled and not running and harness.status[-1] is None
     with bpy.context.temp_override(active_object=cage, object=cage, selected_objects=[mesh, cage]):
         assert bpy.ops.object.lbc_bind.poll()
     assert not is_bound(mesh)

@@ -157,7 +157,20 @@ def test_cage_lists_its_meshes_and_a_selection_offers_bind(bound_gargoyle):
     mesh2, box = sphere_in_box_scene()
     layout = _draw(box, [mesh2, box])
     assert "Bind 1 selected mesh(es) to 'Box'" in layout.labels()
-    assert layout.operators() == ["object.lbc_bind"]
+    assert layout.operators() == ["object.lbc_bind", "object.lbc_make_cage", "object.lbc_make_cage_and_bind"]
+    assert "Or make one cage around the 2 selected meshes:" in layout.labels()
+
+
+def test_a_mesh_selected_alone_is_offered_make_cage_and_a_cage_with_bound_meshes_is_not():
+    mesh, box = sphere_in_box_scene()
+    layout = _draw(mesh, [mesh])
+    assert "No cage yet? Make one around 'Sphere':" in layout.labels()
+    assert layout.operators()[-2:] == ["object.lbc_make_cage", "object.lbc_make_cage_and_bind"]
+    with bpy.context.temp_override(active_object=mesh, object=mesh, selected_objects=[mesh]):
+        assert bpy.ops.object.lbc_make_cage.poll() and bpy.ops.object.lbc_make_cage_and_bind.poll()
+    api.bind(mesh, box, cells=1000)
+    assert "object.lbc_make_cage" not in _draw(box, [mesh, box]).operators()
+    assert "object.lbc_make_cage" not in _draw(mesh, [mesh]).operators()  # bound: its binding's panel
 
 
 def test_a_dense_mesh_active_with_its_cage_selected_is_called_swapped_before_any_click():

@@ -188,3 +188,14 @@ def _subdivide(mesh, cuts):
     edit.to_mesh(mesh)
     edit.free()
     mesh.update()
+
+
+def cube_scene(cuts=2, matrix=MESH_MATRIX):
+    """A cube subdivided with ``cuts`` (2: 56 vertices) named 'Cube', with its own transform; returns it."""
+    reset()
+    bpy.ops.mesh.primitive_cube_add()
+    cube = bpy.context.active_object
+    cube.name = "Cube"
+    _subdivide(cube.data, cuts)
+    cube.matrix_world = matrix
+    return cube
