@@ -236,7 +236,7 @@ def stage(directory, manifest_text, wheels):
 
 
 def zip_name(version, python, platform):
-    """The file name of one zip, e.g. ``lbc-0.1.0-blender4.2-5.0-linux_x64.zip``."""
+    """The file name of one zip, e.g. ``lbc-0.2.0-blender4.2-5.0-linux_x64.zip``."""
     return f"lbc-{version}-{PYTHON_LINES[python][2]}-{platform.replace('-', '_')}.zip"
 
 
