@@ -3,8 +3,8 @@
     OMP_NUM_THREADS=1 taskset -c 0 .venv/bin/python bench/cage_generator.py [FOLDER ...] [--bind] [--auto]
         [--symmetry] [--folds] [--big MESH]
 
-Each FOLDER holds ``mesh.*`` and a hand-made ``cage.*`` (tests/data/cages-3d/*, the public pairs of /work/data/* when
-present, gargoyle's Nested Cage L10 standing in for a hand-made one). Each row runs in a process of its own, timed
+Each FOLDER holds ``mesh.*`` and a hand-made ``cage.*`` (tests/data/cages-3d/*, and the public pairs of bench/public-data.md
+when LBC_PUBLIC_DATA names them, gargoyle's Nested Cage L10 standing in for a hand-made one). Each row runs in a process of its own, timed
 in CPU seconds. Columns: mesh vertices, the count asked (the hand-made cage's; with --auto none, the generator
 chooses), seconds, the cage's vertices, its volume over the hand-made cage's, the clearance (least distance from a
 mesh vertex to the cage) and the mean distance from the cage's vertices to the mesh in % of the mesh's bounding-box
@@ -30,6 +30,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from bench.public_data import public_data  # noqa: E402
 from lbc_core.io import read_mesh  # noqa: E402
 
 DATA = ROOT / "tests" / "data" / "cages-3d"
@@ -162,8 +163,11 @@ def folders(given):
     if given:
         return [Path(folder) for folder in given]
     found = [DATA / name for name in ("arm", "gargoyle", "hand", "clothing")]
-    public = Path("/work/data")
-    return found + (sorted(path for path in public.iterdir() if path.is_dir()) if public.is_dir() else [])
+    public = public_data()
+    if public is None:
+        return found
+    # Only the folders that hold a pair (a folder of other data, e.g. arrays, is not one).
+    return found + sorted(path for path in public.iterdir() if any(path.glob("mesh.*")) and any(path.glob("cage.*")))
 
 
 def cell(value):

@@ -1,7 +1,7 @@
 """Joints against Mesh Deform: folds, kinks and influences per Smoothness, on posed characters, hands and capsules.
 
     PYTHONPATH=. .venv/bin/python bench/joints.py [--scenes capsule,arm,hand,smpl,cactus,beast,figure,tentacle]
-                                                  [--smoothness 0,0.25,0.5,0.75,1] [--data /work/data]
+                                                  [--smoothness 0,0.25,0.5,0.75,1] [--data DIR]
     PYTHONPATH=. .venv/bin/python bench/joints.py --plot OUTPUT.txt PICTURE.png    (the trade-off, from a run's output)
 
 Each scene is bound once (``lbc_core.bind`` at its defaults: the solve does not depend on the smoothness), then
@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 import lbc_core  # noqa: E402
 from bench import capsule, figure  # noqa: E402
 from bench.creases import Evaluation, deformed  # noqa: E402
+from bench.public_data import public_data  # noqa: E402
 from lbc_core.evaluate import thinning  # noqa: E402
 from lbc_core.io import read_mesh  # noqa: E402
 from lbc_core.binding.pipeline import REPRODUCTION_TOLERANCE  # noqa: E402
@@ -95,6 +96,9 @@ def tentacle_scene():
 def data_scene(folder, mesh_name, cage_name, poses):
     """A scene of --data: (mesh, triangles, cage, cage faces, {name: posed cage})."""
     def load():
+        if ARGS.data is None:
+            raise SystemExit(f"the scene of {folder} needs the public pairs: see bench/public-data.md, then set "
+                             f"LBC_PUBLIC_DATA or pass --data")
         mesh, faces = read_mesh(ARGS.data / folder / mesh_name)[:2]
         cage, cage_faces = read_mesh(ARGS.data / folder / cage_name)[:2]
         posed = {name: np.asarray(read_mesh(ARGS.data / folder / file)[0]) for name, file in poses.items()}
@@ -218,7 +222,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", default="capsule,arm,hand,smpl,cactus,beast,figure,tentacle")
     parser.add_argument("--smoothness", default="0,0.25,0.5,0.75,1")
-    parser.add_argument("--data", type=Path, default=Path("/work/data"))
+    parser.add_argument("--data", type=Path, default=public_data(),
+                        help="the public pairs of bench/public-data.md (default: $LBC_PUBLIC_DATA)")
     ARGS = parser.parse_args(argv)
     for name in ARGS.scenes.split(","):
         bench_scene(name, [float(value) for value in ARGS.smoothness.split(",")])

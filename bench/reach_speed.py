@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python bench/reach_speed.py --baseline NAME=DIR [--baseline NAME=DIR ...]
                             [--scenes hand,arm,smpl,figure,gargoyle] [--rounds 3] [--cache /tmp/reach_scenes]
-                            [--data /work/data]
+                            [--data DIR]
 
 Each DIR holds a baseline's source (``git archive REV | tar -x -C DIR``); this checkout is "after". Each scene's points and cage are written once
 to ``--cache`` (the gargoyle subdivided through bpy, as the demo does); then every (round, scene, variant) binds in a
@@ -28,6 +28,8 @@ import scipy.sparse as sp
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "cages-3d"
+sys.path.insert(0, str(ROOT))
+from bench.public_data import public_data  # noqa: E402
 
 CHILD = """
 import json, sys, time
@@ -63,6 +65,9 @@ def scene_arrays(name, data):
     if name in ("hand", "arm"):
         return (np.asarray(read_mesh(DATA / name / "mesh.obj")[0]), *read_mesh(DATA / name / "cage.obj")[:2])
     if name == "smpl":
+        if data is None:
+            raise SystemExit("the smpl scene needs the public pairs: see bench/public-data.md, then set "
+                             "LBC_PUBLIC_DATA or pass --data")
         return (np.asarray(read_mesh(data / "smpl_neuralcage" / "mesh.ply")[0]),
                 *read_mesh(data / "smpl_neuralcage" / "cage.obj")[:2])
     if name == "figure":
@@ -82,8 +87,9 @@ def cached(name, cache, data):
     path = cache / f"{name}.npz"
     if not path.exists():
         cache.mkdir(parents=True, exist_ok=True)
+        folder = str(data) if data is not None else None
         code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); from pathlib import Path; import numpy as np; "
-                f"from bench.reach_speed import scene_arrays; p, c, f = scene_arrays({name!r}, Path({str(data)!r})); "
+                f"from bench.reach_speed import scene_arrays; p, c, f = scene_arrays({name!r}, {folder!r} and Path({folder!r})); "
                 f"np.savez({str(path)!r}, points=np.asarray(p, float), cage=np.asarray(c, float), "
                 f"faces=np.array([list(x) for x in f], dtype=object)); import os; os._exit(0)")
         subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
@@ -104,7 +110,8 @@ def main(argv=None):
     parser.add_argument("--scenes", default="hand,arm,smpl,figure,gargoyle")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--cache", type=Path, default=Path("/tmp/reach_scenes"))
-    parser.add_argument("--data", type=Path, default=Path("/work/data"))
+    parser.add_argument("--data", type=Path, default=public_data(),
+                        help="the public pairs of bench/public-data.md (default: $LBC_PUBLIC_DATA)")
     args = parser.parse_args(argv)
     scenes = args.scenes.split(",")
     files = {name: cached(name, args.cache, args.data) for name in scenes}

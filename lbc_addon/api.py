@@ -21,7 +21,7 @@ from . import cage_job, cage_scene, deformer, diagnosis, geometry, jobs, node_gr
 from .core import DEFAULT_SMOOTHNESS, CageError, Cancelled  # noqa: F401  (Cancelled: for scripts, except api.Cancelled)
 from .diagnosis import Note, NoteKind  # noqa: F401  (for scripts: what Status.notes holds)
 from .options import DEFAULT_INFLUENCES, MESHER_NAMES, AddonOptions
-from .properties import is_bound
+from .properties import bound_to, is_bound
 
 # A bind's warnings go to this logger for pipelines; the NullHandler keeps Python's last-resort handler from printing
 # them a second time in background mode, where they are printed anyway.
@@ -409,7 +409,7 @@ def status(mesh_obj):
     >>> api.status(bpy.data.objects["Sphere"]).text
     "Following 'Box'"
     >>> api.status(bpy.data.objects["Box"]).text
-    "'Box' is not bound to a cage: bind it first (api.bind)"
+    "'Box' is the cage of 1 bound mesh(es) ('Sphere'): ask api.status of each of them"
     """
     _require_enabled()
     if not isinstance(mesh_obj, bpy.types.Object):
@@ -417,6 +417,11 @@ def status(mesh_obj):
     if mesh_obj.type != "MESH":
         return Status(False, geometry.not_a_mesh(mesh_obj, "only meshes can be bound", "bind a mesh"))
     if not is_bound(mesh_obj):
+        meshes = bound_to(mesh_obj, bpy.data.objects)
+        if meshes:
+            names = ", ".join(f"'{obj.name}'" for obj in meshes[:3]) + (", …" if len(meshes) > 3 else "")
+            return Status(False, f"'{mesh_obj.name}' is the cage of {len(meshes)} bound mesh(es) ({names}): ask "
+                                 f"api.status of each of them")
         leftover = ("; it carries LBC weights for no binding (from a bound mesh joined into it), which api.unbind "
                     "removes" if geometry.leftover_weights(mesh_obj) else "")
         return Status(False, f"'{mesh_obj.name}' is not bound to a cage: bind it first (api.bind){leftover}")

@@ -72,7 +72,8 @@ def _checked_meshes(mesh_objs):
             raise CageError(f"the mesh to cage is {obj!r}, not an object: pass it as e.g. bpy.data.objects['Name'] "
                             "(.get returns None for a name that is not there)")
         if obj.type != "MESH":
-            raise CageError(geometry.not_a_mesh(obj, "only meshes can be caged", "select meshes only"))
+            raise CageError(geometry.not_a_mesh(obj, "only meshes can be caged",
+                                                "select the mesh(es) to put a cage around"))
         if obj.data.is_editmode:
             raise CageError(f"'{obj.name}' is in Edit Mode, whose edits its mesh data does not hold yet: switch to "
                             "Object Mode first (Tab)")

@@ -60,6 +60,9 @@ def test_api_status_gives_the_panel_s_notes_on_an_edited_cage_and_a_moved_mesh()
     assert state.ok and state.text.startswith("Following 'Box'; 'Sphere' was moved as an object since the bind, which "
                                               "does not move it")
     assert state.text.endswith("or rebind (api.bind) to bind it where it is now")
+    # Asked of the cage, it names the meshes to ask, rather than telling to bind the cage.
+    assert api.status(cage) == api.Status(False, "'Box' is the cage of 1 bound mesh(es) ('Sphere'): ask api.status "
+                                                 "of each of them")
 
 
 def test_api_bind_warns_when_renders_would_see_other_cage_vertices():

@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 import lbc_addon  # noqa: E402
 from lbc_addon import api  # noqa: E402
-from render_option_pictures import SIZE, small  # noqa: E402
+from render_option_pictures import small, studio  # noqa: E402
 
 EAR_X = 0.75  # cage vertices beyond this x carry Suzanne's right ear (her left, on the picture's right)
 EAR_LIFT = math.radians(30)
@@ -44,26 +44,9 @@ def build_scene():
     material = bpy.data.materials.new("Skin")
     material.diffuse_color = (0.85, 0.62, 0.42, 1.0)
     suzanne.data.materials.append(material)
-    scene.world = bpy.data.worlds.new("World")
-    scene.world.color = (0.02, 0.022, 0.026)
-    scene.render.engine = "BLENDER_WORKBENCH"
-    scene.render.resolution_x, scene.render.resolution_y = SIZE
-    scene.render.resolution_percentage = 100
-    scene.render.image_settings.file_format = "PNG"
-    scene.render.image_settings.color_mode = "RGB"
-    scene.display.shading.light = "STUDIO"
+    studio(scene, ortho_scale=3.6, target=Vector((0.0, 0.0, 0.15)),
+           offset=Vector((-3.0, -8.0, 2.5)), up="Y")  # in front of her face (-y), a little to her right, above
     scene.display.shading.color_type = "MATERIAL"
-    scene.display.shading.show_cavity = False
-    scene.display.render_aa = "8"
-    scene.view_settings.view_transform = "Standard"
-    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    camera.data.type = "ORTHO"
-    camera.data.ortho_scale = 3.6
-    target = Vector((0.0, 0.0, 0.15))
-    camera.location = target + Vector((-3.0, -8.0, 2.5))  # in front of her face (-y), a little to her right, above
-    camera.rotation_euler = (target - camera.location).to_track_quat("-Z", "Y").to_euler()
     return suzanne
 
 

@@ -96,6 +96,15 @@ def build_scene():
     marker = add_object("Marker", *sphere(0.07), (0.95, 0.95, 0.95, 1.0))
     marker.data.shade_smooth()
 
+    # The tube lies across the picture, its base on the left, bending upwards: the camera looks from +y, a little
+    # from above the bend, with its right along +z.
+    studio(scene, ortho_scale=4.6, target=Vector((0.6, 0.0, 0.0)), offset=Vector((2.5, 10.0, -1.5)), up="X")
+    return tube_obj, cage, marker
+
+
+def studio(scene, ortho_scale, target, offset, up):
+    """The pictures' look: a dark world, Workbench at SIZE with studio light and 8× anti-aliasing, and an orthographic
+    camera at ``target + offset`` looking at ``target``, its ``up`` axis ("X" or "Y") up in the picture."""
     scene.world = bpy.data.worlds.new("World")
     scene.world.color = (0.02, 0.022, 0.026)
     scene.render.engine = "BLENDER_WORKBENCH"
@@ -112,13 +121,9 @@ def build_scene():
     scene.collection.objects.link(camera)
     scene.camera = camera
     camera.data.type = "ORTHO"
-    camera.data.ortho_scale = 4.6
-    # The tube lies across the picture, its base on the left, bending upwards: the camera looks from +y, a little
-    # from above the bend, with its right along +z.
-    target = Vector((0.6, 0.0, 0.0))
-    camera.location = target + Vector((2.5, 10.0, -1.5))
-    camera.rotation_euler = (target - camera.location).to_track_quat("-Z", "X").to_euler()
-    return tube_obj, cage, marker
+    camera.data.ortho_scale = ortho_scale
+    camera.location = target + offset
+    camera.rotation_euler = (target - camera.location).to_track_quat("-Z", up).to_euler()
 
 
 def sphere(radius, rings=8, sides=12):

@@ -80,8 +80,8 @@ def _parser():
     commands = parser.add_subparsers(required=True, metavar="COMMAND")
 
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--quiet", action="store_true", help="no progress or warnings on stderr (--json lists the "
-                        "cage's warnings)")
+    common.add_argument("--quiet", action="store_true", help="no progress or warnings on stderr (bind and cage list "
+                        "their warnings in --json)")
     common.add_argument("--json", action="store_true", help="print the figures as JSON on stdout")
 
     solving = _solving_options()
