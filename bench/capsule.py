@@ -23,7 +23,7 @@ def capsule(around=96, rows=125):
     Parameters
     ----------
     around, rows : int
-        96 × 125 gives 12,002 vertices (the issue's scene).
+        96 × 125 gives 12,002 vertices (the scene of docs/benchmarks.md, "Smoothness").
 
     Returns
     -------

@@ -4,7 +4,7 @@
                                          [--tolerance]
                                          (no flag: --capsule)
 
---capsule     the issue's table on the capsule scene (bench/capsule.py): LBC at 8000 cells (the default, smoothed)
+--capsule     docs/benchmarks.md's Smoothness table on the capsule scene (bench/capsule.py): LBC at 8000 cells (the default, smoothed)
               and the same solve evaluated piecewise linearly, LBC at 32000 cells both ways, Mesh Deform precision 5
               through bpy, mean value coordinates; bind seconds, kinks, influences per point.
 --addon       the capsule bound through the Blender add-on (lbc_addon.api.bind, its thinned weights in float32
