@@ -22,7 +22,8 @@ def thin_torus(x, y, z):
 def test_where_fast_simplification_pinches_a_thin_part_the_start_is_decimated():
     vertices, triangles = iso_surface(solid(thin_torus, 21))
     assert not is_surface(*_fast_simplified(vertices, triangles, 80), 1e-9)  # a pinched, non-manifold torus
-    points, faces = _simplified_surface(vertices, triangles, 80, 1e-9, None)
+    assert _simplified_surface(vertices, triangles, 80, 1e-9) is None
+    points, faces = _simplified_surface(vertices, triangles, 80, 1e-9, decimate=True)
     assert is_surface(points, faces, 1e-9) and len(points) == 40
     again = decimated(vertices, triangles, 40)
     assert is_surface(*again, 1e-9) and len(again[0]) == 40

@@ -72,18 +72,20 @@ def _fans_single(triangles, directed, n):
 def quadric_simplified(vertices, triangles, target, mesh, clearance, spacing, zero, check=None):
     """(vertices, triangles) of about ``target`` vertices: closed, manifold, outward, not self-intersecting, with
     every vertex of the InputMesh ``mesh`` inside and none of its edges crossing (vertices pushed out where the
-    simplification cut into the mesh); or None when no target tried gives one."""
-    for factor in TARGET_FACTORS:
-        count = int(round(2 * target * factor))
-        if count >= len(triangles):
-            return vertices, triangles
-        found = _simplified_surface(vertices, triangles, count, zero, check)
-        if found is None:
-            continue
-        points, faces = found
-        points = pushed_out(points, faces, mesh, clearance, spacing, check)
-        if points is not None and is_surface(points, faces, zero):
-            return points, faces
+    simplification cut into the mesh); or None when no target tried gives one. The targets are tried with
+    fast-simplification first, then (where none gave a start: a thin part pinched at every one) with
+    manifold-keeping collapses (:func:`_simplified_surface`)."""
+    for decimate in (False, True):
+        for factor in TARGET_FACTORS:
+            count = int(round(2 * target * factor))
+            if count >= len(triangles):
+                return vertices, triangles
+            found = _simplified_surface(vertices, triangles, count, zero, decimate, check)
+            if found is None:
+                continue
+            points = pushed_out(*found, mesh, clearance, spacing, check)
+            if points is not None and is_surface(points, found[1], zero):
+                return points, found[1]
     return None
 
 
@@ -96,13 +98,14 @@ def _fast_simplified(vertices, triangles, count):
     return compact(*without_doubled_faces(np.asarray(points, dtype=float), np.asarray(faces, dtype=np.int64)))
 
 
-def _simplified_surface(vertices, triangles, count, zero, check):
-    """A surface (:func:`is_surface`) of about ``count`` triangles, or None: fast-simplification's, or where that
-    pinches or cuts itself, fast-simplification's at WIDER_FACTOR × the count (which keeps the surface whole far
-    more often) brought down by manifold-keeping collapses (:mod:`.decimation`)."""
-    points, faces = _fast_simplified(vertices, triangles, count)
-    if is_surface(points, faces, zero):
-        return points, faces
+def _simplified_surface(vertices, triangles, count, zero, decimate=False, check=None):
+    """A surface (:func:`is_surface`) of about ``count`` triangles, or None: fast-simplification's; or, to
+    ``decimate``, fast-simplification's at WIDER_FACTOR × the count (which pinches far less often) brought down by
+    manifold-keeping collapses (:mod:`.decimation`). Decimation comes second: where both give a start, the hull
+    from fast-simplification's is tighter (bench/RESULTS.md, "Cage generator", the third round)."""
+    if not decimate:
+        points, faces = _fast_simplified(vertices, triangles, count)
+        return (points, faces) if is_surface(points, faces, zero) else None
     wider = WIDER_FACTOR * count
     points, faces = (vertices, triangles) if wider >= len(triangles) else _fast_simplified(vertices, triangles, wider)
     if not is_surface(points, faces, zero):
