@@ -27,6 +27,9 @@ CLEARANCE_SHARE = 0.125
 # the normal (the mesher's own test of a gap, meshing/surface.py).
 FACING = 0.7
 
+# Distances below this share of a triangle's longest edge are rounding's.
+ROUNDING = 1e-9
+
 
 def mesher_side(volume, cells=None):
     """The lattice side lbc's tetrahedral mesher takes for a cage enclosing ``volume`` at ``cells`` cells (the
@@ -56,6 +59,8 @@ def facing_gaps(vertices, first, second):
     corners_1, corners_2 = vertices[first], vertices[second]
     normals_1, normals_2 = unit(triangle_normals(corners_1)), unit(triangle_normals(corners_2))
     facing = np.flatnonzero(np.einsum("ij,ij->i", normals_1, normals_2) < -FACING)
+    # A probe on a corner or an edge both triangles share is no gap: its distance, rounding's, is left out.
+    rounding = ROUNDING * np.linalg.norm(corners_1[facing] - np.roll(corners_1[facing], 1, axis=1), axis=2).max(axis=1)
     for probed, target, normal in ((corners_1, corners_2, normals_1), (corners_2, corners_1, normals_2)):
         points = np.einsum("pk,fkd->fpd", PROBES, probed[facing]).reshape(-1, 3)
         aimed = np.repeat(target[facing], len(PROBES), axis=0)
@@ -63,6 +68,7 @@ def facing_gaps(vertices, first, second):
         across = np.einsum("ik,ikd->id", bary, aimed) - points
         distance = np.sqrt(squared)
         ahead = np.einsum("ij,ij->i", across, np.repeat(normal[facing], len(PROBES), axis=0)) > FACING * distance
+        ahead &= distance > np.repeat(rounding, len(PROBES))
         least = np.where(ahead, distance, np.inf).reshape(-1, len(PROBES)).min(axis=1, initial=np.inf)
         gaps[facing] = np.minimum(gaps[facing], least)
     return gaps
