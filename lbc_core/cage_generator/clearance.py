@@ -4,8 +4,8 @@ lbc's tetrahedral mesher (:mod:`lbc_core.meshing.tetrahedra`) samples the cage's
 apart, s = (TETRAHEDRA_PER_CUBE × volume / cells)^(1/3); a part of the cage facing another across a gap g narrower
 than s is sampled finer, at 2 √(0.7 g s), and a gap far below s makes that refinement run away: the bind is refused
 (``GapTooNarrow``), or the tetrahedra cannot follow the surface there. Two triangles sharing corners count too: a
-sharp fold between them is a gap closing to nothing (pgc_elephant's cage: every face the mesher named lay on such a
-fold, or on two triangles an eighth of s apart or less). Where the cage the hull makes has such a gap, the hull runs
+sharp fold between them is a gap closing to nothing (pgc_elephant's cage: 9 of the 10 faces the mesher named lay on
+such folds, or on two triangles a quarter of s apart). Where the cage the hull makes has such a gap, the hull runs
 again keeping every two triangles that face each other at least CLEARANCE_SHARE × s apart, s taken at the default
 cells from the surface the hull starts from (the smallest volume it has, so the finished cage's own s is larger;
 bench/RESULTS.md, "Cage generator", the third round)."""
