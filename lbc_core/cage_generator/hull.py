@@ -43,9 +43,12 @@ class ProgressiveHull(HullTests):
     guard : MeshGuard or None
         The mesh, whose edges and triangles no new triangle of a relaxed move (one that cuts into the planes around
         its edge, see :func:`~lbc_core.cage_generator.placement.place`) may meet.
+    clearance : float or None
+        The least distance two triangles sharing no corner keep where they face each other across the outside
+        (:func:`~lbc_core.cage_generator.clearance.cage_clearance`); None: not tested.
     """
 
-    def __init__(self, vertices, triangles, zero, witnesses=None, axis=None, guard=None):
+    def __init__(self, vertices, triangles, zero, witnesses=None, axis=None, guard=None, clearance=None):
         self.points = np.array(vertices, dtype=float)
         self.faces = np.array(triangles, dtype=np.int64)
         self.alive_faces = np.ones(len(self.faces), dtype=bool)
@@ -66,6 +69,7 @@ class ProgressiveHull(HullTests):
         self._update_faces(np.arange(len(self.faces)))
         self.axis = axis
         self.guard = guard
+        self.clearance = clearance
         self.mirror = None if axis is None else mirror_map(self.points, axis)
         self.pinned = np.zeros(len(self.points), dtype=bool) if axis is None else self.points[:, axis] == 0.0
         self.queue = []

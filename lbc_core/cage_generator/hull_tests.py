@@ -6,6 +6,7 @@ import numpy as np
 
 from ..kernel.geometry import winding_numbers
 from ..kernel.intersections import FLOAT32_ROUNDING, triangles_meet
+from .clearance import facing_gaps
 from .placement import Limits, cross, shapes_fine
 
 
@@ -89,15 +90,16 @@ class HullTests:
         if not shapes_fine(self.points[self.faces[changed]][None], old_normals[where][None],
                            np.ones((1, len(changed)), dtype=bool))[0]:
             return False
-        if self._meets_rest(changed):
+        if self._meets_rest(changed) or self._too_close(changed):
             return False
         if relaxed and self.guard is not None and self.guard.meets(self.points[self.faces[changed]]):
             return False
         return not self._leaves_witness(before, old_corners)
 
-    def _meets_rest(self, changed):
-        """Whether a changed face meets another face (changed or not) anywhere but where they share corners."""
-        low, high = self.low[changed] - self.zero, self.high[changed] + self.zero
+    def _near_pairs(self, changed, reach):
+        """(first, second): the pairs of triangles (vertex indices) of a changed face and another face (changed or
+        not, each pair once) whose boxes, grown by ``reach``, overlap."""
+        low, high = self.low[changed] - reach, self.high[changed] + reach
         near = self.alive_faces & np.all(self.low <= high.max(axis=0), axis=1) & np.all(self.high >= low.min(axis=0),
                                                                                           axis=1)
         near[changed] = False
@@ -106,9 +108,21 @@ class HullTests:
                           & np.all(high[:, None] >= self.low[others][None], axis=2))
         # Each changed face against the unchanged ones and the changed ones after it.
         keep = (j < len(others) - len(changed)) | (j > len(others) - len(changed) + i)
-        first, second = self.faces[changed[i[keep]]], self.faces[others[j[keep]]]
+        return self.faces[changed[i[keep]]], self.faces[others[j[keep]]]
+
+    def _meets_rest(self, changed):
+        """Whether a changed face meets another face (changed or not) anywhere but where they share corners."""
+        first, second = self._near_pairs(changed, self.zero)
         maybe = ~self._apart(first, second)
         return bool(np.any(triangles_meet(self.points, first[maybe], second[maybe], self.zero)))
+
+    def _too_close(self, changed):
+        """Whether a changed face and another face face each other across the outside closer than the cage's
+        clearance (:mod:`lbc_core.cage_generator.clearance`: lbc's mesher needs the parts apart)."""
+        if not self.clearance:
+            return False
+        first, second = self._near_pairs(changed, self.clearance)
+        return bool(np.any(facing_gaps(self.points, first, second) < self.clearance))
 
     def _apart(self, first, second):
         """(P,) bool: pairs of triangles that cannot meet (beyond what the exact test counts as touching): one has

@@ -13,6 +13,7 @@ from ..kernel.intersections import intersecting_triangles
 from .extraction import compact, mirrored_whole, signed_volume
 from .hull_tests import mirror_map
 from .check import CageSamples, edges_crossing, mesh_edges
+from .decimation import decimated
 from .inside import inside_surface
 
 # Targets tried, as factors of the vertex count asked, when a result fails its checks: a thin shell (clothing) needs
@@ -22,6 +23,9 @@ TARGET_FACTORS = (1.0, 1.5, 2.25)
 # Rounds of pushing vertices out past the mesh's vertices and edges the simplification left outside, at most; it
 # stops sooner when two rounds in a row leave no fewer.
 PUSH_ROUNDS = 8
+# Where fast-simplification's surface at a target pinches, its surface at this many times the target (which pinches
+# far less often) is brought down by manifold-keeping collapses (bench/RESULTS.md, "Cage generator", the third round).
+WIDER_FACTOR = 4
 # Sweeps that reconcile the pushes several triangles ask of one vertex.
 PUSH_SWEEPS = 4
 
@@ -68,23 +72,46 @@ def _fans_single(triangles, directed, n):
 def quadric_simplified(vertices, triangles, target, mesh, clearance, spacing, zero, check=None):
     """(vertices, triangles) of about ``target`` vertices: closed, manifold, outward, not self-intersecting, with
     every vertex of the InputMesh ``mesh`` inside and none of its edges crossing (vertices pushed out where the
-    simplification cut into the mesh); or None when no target tried gives one."""
+    simplification cut into the mesh); or None when no target tried gives one. The targets are tried with
+    fast-simplification first, then (where none gave a start: a thin part pinched at every one) with
+    manifold-keeping collapses (:func:`_simplified_surface`)."""
+    for decimate in (False, True):
+        for factor in TARGET_FACTORS:
+            count = int(round(2 * target * factor))
+            if count >= len(triangles):
+                return vertices, triangles
+            found = _simplified_surface(vertices, triangles, count, zero, decimate, check)
+            if found is None:
+                continue
+            points = pushed_out(*found, mesh, clearance, spacing, check)
+            if points is not None and is_surface(points, found[1], zero):
+                return points, found[1]
+    return None
+
+
+def _fast_simplified(vertices, triangles, count):
+    """fast-simplification's result at ``count`` triangles, without doubled faces and unused vertices."""
     import fast_simplification
 
-    for factor in TARGET_FACTORS:
-        count = int(round(2 * target * factor))
-        if count >= len(triangles):
-            return vertices, triangles
-        points, faces = fast_simplification.simplify(vertices.astype(np.float64), triangles.astype(np.int64),
-                                                     target_count=count)
-        points, faces = compact(*without_doubled_faces(np.asarray(points, dtype=float),
-                                                       np.asarray(faces, dtype=np.int64)))
-        if not is_surface(points, faces, zero):
-            continue
-        points = pushed_out(points, faces, mesh, clearance, spacing, check)
-        if points is not None and is_surface(points, faces, zero):
-            return points, faces
-    return None
+    points, faces = fast_simplification.simplify(vertices.astype(np.float64), triangles.astype(np.int64),
+                                                 target_count=count)
+    return compact(*without_doubled_faces(np.asarray(points, dtype=float), np.asarray(faces, dtype=np.int64)))
+
+
+def _simplified_surface(vertices, triangles, count, zero, decimate=False, check=None):
+    """A surface (:func:`is_surface`) of about ``count`` triangles, or None: fast-simplification's; or, to
+    ``decimate``, fast-simplification's at WIDER_FACTOR × the count (which pinches far less often) brought down by
+    manifold-keeping collapses (:mod:`.decimation`). Decimation comes second: where both give a start, the hull
+    from fast-simplification's is tighter (bench/RESULTS.md, "Cage generator", the third round)."""
+    if not decimate:
+        points, faces = _fast_simplified(vertices, triangles, count)
+        return (points, faces) if is_surface(points, faces, zero) else None
+    wider = WIDER_FACTOR * count
+    points, faces = (vertices, triangles) if wider >= len(triangles) else _fast_simplified(vertices, triangles, wider)
+    if not is_surface(points, faces, zero):
+        return None
+    points, faces = decimated(points, faces, count // 2, check)
+    return (points, faces) if is_surface(points, faces, zero) else None
 
 
 def symmetric_simplified(half_vertices, half_triangles, target, mesh, clearance, spacing, zero, axis, check=None):
@@ -248,11 +275,22 @@ def _pushes(vertices, triangles, outside, crossing, crossed, clearance):
 
 
 def _nearest_triangles(points, corners):
-    """(P,) index of the triangle nearest each point (all pairs, a chunk of points at a time)."""
-    found = np.zeros(len(points), dtype=np.int64)
-    for chunk in np.array_split(np.arange(len(points)), max(1, len(points) * len(corners) // 500_000)):
-        repeated = np.repeat(points[chunk], len(corners), axis=0)
-        tiled = np.tile(corners, (len(chunk), 1, 1))
-        squared, _ = closest_on_triangles(repeated, tiled[:, 0], tiled[:, 1], tiled[:, 2])
-        found[chunk] = np.argmin(squared.reshape(len(chunk), len(corners)), axis=1)
-    return found
+    """(P,) index of the triangle nearest each point, the first of those as near (as over all pairs): only the
+    triangles whose centres lie within the distance to the triangle of the nearest centre plus their own radius can
+    be nearer (a k-d tree over the centres finds them; all pairs took 4 of the 64k gargoyle's 14 s)."""
+    if not len(points):
+        return np.zeros(0, dtype=np.int64)
+    centres = corners.mean(axis=1)
+    radii = np.linalg.norm(corners - centres[:, None], axis=2).max(axis=1)
+    tree = cKDTree(centres)
+    _, first = tree.query(points)
+    bound = np.sqrt(closest_on_triangles(points, *corners[first].transpose(1, 0, 2))[0])
+    found = tree.query_ball_point(points, bound + radii.max() * (1.0 + 1e-9) + 1e-12)
+    counts = np.array([len(items) for items in found])
+    owner = np.repeat(np.arange(len(points)), counts)
+    candidate = np.concatenate([np.sort(np.asarray(items, dtype=np.int64)) for items in found])
+    squared, _ = closest_on_triangles(points[owner], *corners[candidate].transpose(1, 0, 2))
+    # The least distance per point, and of the triangles at it the first: sort by (point, distance, index).
+    order = np.lexsort((candidate, squared, owner))
+    starts = np.cumsum(counts) - counts
+    return candidate[order[starts]]
