@@ -150,8 +150,11 @@ def write(request, result, select=True):
 def select_for_bind(meshes, cage):
     """Select ``meshes`` and ``cage`` alone, the cage active: what Bind binds (in this view layer)."""
     layer = bpy.context.view_layer
+    # An object a script removed keeps its base in the layer until the layer is synced: reading that base reads freed
+    # memory (a crash in one run of three), so sync first.
+    layer.update()
     for obj in layer.objects:
-        if obj is not None and obj.select_get():  # None: an object a script removed, until the layer updates
+        if obj.select_get():
             obj.select_set(False)
     for obj in list(meshes) + [cage]:
         if obj.name in layer.objects:
