@@ -6,12 +6,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings as hypothesis_settings
 
 import lbc_core
 from lbc_core.io import read_cage, read_mesh
 from helpers.random_cages import GRID, STAR, inside_polygon
 
 DATA = Path(__file__).parent / "data"
+
+# Property tests draw the same examples on every run and machine, with no example database: a run's verdict must not
+# depend on which examples a fresh clone happens to draw.
+hypothesis_settings.register_profile("lbc", derandomize=True, database=None)
+hypothesis_settings.load_profile("lbc")
 
 
 class _ExitPastBlenderTeardown:
